@@ -1,0 +1,29 @@
+"""Where the robots and scenario files that ship with wholebody live.
+
+In a wheel they are package data under ``wholebody/_share/``; in a source checkout they are
+the repository's ``robots/`` and ``tasks/`` directories.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["robots_dir", "share_dir", "tasks_dir"]
+
+
+def share_dir() -> Path:
+    """The directory holding ``robots/`` and ``tasks/``."""
+    installed = Path(__file__).resolve().parent / "_share"
+    if (installed / "robots").is_dir():
+        return installed
+    return Path(__file__).resolve().parents[2]
+
+
+def robots_dir() -> Path:
+    """The bundled robot descriptions: one directory per robot with a ``robot.toml``."""
+    return share_dir() / "robots"
+
+
+def tasks_dir() -> Path:
+    """The bundled scenario files (the paper's experiments)."""
+    return share_dir() / "tasks"

@@ -1,0 +1,61 @@
+"""Robot models: Pinocchio kinematics in the actuated velocity space, groups, limits, arms."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from wholebody.errors import ConfigError
+from wholebody.resources import robots_dir
+from wholebody.robot.base import BaseModel
+from wholebody.robot.config import ArmConfig, BaseConfig, RobotConfig, read_robot_config
+from wholebody.robot.robot import ArmChain, Body, Frame, JointGroup, Robot, RobotState
+
+__all__ = [
+    "ArmChain",
+    "ArmConfig",
+    "BaseConfig",
+    "BaseModel",
+    "Body",
+    "Frame",
+    "JointGroup",
+    "Robot",
+    "RobotConfig",
+    "RobotState",
+    "available_robots",
+    "load_robot",
+    "read_robot_config",
+]
+
+
+def available_robots() -> list[str]:
+    """Names of the robots that ship with wholebody."""
+    root = robots_dir()
+    return sorted(p.parent.name for p in root.glob("*/robot.toml"))
+
+
+def load_robot(name_or_path: str | Path) -> Robot:
+    """Load a robot by bundled name (``"mobile_humanoid"``), robot directory or ``robot.toml``.
+
+    Raises
+    ------
+    ConfigError
+        Unknown name, missing files, or a malformed/inconsistent ``robot.toml``.
+    ModelError
+        A URDF that cannot be loaded.
+    """
+    path = Path(name_or_path)
+    if path.suffix == ".toml":
+        return Robot(read_robot_config(path))
+    if path.is_dir():
+        toml = path / "robot.toml"
+        if not toml.is_file():
+            raise ConfigError(f"{path}: robot directory has no robot.toml")
+        return Robot(read_robot_config(toml))
+    bundled = robots_dir() / str(name_or_path) / "robot.toml"
+    if isinstance(name_or_path, str) and "/" not in name_or_path and bundled.is_file():
+        return Robot(read_robot_config(bundled))
+    raise ConfigError(
+        f"no robot {str(name_or_path)!r}: expected a bundled robot name "
+        f"({', '.join(available_robots()) or 'none installed'}), a robot directory or a "
+        "robot.toml path"
+    )

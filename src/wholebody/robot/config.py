@@ -1,0 +1,307 @@
+"""``robot.toml``: what a URDF does not say about a robot.
+
+A robot directory holds ``robot.urdf`` and ``robot.toml``. The TOML names the joint groups,
+the arm chains (the frames and bodies of the arm energy and arm angle), the base type and
+its parameters, and a home posture. Nothing in wholebody's code names a joint or frame of a
+particular robot: another robot is another ``robot.toml``.
+
+Schema (every key is checked; unknown keys are errors, to catch typos)::
+
+    [robot]
+    name = "my_robot"            # required
+    urdf = "robot.urdf"          # required, relative to this file
+    description = "..."          # optional
+
+    [base]                       # optional; default type = "fixed"
+    type = "fixed" | "mecanum" | "differential" | "planar"
+    wheels = [...]               # mecanum: 4 joints FL, FR, RL, RR; differential: left, right
+    wheel_radius = 0.08          # m, mecanum and differential
+    wheel_base = 0.50            # m, front-rear axle distance, mecanum
+    track = 0.44                 # m, left-right wheel distance, mecanum and differential
+    max_linear_velocity = 1.0    # m/s, planar (default 1.0)
+    max_angular_velocity = 1.0   # rad/s, planar (default 1.0)
+
+    [groups]                     # optional; a joint belongs to at most one group
+    name = ["joint", ...]
+
+    [arms.<name>]                # optional, any number
+    side = "left" | "right"
+    group = "<group name>"       # optional
+    shoulder = elbow = wrist = tool = "<frame>"
+    upper_arm = forearm = "<link>"
+
+    [home]                       # optional; joint = angle (rad), others at 0
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from wholebody.errors import ConfigError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["ArmConfig", "BaseConfig", "RobotConfig", "read_robot_config"]
+
+BaseType = Literal["fixed", "mecanum", "differential", "planar"]
+BASE_TYPES: tuple[str, ...] = ("fixed", "mecanum", "differential", "planar")
+ARM_FRAME_KEYS = ("shoulder", "elbow", "wrist", "tool")
+ARM_BODY_KEYS = ("upper_arm", "forearm")
+
+
+@dataclass(frozen=True)
+class BaseConfig:
+    """The mobile base: its type and parameters (SI units)."""
+
+    type: BaseType = "fixed"
+    wheels: tuple[str, ...] = ()
+    wheel_radius: float = 0.0
+    wheel_base: float = 0.0
+    track: float = 0.0
+    max_linear_velocity: float = 1.0
+    max_angular_velocity: float = 1.0
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """One arm chain: frame names at the joint centres and tool, and its two bodies."""
+
+    name: str
+    side: Literal["left", "right"]
+    shoulder: str
+    elbow: str
+    wrist: str
+    tool: str
+    upper_arm: str
+    forearm: str
+    group: str | None = None
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The parsed, schema-checked content of a ``robot.toml`` (not yet checked against
+    the URDF; :class:`wholebody.Robot` does that)."""
+
+    path: Path
+    name: str
+    urdf: Path
+    description: str = ""
+    base: BaseConfig = field(default_factory=BaseConfig)
+    groups: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    arms: Mapping[str, ArmConfig] = field(default_factory=dict)
+    home: Mapping[str, float] = field(default_factory=dict)
+
+    def error(self, key: str, message: str) -> ConfigError:
+        """A :class:`ConfigError` naming this file and ``key``."""
+        return ConfigError(f"{self.path}: [{key}] {message}")
+
+
+class _Reader:
+    """Typed access to a TOML table with errors that name the file and the key."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.path}: [{key}] {message}")
+
+    def table(self, data: Mapping[str, Any], key: str, where: str, required: bool) -> dict:
+        full = f"{where}.{key}" if where else key
+        if key not in data:
+            if required:
+                raise self.fail(full, "missing table: expected a TOML table here")
+            return {}
+        value = data[key]
+        if not isinstance(value, dict):
+            raise self.fail(full, f"expected a table, got {type(value).__name__}")
+        return value
+
+    def only(self, data: Mapping[str, Any], where: str, allowed: tuple[str, ...]) -> None:
+        unknown = sorted(set(data) - set(allowed))
+        if unknown:
+            raise self.fail(
+                f"{where}.{unknown[0]}" if where else unknown[0],
+                f"unknown key; expected one of: {', '.join(allowed)}",
+            )
+
+    def string(
+        self,
+        data: Mapping[str, Any],
+        key: str,
+        where: str,
+        default: str | None = None,
+        choices: tuple[str, ...] | None = None,
+    ) -> str:
+        full = f"{where}.{key}"
+        if key not in data:
+            if default is None:
+                raise self.fail(full, "missing key: expected a string")
+            return default
+        value = data[key]
+        if not isinstance(value, str) or not value:
+            raise self.fail(full, f"expected a non-empty string, got {value!r}")
+        if choices is not None and value not in choices:
+            raise self.fail(full, f"got {value!r}; expected one of: {', '.join(choices)}")
+        return value
+
+    def number(
+        self,
+        data: Mapping[str, Any],
+        key: str,
+        where: str,
+        default: float | None = None,
+        positive: bool = False,
+    ) -> float:
+        full = f"{where}.{key}"
+        if key not in data:
+            if default is None:
+                raise self.fail(
+                    full, "missing key: expected a number" + (" > 0" if positive else "")
+                )
+            return default
+        value = data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(full, f"expected a number, got {value!r}")
+        if value != value or value in (float("inf"), float("-inf")):
+            raise self.fail(full, f"expected a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise self.fail(full, f"expected a number > 0, got {value!r}")
+        return float(value)
+
+    def names(
+        self, data: Mapping[str, Any], key: str, where: str, count: int | None = None
+    ) -> tuple[str, ...]:
+        full = f"{where}.{key}" if where else key
+        if key not in data:
+            raise self.fail(full, "missing key: expected a list of joint names")
+        value = data[key]
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise self.fail(full, f"expected a list of non-empty strings, got {value!r}")
+        if count is not None and len(value) != count:
+            raise self.fail(full, f"expected exactly {count} names, got {len(value)}")
+        duplicates = sorted({v for v in value if value.count(v) > 1})
+        if duplicates:
+            raise self.fail(full, f"names listed twice: {', '.join(duplicates)}")
+        return tuple(value)
+
+
+def read_robot_config(path: str | Path) -> RobotConfig:
+    """Read and schema-check a ``robot.toml``.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing, not valid TOML, or breaks the schema; the message names
+        the file, the key and what was expected.
+    """
+    path = Path(path)
+    r = _Reader(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read robot configuration ({exc.strerror})") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+
+    r.only(data, "", ("robot", "base", "groups", "arms", "home"))
+    robot = r.table(data, "robot", "", required=True)
+    r.only(robot, "robot", ("name", "urdf", "description"))
+    name = r.string(robot, "name", "robot")
+    urdf = path.parent / r.string(robot, "urdf", "robot")
+    if not urdf.is_file():
+        raise r.fail(
+            "robot.urdf",
+            f"file {urdf} does not exist: expected a URDF path relative to the robot.toml",
+        )
+    description = r.string(robot, "description", "robot", default="")
+
+    base = _read_base(r, r.table(data, "base", "", required=False))
+
+    groups: dict[str, tuple[str, ...]] = {}
+    owner: dict[str, str] = {}
+    for gname in r.table(data, "groups", "", required=False):
+        joints = r.names(data["groups"], gname, "groups")
+        for j in joints:
+            if j in owner:
+                raise r.fail(
+                    f"groups.{gname}",
+                    f"joint {j!r} is already in group "
+                    f"{owner[j]!r}: a joint belongs to at most one group",
+                )
+            owner[j] = gname
+        groups[gname] = joints
+
+    arms: dict[str, ArmConfig] = {}
+    for aname, table in r.table(data, "arms", "", required=False).items():
+        where = f"arms.{aname}"
+        if not isinstance(table, dict):
+            raise r.fail(where, f"expected a table, got {type(table).__name__}")
+        r.only(table, where, ("side", "group", *ARM_FRAME_KEYS, *ARM_BODY_KEYS))
+        group = table.get("group")
+        if group is not None and group not in groups:
+            raise r.fail(
+                f"{where}.group",
+                f"unknown group {group!r}; defined groups: {', '.join(groups) or '(none)'}",
+            )
+        arms[aname] = ArmConfig(
+            name=aname,
+            side=r.string(table, "side", where, choices=("left", "right")),  # type: ignore[arg-type]
+            group=group,
+            **{k: r.string(table, k, where) for k in (*ARM_FRAME_KEYS, *ARM_BODY_KEYS)},
+        )
+
+    home: dict[str, float] = {}
+    for joint in r.table(data, "home", "", required=False):
+        home[joint] = r.number(data["home"], joint, "home")
+
+    return RobotConfig(
+        path=path,
+        name=name,
+        urdf=urdf,
+        description=description,
+        base=base,
+        groups=groups,
+        arms=arms,
+        home=home,
+    )
+
+
+def _read_base(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:
+    if not table:
+        return BaseConfig()
+    kind = r.string(table, "type", "base", choices=BASE_TYPES)
+    if kind == "fixed":
+        r.only(table, "base", ("type",))
+        return BaseConfig()
+    if kind == "planar":
+        r.only(table, "base", ("type", "max_linear_velocity", "max_angular_velocity"))
+        return BaseConfig(
+            type="planar",
+            max_linear_velocity=r.number(table, "max_linear_velocity", "base", 1.0, True),
+            max_angular_velocity=r.number(table, "max_angular_velocity", "base", 1.0, True),
+        )
+    if kind == "mecanum":
+        r.only(table, "base", ("type", "wheels", "wheel_radius", "wheel_base", "track"))
+        return BaseConfig(
+            type="mecanum",
+            wheels=r.names(table, "wheels", "base", count=4),
+            wheel_radius=r.number(table, "wheel_radius", "base", positive=True),
+            wheel_base=r.number(table, "wheel_base", "base", positive=True),
+            track=r.number(table, "track", "base", positive=True),
+        )
+    r.only(table, "base", ("type", "wheels", "wheel_radius", "track"))
+    return BaseConfig(
+        type="differential",
+        wheels=r.names(table, "wheels", "base", count=2),
+        wheel_radius=r.number(table, "wheel_radius", "base", positive=True),
+        track=r.number(table, "track", "base", positive=True),
+    )

@@ -1,0 +1,628 @@
+"""The robot model: one Pinocchio model and data, the actuated velocity space, joint groups,
+limits and arm chains.
+
+Actuated velocities
+-------------------
+Tasks and solvers work in the **actuated velocity** space ``u`` (size ``nu``): first the base
+actuators (wheel speeds in rad/s, or the twist of a directly actuated planar base), then one
+speed per remaining 1-DOF joint in model order. The model velocity is ``v = A u`` with the
+constant actuation matrix ``A`` (nv x nu): the planar root joint's rows are the base model's
+``B`` (see :mod:`wholebody.robot.base`), every other joint's row is a unit row. Every
+Jacobian this module returns is ``J_model A``: its wheel columns go through the base's
+actuation map.
+
+Frames
+------
+Poses are 4x4 homogeneous transforms in the world frame (z up). Jacobians are 6 x nu with
+world-aligned axes at the frame origin (Pinocchio's ``LOCAL_WORLD_ALIGNED``), linear rows
+first: ``[v; w] = J u``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from wholebody.errors import DimensionError, FrameError, ModelError, WholebodyError
+from wholebody.robot.base import BaseModel, base_model
+from wholebody.robot.config import ArmConfig, RobotConfig
+
+__all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+WORLD = pin.ReferenceFrame.WORLD
+WHEEL_PLACEMENT_TOLERANCE = 1e-3  # m, between robot.toml's base geometry and the URDF
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A frame of the robot model, resolved once by name (see :meth:`Robot.frame`)."""
+
+    name: str
+    index: int
+    joint: int
+
+    def __str__(self) -> str:
+        return self.name
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid link with mass: its frame, mass (kg) and centre of mass in the link frame (m)."""
+
+    name: str
+    frame: Frame
+    mass: float
+    com: np.ndarray
+
+
+@dataclass(frozen=True)
+class JointGroup:
+    """Named joints and their indices into the actuated velocity ``u``."""
+
+    name: str
+    joints: tuple[str, ...]
+    indices: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.joints)
+
+
+@dataclass(frozen=True)
+class ArmChain:
+    """An arm: frames at the shoulder, elbow and wrist centres and the tool, the upper-arm
+    and forearm bodies, its side (``"left"``/``"right"``, used to mirror the arm angle) and
+    its joint group if one is named in ``robot.toml``."""
+
+    name: str
+    side: str
+    shoulder: Frame
+    elbow: Frame
+    wrist: Frame
+    tool: Frame
+    upper_arm: Body
+    forearm: Body
+    group: JointGroup | None
+
+    @property
+    def upper_arm_length(self) -> float:
+        """Shoulder-to-elbow distance (m); constant for a rigid arm, read at any state."""
+        return float(self._lengths[0])
+
+    @property
+    def forearm_length(self) -> float:
+        """Elbow-to-wrist distance (m)."""
+        return float(self._lengths[1])
+
+    _lengths: tuple[float, float] = (0.0, 0.0)
+
+
+class Robot:
+    """A robot: Pinocchio model and data, actuation map, groups, limits and arm chains.
+
+    Build it with :func:`wholebody.load_robot`. One ``Robot`` owns one ``pinocchio.Data``:
+    :meth:`update` fills it and returns a :class:`RobotState` view, which stays valid until
+    the next :meth:`update` (a stale view raises instead of returning wrong numbers). The
+    convenience methods that take ``q`` (:meth:`frame_pose`, :meth:`frame_jacobian`, ...)
+    call :meth:`update` themselves.
+    """
+
+    def __init__(self, config: RobotConfig) -> None:
+        self.config = config
+        self.name = config.name
+        self.base: BaseModel = base_model(config.base)
+        root = pin.JointModelPlanar() if self.base.mobile else None
+        self._links = _read_urdf_links(config.urdf)
+        try:
+            self.model: pin.Model = (
+                pin.buildModelFromUrdf(str(config.urdf), root)
+                if root is not None
+                else pin.buildModelFromUrdf(str(config.urdf))
+            )
+        except (RuntimeError, ValueError) as exc:
+            raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
+        self.data: pin.Data = self.model.createData()
+        self._version = 0
+        self._build_actuation()
+        self.groups: dict[str, JointGroup] = {
+            g: self._group(g, joints) for g, joints in config.groups.items()
+        }
+        self._check_base_geometry()
+        self.arms: dict[str, ArmChain] = {a: self._arm(c) for a, c in config.arms.items()}
+        self._home = self._configuration_from(config.home, "home")
+
+    # ------------------------------------------------------------------ construction
+    def _build_actuation(self) -> None:
+        model, base = self.model, self.base
+        first = 2 if base.mobile else 1  # joint 0 = universe, 1 = planar root if mobile
+        joint_ids = {model.names[j]: j for j in range(first, model.njoints)}
+        for name, j in joint_ids.items():
+            if model.joints[j].nv != 1:
+                raise ModelError(
+                    f"{self.config.urdf}: joint {name!r} has {model.joints[j].nv} DOF; "
+                    "wholebody supports 1-DOF joints (revolute, continuous, prismatic) "
+                    "below the root"
+                )
+        for w in base.wheel_joints:
+            if w not in joint_ids:
+                raise self.config.error(
+                    "base.wheels",
+                    f"wheel joint {w!r} is not a joint of {self.config.urdf.name}"
+                    + _suggest(w, joint_ids),
+                )
+        names = list(base.actuators) + [n for n in joint_ids if n not in base.wheel_joints]
+        self.actuated_joints: tuple[str, ...] = tuple(names)
+        self.nu = len(names)
+        self.nq, self.nv = model.nq, model.nv
+        A = np.zeros((model.nv, self.nu))
+        lower = np.full(self.nu, -np.inf)
+        upper = np.full(self.nu, np.inf)
+        vmax = np.full(self.nu, np.inf)
+        kinds = np.zeros(self.nu, dtype=int)  # 0 scalar q, 1 continuous (cos, sin), 2 base
+        qidx = np.zeros(self.nu, dtype=int)
+        nb = len(base.actuators)
+        if base.mobile:
+            A[0:3, 0:nb] = base.matrix
+        for k, name in enumerate(names):
+            if name not in joint_ids:  # virtual planar actuator
+                kinds[k] = 2
+                qidx[k] = k
+                vmax[k] = (
+                    self.config.base.max_linear_velocity
+                    if k < 2
+                    else self.config.base.max_angular_velocity
+                )
+                continue
+            j = joint_ids[name]
+            iv, iq = model.joints[j].idx_v, model.joints[j].idx_q
+            A[iv, k] = 1.0
+            qidx[k] = iq
+            vmax[k] = model.velocityLimit[iv]
+            if model.joints[j].nq == 2:
+                kinds[k] = 1
+            else:
+                lower[k] = model.lowerPositionLimit[iq]
+                upper[k] = model.upperPositionLimit[iq]
+        lower[~np.isfinite(lower) | (lower < -1e300)] = -np.inf
+        upper[~np.isfinite(upper) | (upper > 1e300)] = np.inf
+        vmax[vmax <= 0] = np.inf  # URDF velocity 0 means "not given"
+        self.actuation = A
+        self.position_limits: tuple[np.ndarray, np.ndarray] = (lower, upper)
+        self.velocity_limits: np.ndarray = vmax
+        for arr in (A, lower, upper, vmax):
+            arr.setflags(write=False)
+        self._kinds = kinds
+        self._scalar = np.flatnonzero(kinds == 0)
+        self._scalar_q = qidx[self._scalar]
+        self._cont = np.flatnonzero(kinds == 1)
+        self._cont_q = qidx[self._cont]
+        self._virtual = np.flatnonzero(kinds == 2)
+        self._joint_ids = joint_ids
+        self._u_index = {n: k for k, n in enumerate(names)}
+
+    def _group(self, gname: str, joints: tuple[str, ...]) -> JointGroup:
+        for j in joints:
+            if j not in self._u_index:
+                raise self.config.error(
+                    f"groups.{gname}",
+                    f"{j!r} is not an actuated joint of {self.config.urdf.name}"
+                    + _suggest(j, self._u_index),
+                )
+        idx = np.array([self._u_index[j] for j in joints], dtype=int)
+        idx.setflags(write=False)
+        return JointGroup(gname, joints, idx)
+
+    def _check_base_geometry(self) -> None:
+        """Check the base parameters of robot.toml against the URDF's wheel placements."""
+        base, cfg = self.base, self.config.base
+        if not base.wheel_joints:
+            return
+        placements = []
+        for w in base.wheel_joints:
+            j = self._joint_ids[w]
+            if self.model.parents[j] != 1:
+                raise self.config.error(
+                    "base.wheels",
+                    f"wheel {w!r} must be attached to the base link (the root link of the URDF), "
+                    f"not below joint {self.model.names[self.model.parents[j]]!r}",
+                )
+            placements.append(self.model.jointPlacements[j].translation[:2])
+        xy = np.array(placements)
+        if base.type == "mecanum":
+            expected = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]]) * [
+                cfg.wheel_base / 2,
+                cfg.track / 2,
+            ]
+            what = "front-left, front-right, rear-left, rear-right at (+-wheel_base/2, +-track/2)"
+        else:
+            expected = np.array([[np.nan, 1], [np.nan, -1]]) * [1.0, cfg.track / 2]
+            expected[:, 0] = xy[:, 0]
+            what = "left, right at y = +-track/2"
+        err = np.abs(xy - expected)
+        if np.any(err > WHEEL_PLACEMENT_TOLERANCE):
+            bad = int(np.argmax(err.max(axis=1)))
+            raise self.config.error(
+                "base",
+                f"wheel_base/track/wheel order do not match the URDF: wheel "
+                f"{base.wheel_joints[bad]!r} is at x={xy[bad, 0]:.4f}, y={xy[bad, 1]:.4f} m but "
+                f"the [base] table puts it at x={expected[bad, 0]:.4f}, y={expected[bad, 1]:.4f}"
+                f" m (expected wheels {what})",
+            )
+
+    def _arm(self, cfg: ArmConfig) -> ArmChain:
+        where = f"arms.{cfg.name}"
+        frames = {}
+        for key in ("shoulder", "elbow", "wrist", "tool"):
+            try:
+                frames[key] = self.frame(getattr(cfg, key))
+            except FrameError as exc:
+                raise self.config.error(f"{where}.{key}", str(exc)) from None
+        bodies = {}
+        for key in ("upper_arm", "forearm"):
+            name = getattr(cfg, key)
+            if name not in self._links:
+                raise self.config.error(
+                    f"{where}.{key}",
+                    f"{name!r} is not a link of {self.config.urdf.name}"
+                    + _suggest(name, self._links),
+                )
+            mass, com = self._links[name]
+            if mass <= 0:
+                raise self.config.error(
+                    f"{where}.{key}",
+                    f"link {name!r} has no mass in the URDF: expected an "
+                    "<inertial> with mass > 0 (the arm energy needs it)",
+                )
+            bodies[key] = Body(name, self.frame(name), mass, com)
+        group = self.groups[cfg.group] if cfg.group else None
+        state = self.update(self.neutral())
+        lengths = (
+            float(
+                np.linalg.norm(state.position(frames["elbow"]) - state.position(frames["shoulder"]))
+            ),
+            float(
+                np.linalg.norm(state.position(frames["wrist"]) - state.position(frames["elbow"]))
+            ),
+        )
+        if min(lengths) < 1e-3:
+            raise self.config.error(
+                where,
+                f"upper-arm/forearm lengths {lengths} m: the shoulder, elbow and wrist "
+                "frames must be distinct points",
+            )
+        return ArmChain(
+            cfg.name,
+            cfg.side,
+            frames["shoulder"],
+            frames["elbow"],
+            frames["wrist"],
+            frames["tool"],
+            bodies["upper_arm"],
+            bodies["forearm"],
+            group,
+            lengths,
+        )
+
+    # ------------------------------------------------------------------ names
+    def frame(self, name: str | Frame) -> Frame:
+        """The frame called ``name`` (link, joint or fixed frame of the URDF)."""
+        if isinstance(name, Frame):
+            return name
+        if not isinstance(name, str) or not self.model.existFrame(name):
+            names = [f.name for f in self.model.frames]
+            raise FrameError(f"robot {self.name!r} has no frame {name!r}" + _suggest(name, names))
+        fid = self.model.getFrameId(name)
+        return Frame(name, fid, int(self.model.frames[fid].parentJoint))
+
+    def body(self, name: str) -> Body:
+        """The link ``name`` with its mass and centre of mass (from the URDF)."""
+        if name not in self._links:
+            raise FrameError(
+                f"robot {self.name!r} has no link {name!r}" + _suggest(name, self._links)
+            )
+        mass, com = self._links[name]
+        return Body(name, self.frame(name), mass, com)
+
+    def group(self, name: str) -> JointGroup:
+        """The joint group ``name`` of ``robot.toml``."""
+        try:
+            return self.groups[name]
+        except KeyError:
+            raise FrameError(
+                f"robot {self.name!r} has no joint group {name!r}" + _suggest(name, self.groups)
+            ) from None
+
+    def index(self, joint: str) -> int:
+        """Index of an actuated joint (or base actuator) in ``u``."""
+        try:
+            return self._u_index[joint]
+        except KeyError:
+            raise FrameError(
+                f"robot {self.name!r} has no actuated joint {joint!r}"
+                + _suggest(joint, self._u_index)
+            ) from None
+
+    # ------------------------------------------------------------------ configurations
+    def neutral(self) -> np.ndarray:
+        """The zero configuration: base at the world origin facing +x, all joints at 0."""
+        return pin.neutral(self.model)
+
+    def home(self) -> np.ndarray:
+        """The home posture of ``robot.toml`` (base at the origin)."""
+        return self._home.copy()
+
+    def configuration(
+        self,
+        joints: Mapping[str, float] | None = None,
+        base_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> np.ndarray:
+        """A configuration from joint values (rad, m) by name and a base pose (x, y, yaw)."""
+        q = self._configuration_from(joints or {}, "joints")
+        self._set_base(q, base_pose)
+        return q
+
+    def _configuration_from(self, joints: Mapping[str, float], where: str) -> np.ndarray:
+        q = self.neutral()
+        lower, upper = self.position_limits
+        for name, value in joints.items():
+            if name not in self._joint_ids:
+                msg = f"{name!r} is not a joint of the robot" + _suggest(name, self._joint_ids)
+                if where == "home":
+                    raise self.config.error(f"home.{name}", msg)
+                raise FrameError(msg)
+            k = self._u_index[name]
+            if not lower[k] <= value <= upper[k]:
+                msg = f"{value} rad is outside the joint's limits [{lower[k]}, {upper[k]}]"
+                if where == "home":
+                    raise self.config.error(f"home.{name}", msg)
+                raise DimensionError(f"joint {name!r}: {msg}")
+            j = self.model.joints[self._joint_ids[name]]
+            if j.nq == 2:
+                q[j.idx_q : j.idx_q + 2] = math.cos(value), math.sin(value)
+            else:
+                q[j.idx_q] = value
+        return q
+
+    def _set_base(self, q: np.ndarray, pose: tuple[float, float, float]) -> None:
+        if not self.base.mobile:
+            if any(pose):
+                raise DimensionError(
+                    f"robot {self.name!r} has a fixed base: base_pose must be (0, 0, 0)"
+                )
+            return
+        x, y, yaw = pose
+        q[0:4] = x, y, math.cos(yaw), math.sin(yaw)
+
+    def random_configuration(
+        self, rng: np.random.Generator, margin: float = 0.0, base_range: float = 1.0
+    ) -> np.ndarray:
+        """A configuration drawn uniformly inside the joint limits shrunk by ``margin``
+        (fraction of each range on each side), wheels at random angles, base uniform in
+        ``[-base_range, base_range]^2`` with any heading."""
+        lower, upper = self.position_limits
+        q = self.neutral()
+        s = self._scalar
+        span = upper[s] - lower[s]
+        q[self._scalar_q] = rng.uniform(lower[s] + margin * span, upper[s] - margin * span)
+        ang = rng.uniform(-np.pi, np.pi, self._cont.size)
+        q[self._cont_q], q[self._cont_q + 1] = np.cos(ang), np.sin(ang)
+        if self.base.mobile:
+            x, y = rng.uniform(-base_range, base_range, 2)
+            self._set_base(q, (x, y, rng.uniform(-np.pi, np.pi)))
+        return q
+
+    def joint_positions(self, q: np.ndarray) -> np.ndarray:
+        """One scalar position per entry of ``u`` (rad or m): joint angles, wheel angles in
+        (-pi, pi], and for a directly actuated planar base its pose (x, y, yaw)."""
+        out = np.empty(self.nu)
+        out[self._scalar] = q[self._scalar_q]
+        out[self._cont] = np.arctan2(q[self._cont_q + 1], q[self._cont_q])
+        if self._virtual.size:
+            out[self._virtual] = self.base_pose(q)
+        return out
+
+    def base_pose(self, q: np.ndarray) -> np.ndarray:
+        """Base pose ``(x [m], y [m], yaw [rad])`` in the world (zeros for a fixed base)."""
+        if not self.base.mobile:
+            return np.zeros(3)
+        return np.array([q[0], q[1], math.atan2(q[3], q[2])])
+
+    # ------------------------------------------------------------------ kinematics
+    def check_configuration(self, q: np.ndarray) -> np.ndarray:
+        """``q`` as a float array of shape (nq,), or a :class:`DimensionError`."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.nq,):
+            raise DimensionError(
+                f"configuration of robot {self.name!r} has shape {q.shape}; expected ({self.nq},)"
+            )
+        if not np.all(np.isfinite(q)):
+            raise DimensionError(f"configuration of robot {self.name!r} is not finite: {q}")
+        return q
+
+    def update(self, q: np.ndarray) -> RobotState:
+        """Forward kinematics and all joint Jacobians at ``q``; a view valid until the next
+        call."""
+        q = self.check_configuration(q)
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        self._version += 1
+        return RobotState(self, q, self._version)
+
+    def frame_pose(self, q: np.ndarray, frame: str | Frame) -> np.ndarray:
+        """4x4 pose of ``frame`` in the world at ``q``."""
+        return self.update(q).pose(self.frame(frame))
+
+    def frame_jacobian(self, q: np.ndarray, frame: str | Frame) -> np.ndarray:
+        """6 x nu Jacobian of ``frame`` at ``q``: world-aligned axes at the frame origin,
+        linear rows first, wheel columns through the base actuation map."""
+        return self.update(q).jacobian(self.frame(frame)).copy()
+
+    def com_position(self, q: np.ndarray, body: str | Body) -> np.ndarray:
+        """World position (m) of a body's centre of mass at ``q``."""
+        body = body if isinstance(body, Body) else self.body(body)
+        return self.update(q).com_position(body)
+
+    def integrate(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """Configuration reached from ``q`` by applying ``u`` for ``dt`` seconds (exact on
+        the configuration manifold: the planar base follows the SE(2) exponential)."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != (self.nu,):
+            raise DimensionError(
+                f"actuated velocity of robot {self.name!r} has shape "
+                f"{u.shape}; expected ({self.nu},)"
+            )
+        return pin.integrate(self.model, q, self.actuation @ (u * dt))
+
+    # ------------------------------------------------------------------ presentation
+    def summary(self) -> str:
+        """A human-readable description of the robot."""
+        q = self.neutral()
+        state = self.update(q)
+        lines = [
+            f"robot {self.name}: {self.config.description}".rstrip(": "),
+            f"  files: {self.config.path}",
+            f"  base: {self.base.type}; nq = {self.nq}, nv = {self.nv}, nu = {self.nu} "
+            "actuated velocities",
+        ]
+        for g in self.groups.values():
+            lines.append(f"  group {g.name} ({len(g)}): {', '.join(g.joints)}")
+        for arm in self.arms.values():
+            p = state.position(arm.tool)
+            lines.append(
+                f"  arm {arm.name} ({arm.side}): upper arm {arm.upper_arm_length:.4f} m, "
+                f"forearm {arm.forearm_length:.4f} m, masses {arm.upper_arm.mass:g} / "
+                f"{arm.forearm.mass:g} kg; tool at q=0: ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m"
+            )
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, nu={self.nu}, base={self.base.type!r})"
+
+
+class RobotState:
+    """Kinematics of a robot at one configuration (a view of the robot's Pinocchio data).
+
+    Returned by :meth:`Robot.update`. Jacobians are computed once per frame and cached;
+    the arrays returned are read-only views of that cache. The view is invalidated by the
+    next :meth:`Robot.update`; using it afterwards raises :class:`WholebodyError`.
+    """
+
+    __slots__ = ("_cache", "_version", "q", "robot")
+
+    def __init__(self, robot: Robot, q: np.ndarray, version: int) -> None:
+        self.robot = robot
+        self.q = q.copy()
+        self.q.setflags(write=False)
+        self._version = version
+        self._cache: dict[object, np.ndarray] = {}
+
+    def _data(self) -> pin.Data:
+        if self._version != self.robot._version:
+            raise WholebodyError(
+                "this RobotState is stale: Robot.update() was called again since it was "
+                "made; keep using the newest state"
+            )
+        return self.robot.data
+
+    def placement(self, frame: Frame) -> pin.SE3:
+        """The frame's world placement as a ``pinocchio.SE3`` (a copy)."""
+        return pin.SE3(self._data().oMf[frame.index])
+
+    def pose(self, frame: Frame) -> np.ndarray:
+        """4x4 world pose of ``frame``."""
+        return self._data().oMf[frame.index].homogeneous
+
+    def position(self, frame: Frame) -> np.ndarray:
+        """World position (m) of the frame origin."""
+        return self._data().oMf[frame.index].translation.copy()
+
+    def rotation(self, frame: Frame) -> np.ndarray:
+        """3x3 world orientation of the frame."""
+        return self._data().oMf[frame.index].rotation.copy()
+
+    def jacobian(self, frame: Frame) -> np.ndarray:
+        """6 x nu Jacobian (world-aligned axes at the frame origin, linear rows first)."""
+        J = self._cache.get(frame.index)
+        if J is None:
+            robot = self.robot
+            Jm = pin.getFrameJacobian(robot.model, self._data(), frame.index, LWA)
+            J = Jm @ robot.actuation
+            J.setflags(write=False)
+            self._cache[frame.index] = J
+        return J
+
+    def world_jacobian(self, frame: Frame) -> np.ndarray:
+        """6 x nv model Jacobian in Pinocchio's ``WORLD`` convention (spatial velocity at
+        the world origin), model velocity columns (not actuated)."""
+        key = ("world", frame.index)
+        J = self._cache.get(key)
+        if J is None:
+            J = pin.getFrameJacobian(self.robot.model, self._data(), frame.index, WORLD)
+            J.setflags(write=False)
+            self._cache[key] = J
+        return J
+
+    def com_position(self, body: Body) -> np.ndarray:
+        """World position (m) of the body's centre of mass."""
+        M = self._data().oMf[body.frame.index]
+        return M.translation + M.rotation @ body.com
+
+    def com_jacobian(self, body: Body) -> np.ndarray:
+        """3 x nu Jacobian of the body's centre of mass (world axes)."""
+        J = self.jacobian(body.frame)
+        r = self._data().oMf[body.frame.index].rotation @ body.com
+        # v_com = v_o + w x r = v_o - r x w
+        return J[:3] - np.cross(r, J[3:].T).T
+
+    def joint_positions(self) -> np.ndarray:
+        """Scalar position per actuated velocity (see :meth:`Robot.joint_positions`)."""
+        jp = self._cache.get("joint_positions")
+        if jp is None:
+            jp = self.robot.joint_positions(self.q)
+            jp.setflags(write=False)
+            self._cache["joint_positions"] = jp
+        return jp
+
+
+# ---------------------------------------------------------------------- helpers
+def _suggest(name: object, candidates) -> str:
+    close = difflib.get_close_matches(str(name), [str(c) for c in candidates], n=3)
+    return f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
+
+
+def _read_urdf_links(path: Path) -> dict[str, tuple[float, np.ndarray]]:
+    """Mass and centre of mass (link frame) of every link of a URDF."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ModelError(f"{path}: not well-formed XML: {exc}") from exc
+    if root.tag != "robot":
+        raise ModelError(f"{path}: root element is <{root.tag}>; expected <robot>")
+    links: dict[str, tuple[float, np.ndarray]] = {}
+    for link in root.iter("link"):
+        name = link.get("name")
+        if not name:
+            raise ModelError(f"{path}: a <link> has no name attribute")
+        mass, com = 0.0, np.zeros(3)
+        inertial = link.find("inertial")
+        if inertial is not None:
+            m = inertial.find("mass")
+            o = inertial.find("origin")
+            try:
+                mass = float(m.get("value", "0")) if m is not None else 0.0
+                if o is not None:
+                    com = np.array([float(v) for v in o.get("xyz", "0 0 0").split()])
+            except ValueError as exc:
+                raise ModelError(f"{path}: link {name!r}: bad <inertial>: {exc}") from exc
+            if com.shape != (3,):
+                raise ModelError(f"{path}: link {name!r}: <inertial><origin xyz> needs 3 numbers")
+        com.setflags(write=False)
+        links[name] = (mass, com)
+    return links

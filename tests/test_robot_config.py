@@ -1,0 +1,320 @@
+"""Malformed or inconsistent robot descriptions are rejected with messages that name the file,
+the key and what was expected; other base types and robots are just other robot.toml files."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fdcheck import frame_jacobian_fd
+
+import wholebody
+from wholebody import ConfigError, ModelError
+from wholebody.resources import robots_dir
+
+
+def copy_robot(tmp_path: Path, name: str = "mobile_humanoid") -> Path:
+    dst = tmp_path / name
+    shutil.copytree(robots_dir() / name, dst)
+    return dst
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, f"fixture text {old!r} not found in {path.name}"
+    path.write_text(text.replace(old, new, 1))
+
+
+# (description, file, old text, new text, error type, substrings the message must contain)
+CASES = [
+    (
+        "missing [robot] table",
+        "robot.toml",
+        "[robot]\n",
+        "[robt]\n",
+        ConfigError,
+        ["robot.toml", "[robt]", "unknown key"],
+    ),
+    (
+        "missing urdf key",
+        "robot.toml",
+        'urdf = "robot.urdf"\n',
+        "",
+        ConfigError,
+        ["[robot.urdf]", "missing key"],
+    ),
+    (
+        "urdf file not found",
+        "robot.toml",
+        'urdf = "robot.urdf"',
+        'urdf = "nope.urdf"',
+        ConfigError,
+        ["[robot.urdf]", "nope.urdf", "does not exist"],
+    ),
+    (
+        "unknown frame in an arm",
+        "robot.toml",
+        'tool = "left_tool"',
+        'tool = "left_tol"',
+        ConfigError,
+        ["[arms.left.tool]", "no frame 'left_tol'", "did you mean 'left_tool'"],
+    ),
+    (
+        "unknown link for a body",
+        "robot.toml",
+        'forearm = "right_forearm"',
+        'forearm = "right_fore_arm"',
+        ConfigError,
+        ["[arms.right.forearm]", "not a link"],
+    ),
+    (
+        "joint in two groups",
+        "robot.toml",
+        'waist = ["waist_pitch", "waist_yaw", "waist_roll"]',
+        'waist = ["waist_pitch", "waist_yaw", "waist_roll", "left_clavicle"]',
+        ConfigError,
+        ["[groups.left_arm]", "'left_clavicle' is already in group 'waist'"],
+    ),
+    (
+        "unknown joint in a group",
+        "robot.toml",
+        '"waist_pitch", "waist_yaw", "waist_roll"]',
+        '"waist_pitch", "waist_yw", "waist_roll"]',
+        ConfigError,
+        ["[groups.waist]", "'waist_yw' is not an actuated joint", "did you mean 'waist_yaw'"],
+    ),
+    (
+        "wheel base does not match the URDF",
+        "robot.toml",
+        "wheel_base = 0.50",
+        "wheel_base = 0.60",
+        ConfigError,
+        ["[base]", "do not match the URDF", "wheel_front_left"],
+    ),
+    (
+        "wheels in the wrong order",
+        "robot.toml",
+        'wheels = ["wheel_front_left", "wheel_front_right", "wheel_rear_left", "wheel_rear_right"]'
+        "\nwheel_radius",
+        'wheels = ["wheel_front_right", "wheel_front_left", "wheel_rear_left", "wheel_rear_right"]'
+        "\nwheel_radius",
+        ConfigError,
+        ["[base]", "wheel order", "'wheel_front_right'"],
+    ),
+    (
+        "three Mecanum wheels",
+        "robot.toml",
+        'wheels = ["wheel_front_left", "wheel_front_right", "wheel_rear_left", "wheel_rear_right"]'
+        "\nwheel_radius",
+        'wheels = ["wheel_front_left", "wheel_front_right", "wheel_rear_left"]\nwheel_radius',
+        ConfigError,
+        ["[base.wheels]", "exactly 4 names, got 3"],
+    ),
+    (
+        "negative wheel radius",
+        "robot.toml",
+        "wheel_radius = 0.08",
+        "wheel_radius = -0.08",
+        ConfigError,
+        ["[base.wheel_radius]", "> 0"],
+    ),
+    (
+        "wheel radius as a string",
+        "robot.toml",
+        "wheel_radius = 0.08",
+        'wheel_radius = "8cm"',
+        ConfigError,
+        ["[base.wheel_radius]", "expected a number"],
+    ),
+    (
+        "unknown base type",
+        "robot.toml",
+        'type = "mecanum"',
+        'type = "tracked"',
+        ConfigError,
+        ["[base.type]", "'tracked'", "fixed, mecanum, differential, planar"],
+    ),
+    (
+        "typo in a key",
+        "robot.toml",
+        "track = 0.44",
+        "trak = 0.44",
+        ConfigError,
+        ["[base.trak]", "unknown key"],
+    ),
+    (
+        "wheel that is not a joint",
+        "robot.toml",
+        '"wheel_rear_right"]\nwheel_radius',
+        '"wheel_rear_rigth"]\nwheel_radius',
+        ConfigError,
+        ["[base.wheels]", "'wheel_rear_rigth' is not a joint", "did you mean 'wheel_rear_right'"],
+    ),
+    (
+        "home outside the limits",
+        "robot.toml",
+        "left_elbow_flexion = 1.2",
+        "left_elbow_flexion = 3.2",
+        ConfigError,
+        ["[home.left_elbow_flexion]", "outside"],
+    ),
+    (
+        "home names an unknown joint",
+        "robot.toml",
+        "left_elbow_flexion = 1.2",
+        "left_elbow = 1.2",
+        ConfigError,
+        ["[home.left_elbow]", "not a joint"],
+    ),
+    (
+        "bad arm side",
+        "robot.toml",
+        'side = "left"',
+        'side = "port"',
+        ConfigError,
+        ["[arms.left.side]", "'port'", "left, right"],
+    ),
+    (
+        "arm names an undefined group",
+        "robot.toml",
+        'group = "left_arm"',
+        'group = "larm"',
+        ConfigError,
+        ["[arms.left.group]", "unknown group 'larm'"],
+    ),
+    ("not TOML", "robot.toml", "[robot]\n", "[robot\n", ConfigError, ["not valid TOML"]),
+    (
+        "URDF not XML",
+        "robot.urdf",
+        "<robot name=",
+        "<robot name=<",
+        ModelError,
+        ["robot.urdf", "not well-formed XML"],
+    ),
+    (
+        "URDF with a dangling joint",
+        "robot.urdf",
+        '<parent link="chest"/><child link="head"/>',
+        '<parent link="chesst"/><child link="head"/>',
+        ModelError,
+        ["robot.urdf", "Pinocchio cannot load"],
+    ),
+    (
+        "multi-DOF joint below the root",
+        "robot.urdf",
+        '<joint name="head_mount" type="fixed">',
+        '<joint name="head_mount" type="floating">',
+        ModelError,
+        ["robot.urdf", "'head_mount' has 6 DOF", "1-DOF joints"],
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    ("file", "old", "new", "error", "parts"), [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
+def test_malformed_robot_is_rejected_with_a_precise_message(tmp_path, file, old, new, error, parts):
+    d = copy_robot(tmp_path)
+    edit(d / file, old, new)
+    with pytest.raises(error) as info:
+        wholebody.load_robot(d / "robot.toml")
+    message = str(info.value)
+    for part in parts:
+        assert part in message, f"{part!r} not in {message!r}"
+    if file == "robot.toml":
+        assert str(d / "robot.toml") in message
+
+
+def test_massless_arm_body_is_rejected(tmp_path):
+    d = copy_robot(tmp_path)
+    edit(d / "robot.toml", 'upper_arm = "left_upper_arm"', 'upper_arm = "left_tool"')
+    with pytest.raises(ConfigError, match=r"\[arms.left.upper_arm\].*no mass"):
+        wholebody.load_robot(d)
+
+
+def test_unknown_robot_name_lists_the_bundled_ones():
+    with pytest.raises(ConfigError, match="mobile_humanoid"):
+        wholebody.load_robot("no_such_robot")
+    with pytest.raises(ConfigError, match=r"no robot\.toml"):
+        wholebody.load_robot(Path(__file__).parent)
+
+
+def test_fixed_base_torso_is_just_another_robot_toml(torso, rng):
+    assert torso.nu == 15 and torso.base.type == "fixed"
+    assert set(torso.arms) == {"left", "right"}
+    assert torso.arms["left"].upper_arm_length == pytest.approx(0.30)
+    assert torso.arms["left"].forearm_length == pytest.approx(0.25)
+    q = torso.random_configuration(rng, margin=0.05)
+    for f in ("left_tool", "right_elbow_centre"):
+        np.testing.assert_allclose(
+            torso.frame_jacobian(q, f), frame_jacobian_fd(torso, q, f), atol=2e-8
+        )
+    assert torso.joint_positions(torso.home())[torso.index("left_elbow")] == pytest.approx(1.0)
+
+
+def test_planar_base_adds_three_virtual_actuators(tmp_path, rng):
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    edit(d / "robot.toml", 'type = "fixed"', 'type = "planar"\nmax_linear_velocity = 0.8')
+    r = wholebody.load_robot(d)
+    assert r.nu == 18 and r.actuated_joints[:3] == ("base_vx", "base_vy", "base_wz")
+    assert r.velocity_limits[0] == pytest.approx(0.8)
+    q = r.random_configuration(rng, margin=0.05)
+    np.testing.assert_allclose(
+        r.frame_jacobian(q, "left_tool"), frame_jacobian_fd(r, q, "left_tool"), atol=2e-8
+    )
+    u = np.zeros(r.nu)
+    u[0] = 0.5  # forward in the base frame
+    yaw = r.base_pose(q)[2]
+    moved = r.base_pose(r.integrate(q, u, 1.0)) - r.base_pose(q)
+    np.testing.assert_allclose(moved[:2], 0.5 * np.array([np.cos(yaw), np.sin(yaw)]), atol=1e-12)
+
+
+DIFF_DRIVE_URDF = """<?xml version="1.0"?>
+<robot name="diff">
+  <link name="base"><inertial><mass value="10"/><inertia ixx="1" iyy="1" izz="1" ixy="0"
+    ixz="0" iyz="0"/></inertial></link>
+  <link name="wl"/><link name="wr"/>
+  <joint name="wheel_left" type="continuous"><parent link="base"/><child link="wl"/>
+    <origin xyz="0 0.2 0.1"/><axis xyz="0 1 0"/><limit effort="1" velocity="10"/></joint>
+  <joint name="wheel_right" type="continuous"><parent link="base"/><child link="wr"/>
+    <origin xyz="0 -0.2 0.1"/><axis xyz="0 1 0"/><limit effort="1" velocity="10"/></joint>
+  <link name="arm"><inertial><origin xyz="0.2 0 0"/><mass value="1"/><inertia ixx="0.1"
+    iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="arm_yaw" type="revolute"><parent link="base"/><child link="arm"/>
+    <origin xyz="0.1 0 0.5"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+  <link name="tip"/>
+  <joint name="tip_joint" type="fixed"><parent link="arm"/><child link="tip"/>
+    <origin xyz="0.4 0 0"/></joint>
+</robot>
+"""
+
+
+def test_differential_base(tmp_path, rng):
+    (tmp_path / "robot.urdf").write_text(DIFF_DRIVE_URDF)
+    (tmp_path / "robot.toml").write_text(
+        '[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
+        'wheels = ["wheel_left", "wheel_right"]\nwheel_radius = 0.1\ntrack = 0.4\n'
+    )
+    r = wholebody.load_robot(tmp_path)
+    assert r.nu == 3 and r.actuated_joints == ("wheel_left", "wheel_right", "arm_yaw")
+    np.testing.assert_allclose(r.base.matrix, [[0.05, 0.05], [0, 0], [-0.25, 0.25]])
+    q = r.random_configuration(rng)
+    np.testing.assert_allclose(
+        r.frame_jacobian(q, "tip"), frame_jacobian_fd(r, q, "tip"), atol=2e-8
+    )
+    # equal wheel speeds drive straight ahead; opposite ones turn in place
+    yaw = r.base_pose(q)[2]
+    ahead = r.base_pose(r.integrate(q, np.array([2.0, 2.0, 0.0]), 0.5)) - r.base_pose(q)
+    np.testing.assert_allclose(ahead, [0.1 * np.cos(yaw), 0.1 * np.sin(yaw), 0.0], atol=1e-12)
+    turn = r.base_pose(r.integrate(q, np.array([-2.0, 2.0, 0.0]), 0.5)) - r.base_pose(q)
+    np.testing.assert_allclose(turn[:2], 0.0, atol=1e-12)
+    assert turn[2] == pytest.approx(0.5, abs=1e-12)
+    # a differential base whose track contradicts the URDF is rejected
+    (tmp_path / "robot.toml").write_text(
+        (tmp_path / "robot.toml").read_text().replace("track = 0.4", "track = 0.5")
+    )
+    with pytest.raises(ConfigError, match=r"\[base\].*'wheel_left'"):
+        wholebody.load_robot(tmp_path)

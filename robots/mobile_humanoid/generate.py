@@ -101,11 +101,12 @@ ARM_LINKS = (
 )  # fmt: skip
 
 # Human-like ranges of motion (rad) in the conventions above: typical adult active ranges
-# (AAOS; Norkin & White) trimmed for a robot: trunk flexion 45 deg, extension 15, rotation
-# 45, lateral flexion 30; clavicle 20; shoulder flexion 175 / extension 50, abduction 150 /
+# (AAOS; Norkin & White) trimmed for a robot: trunk flexion and extension 30 deg (symmetric,
+# so that the joint-limit term h1, which pulls joints to mid-range, keeps the trunk upright),
+# rotation 45, lateral flexion 30; clavicle 20; shoulder flexion 175 / extension 50, abduction 150 /
 # adduction 30, rotation 75; elbow 0-145 deg plus 6 deg hyperextension so that the hanging
 # zero posture is strictly inside the range; forearm rotation 80; wrist 70; hand roll 90.
-WAIST_LIMITS = ((-0.79, 0.26), (-0.79, 0.79), (-0.52, 0.52))
+WAIST_LIMITS = ((-0.52, 0.52), (-0.79, 0.79), (-0.52, 0.52))
 ARM_LIMITS = (
     (-0.35, 0.35),
     (-0.87, 3.05),

@@ -1,14 +1,14 @@
 """Where the robots and scenario files that ship with wholebody live.
 
 In a wheel they are package data under ``wholebody/_share/``; in a source checkout they are
-the repository's ``robots/`` and ``tasks/`` directories.
+the repository's ``robots/``, ``tasks/`` and ``data/`` directories.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["robots_dir", "share_dir", "tasks_dir"]
+__all__ = ["data_dir", "robots_dir", "share_dir", "tasks_dir"]
 
 
 def share_dir() -> Path:
@@ -27,3 +27,8 @@ def robots_dir() -> Path:
 def tasks_dir() -> Path:
     """The bundled scenario files (the paper's experiments)."""
     return share_dir() / "tasks"
+
+
+def data_dir() -> Path:
+    """The bundled data sets (human reaching recordings, with their licences)."""
+    return share_dir() / "data"

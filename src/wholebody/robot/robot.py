@@ -119,7 +119,7 @@ class Robot:
         self.name = config.name
         self.base: BaseModel = base_model(config.base)
         root = pin.JointModelPlanar() if self.base.mobile else None
-        self._links = _read_urdf_links(config.urdf)
+        self._links, root_link = _read_urdf_links(config.urdf)
         try:
             self.model: pin.Model = (
                 pin.buildModelFromUrdf(str(config.urdf), root)
@@ -130,6 +130,8 @@ class Robot:
             raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
         self.data: pin.Data = self.model.createData()
         self._version = 0
+        self.base_frame: Frame = self.frame(root_link)
+        """The URDF's root link (the moving base of a mobile robot)."""
         self._build_actuation()
         self.groups: dict[str, JointGroup] = {
             g: self._group(g, joints) for g, joints in config.groups.items()
@@ -198,7 +200,10 @@ class Robot:
         self.velocity_limits: np.ndarray = vmax
         for arr in (A, lower, upper, vmax):
             arr.setflags(write=False)
-        self._kinds = kinds
+        self.positional: np.ndarray = kinds == 0
+        """Per actuated velocity: whether it has a bounded-or-not scalar joint position
+        (revolute, prismatic); False for wheels and planar-base actuators."""
+        self.positional.setflags(write=False)
         self._scalar = np.flatnonzero(kinds == 0)
         self._scalar_q = qidx[self._scalar]
         self._cont = np.flatnonzero(kinds == 1)
@@ -577,9 +582,9 @@ class RobotState:
     def com_jacobian(self, body: Body) -> np.ndarray:
         """3 x nu Jacobian of the body's centre of mass (world axes)."""
         J = self.jacobian(body.frame)
-        r = self._data().oMf[body.frame.index].rotation @ body.com
-        # v_com = v_o + w x r = v_o - r x w
-        return J[:3] - np.cross(r, J[3:].T).T
+        rx, ry, rz = self._data().oMf[body.frame.index].rotation @ body.com
+        # v_com = v_o + w x r = v_o - [r]x w
+        return J[:3] - np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ J[3:]
 
     def joint_positions(self) -> np.ndarray:
         """Scalar position per actuated velocity (see :meth:`Robot.joint_positions`)."""
@@ -597,8 +602,8 @@ def _suggest(name: object, candidates) -> str:
     return f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
 
 
-def _read_urdf_links(path: Path) -> dict[str, tuple[float, np.ndarray]]:
-    """Mass and centre of mass (link frame) of every link of a URDF."""
+def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], str]:
+    """Mass and centre of mass (link frame) of every link of a URDF, and the root link."""
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
@@ -625,4 +630,8 @@ def _read_urdf_links(path: Path) -> dict[str, tuple[float, np.ndarray]]:
                 raise ModelError(f"{path}: link {name!r}: <inertial><origin xyz> needs 3 numbers")
         com.setflags(write=False)
         links[name] = (mass, com)
-    return links
+    children = {c.get("link") for c in root.iter("child")}
+    roots = [name for name in links if name not in children]
+    if len(roots) != 1:
+        raise ModelError(f"{path}: expected one root link, found {roots or 'none'}")
+    return links, roots[0]

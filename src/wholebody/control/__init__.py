@@ -1,0 +1,24 @@
+"""The control loop, run logs and their metrics."""
+
+from __future__ import annotations
+
+from wholebody.control.controller import Controller
+from wholebody.control.log import ArmTrace, RunLog
+from wholebody.control.metrics import (
+    Tracking,
+    closed_chain_error,
+    limit_violations,
+    summary,
+    tracking,
+)
+
+__all__ = [
+    "ArmTrace",
+    "Controller",
+    "RunLog",
+    "Tracking",
+    "closed_chain_error",
+    "limit_violations",
+    "summary",
+    "tracking",
+]

@@ -1,0 +1,139 @@
+"""The run log: everything a control run produced, saved to and loaded from ``.npz``.
+
+Arrays have one row per control step. Keys in the file (no pickle; metadata as JSON)::
+
+    t, q, u, joint_positions, step_time, solve_time, status, limit_hit, level_residuals
+    task_error/<task>               (N, dim)  task errors (m, rad)
+    frame_position/<task>           (N, 3)    tracked frame position (m, world)
+    reference_position/<task>       (N, 3)    its reference (m, world)
+    arm/<arm>/{energy,gravity,spring,arm_angle,stiffness,rho}  (N,)  J, J, J, rad, N m/rad, m
+    meta                            JSON: robot, dt, solver, levels, actuated joints, groups,
+                                    position limits, phases
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wholebody.errors import DataError
+
+__all__ = ["ArmTrace", "RunLog"]
+
+ARM_FIELDS = ("energy", "gravity", "spring", "arm_angle", "stiffness", "rho")
+
+
+@dataclass
+class ArmTrace:
+    """Per-step energy terms of one arm (J, J, J, rad, N m/rad) and ``rho`` (m), how well
+    the arm angle is defined (0 for a straight arm or a vertical shoulder-wrist line)."""
+
+    energy: np.ndarray
+    gravity: np.ndarray
+    spring: np.ndarray
+    arm_angle: np.ndarray
+    stiffness: np.ndarray
+    rho: np.ndarray
+
+
+@dataclass
+class RunLog:
+    """A control run, one row per step (see the module docstring for units)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    u: np.ndarray
+    joint_positions: np.ndarray
+    step_time: np.ndarray
+    solve_time: np.ndarray
+    status: np.ndarray
+    limit_hit: np.ndarray
+    level_residuals: np.ndarray
+    task_errors: dict[str, np.ndarray] = field(default_factory=dict)
+    frame_positions: dict[str, np.ndarray] = field(default_factory=dict)
+    reference_positions: dict[str, np.ndarray] = field(default_factory=dict)
+    arms: dict[str, ArmTrace] = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def dt(self) -> float:
+        return float(self.meta.get("dt", 0.0))
+
+    def group_indices(self, group: str) -> np.ndarray:
+        """Indices into ``u`` of a joint group recorded in the metadata."""
+        try:
+            return np.asarray(self.meta["groups"][group], dtype=int)
+        except KeyError:
+            raise DataError(f"run log has no joint group {group!r}; it has "
+                            f"{sorted(self.meta.get('groups', {}))}") from None  # fmt: skip
+
+    def phase_mask(self, phase: str) -> np.ndarray:
+        """Boolean mask of the steps inside a named phase (``meta['phases']``)."""
+        phases = self.meta.get("phases", {})
+        if phase not in phases:
+            raise DataError(f"run log has no phase {phase!r}; it has {sorted(phases)}")
+        t0, t1 = phases[phase]
+        return (self.t >= t0 - 1e-9) & (self.t < t1 - 1e-9)
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | Path) -> Path:
+        """Write the log as a compressed ``.npz`` (no pickle)."""
+        path = Path(path)
+        arrays: dict[str, np.ndarray] = {
+            "t": self.t, "q": self.q, "u": self.u, "joint_positions": self.joint_positions,
+            "step_time": self.step_time, "solve_time": self.solve_time, "status": self.status,
+            "limit_hit": self.limit_hit, "level_residuals": self.level_residuals,
+        }  # fmt: skip
+        for prefix, table in (("task_error", self.task_errors),
+                              ("frame_position", self.frame_positions),
+                              ("reference_position", self.reference_positions)):  # fmt: skip
+            for name, value in table.items():
+                arrays[f"{prefix}/{name}"] = value
+        for arm, trace in self.arms.items():
+            for f in ARM_FIELDS:
+                arrays[f"arm/{arm}/{f}"] = getattr(trace, f)
+        arrays["meta"] = np.array(json.dumps(self.meta))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> RunLog:
+        """Read a log written by :meth:`save`."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise DataError(f"{path}: not a run log (.npz): {exc}") from exc
+        required = ("t", "q", "u", "joint_positions", "step_time", "solve_time", "status",
+                    "limit_hit", "level_residuals", "meta")  # fmt: skip
+        missing = [k for k in required if k not in data]
+        if missing:
+            raise DataError(f"{path}: run log lacks {missing}")
+        tables: dict[str, dict[str, np.ndarray]] = {
+            "task_error": {}, "frame_position": {}, "reference_position": {}
+        }  # fmt: skip
+        arms: dict[str, dict[str, np.ndarray]] = {}
+        for key, value in data.items():
+            head, _, rest = key.partition("/")
+            if head in tables:
+                tables[head][rest] = value
+            elif head == "arm":
+                arm, _, f = rest.partition("/")
+                arms.setdefault(arm, {})[f] = value
+        return cls(
+            **{k: data[k] for k in required if k != "meta"},
+            task_errors=tables["task_error"],
+            frame_positions=tables["frame_position"],
+            reference_positions=tables["reference_position"],
+            arms={a: ArmTrace(**{f: v[f] for f in ARM_FIELDS}) for a, v in arms.items()},
+            meta=json.loads(str(data["meta"])),
+        )

@@ -1,0 +1,115 @@
+"""Metrics of a run log: the paper's Table 2 quantities and the safety counts.
+
+* tracking of each frame task against its reference: MSE (m^2) and MAE (m) per axis,
+* execution frequency: ``1 / mean(step_time)`` (Hz; the paper's "decision frequency"),
+* joint travel per group: ``sum_k sum_j |u_kj| dt`` (rad; for wheels, wheel rotation),
+* arm energies: initial, final, mean (J); arm angle range (rad) over the steps where it is
+  defined (``rho >= ARM_ANGLE_MIN_RHO``: not a straight arm, not a vertical shoulder-wrist
+  line),
+* limit violations (steps with a joint outside its limits by more than 1e-9 rad) and solver
+  failures (steps with status INFEASIBLE or FAILED).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wholebody.control.log import RunLog
+from wholebody.errors import DataError
+from wholebody.solvers.result import SolverStatus
+
+__all__ = ["Tracking", "closed_chain_error", "limit_violations", "summary", "tracking"]
+
+AXES = ("x", "y", "z")
+ARM_ANGLE_MIN_RHO = 0.005  # m
+
+
+@dataclass(frozen=True)
+class Tracking:
+    """Position tracking of one frame task (per axis x, y, z)."""
+
+    mse_m2: dict[str, float]
+    mae_m: dict[str, float]
+    max_m: float
+
+
+def tracking(log: RunLog, task: str, mask: np.ndarray | None = None) -> Tracking:
+    """Position tracking of a frame task against its reference over the masked steps."""
+    if task not in log.frame_positions:
+        raise DataError(f"run log has no tracked frame task {task!r}; it has "
+                        f"{sorted(log.frame_positions)}")  # fmt: skip
+    err = log.frame_positions[task] - log.reference_positions[task]
+    if mask is not None:
+        err = err[mask]
+    if err.size == 0:
+        raise DataError(f"no steps selected for {task!r}")
+    mse = np.mean(err**2, axis=0)
+    mae = np.mean(np.abs(err), axis=0)
+    return Tracking(dict(zip(AXES, map(float, mse), strict=True)),
+                    dict(zip(AXES, map(float, mae), strict=True)),
+                    float(np.max(np.linalg.norm(err, axis=1))))  # fmt: skip
+
+
+def limit_violations(log: RunLog, tolerance: float = 1e-9) -> int:
+    """Number of steps with any joint outside its position limits by more than ``tolerance``."""
+    lo, hi = (np.asarray(v, dtype=float) for v in log.meta["position_limits"])
+    jp = log.joint_positions
+    bad = (jp < lo - tolerance) | (jp > hi + tolerance)
+    return int(np.count_nonzero(bad.any(axis=1)))
+
+
+def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -> float:
+    """Largest position error (m) of a relative (closed-chain) task over the masked steps."""
+    if task not in log.task_errors:
+        raise DataError(f"run log has no task {task!r}")
+    e = log.task_errors[task][:, :3]
+    if mask is not None:
+        e = e[mask]
+    return float(np.max(np.linalg.norm(e, axis=1))) if e.size else 0.0
+
+
+def summary(log: RunLog) -> dict:
+    """The metrics of a run as a JSON-ready dictionary."""
+    dt = log.dt
+    out: dict = {
+        "steps": len(log),
+        "duration_s": float(len(log) * dt),
+        "frequency_hz": float(1.0 / np.mean(log.step_time)),
+        "step_time_us": {
+            "median": float(np.median(log.step_time) * 1e6),
+            "p90": float(np.percentile(log.step_time, 90) * 1e6),
+        },
+        "mse_m2": {},
+        "mae_m": {},
+        "max_tracking_error_m": {},
+        "joint_travel_rad": {
+            g: float(np.sum(np.abs(log.u[:, log.group_indices(g)])) * dt)
+            for g in log.meta.get("groups", {})
+        },
+        "limit_violations": limit_violations(log),
+        "solver_failures": int(np.count_nonzero(log.status >= SolverStatus.INFEASIBLE)),
+        "limit_hit_steps": int(np.count_nonzero(log.limit_hit)),
+        "arm_energy_j": {},
+        "arm_angle_rad": {},
+    }
+    for task in log.frame_positions:
+        tr = tracking(log, task)
+        out["mse_m2"][task] = tr.mse_m2
+        out["mae_m"][task] = tr.mae_m
+        out["max_tracking_error_m"][task] = tr.max_m
+    for arm, trace in log.arms.items():
+        out["arm_energy_j"][arm] = {
+            "initial": float(trace.energy[0]),
+            "final": float(trace.energy[-1]),
+            "mean": float(np.mean(trace.energy)),
+            "gravity_final": float(trace.gravity[-1]),
+        }
+        defined = trace.arm_angle[trace.rho >= ARM_ANGLE_MIN_RHO]
+        out["arm_angle_rad"][arm] = {
+            "min": float(np.min(defined)) if defined.size else float("nan"),
+            "max": float(np.max(defined)) if defined.size else float("nan"),
+            "defined_fraction": float(defined.size / max(1, trace.rho.size)),
+        }
+    return out

@@ -1,0 +1,128 @@
+"""The paper's controller as a ready-made stack.
+
+``H = w1 f_p + w2 h1 - w3 h2`` (NOTES §2) with:
+
+* ``f_p`` the arm potential energy of each arm (:class:`ArmPotentialEnergy`), weight ``w1``;
+* ``h1`` joint-limit avoidance with a per-group weight (the paper's ``w2`` "is a coefficient
+  matrix"): heavy on the waist, light on the arms. That is what turns the paper's principle
+  "more arm, less waist" into numbers: ``h1`` pulls joints to mid-range, and a heavy waist
+  weight makes the null-space motion straighten the trunk and let the base and arms work;
+* ``h2`` manipulability of both hands (:class:`Manipulability`), weight ``w3``;
+* descent gain ``k`` (``u = J+ v - k (I - J+ J) grad H``).
+
+The velocity metric makes one wheel radian per second as cheap as 0.01 of a joint's, so the
+minimum-norm choices let the base drive (a wheel speed of 1 rad/s moves the base only
+2 cm/s). The same metric is used for the plain pseudo-inverse baseline, so a comparison
+isolates the effect of the objectives.
+
+The default numbers were tuned on the paper's single-arm reach (right hand to
+(1.701, -0.45675, 0.46133) m in 5 s at 100 Hz): ``tests/test_controller.py`` holds the
+comparison with the plain pseudo-inverse. The energy weight keeps an arm that has no task
+hanging relaxed (``h1`` alone would lift it to mid-range), and the waist weight keeps the
+trunk upright while the base and the arm reach.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.robot import Robot
+from wholebody.solvers.stack import Level, Stack
+from wholebody.tasks import (
+    ArmPotentialEnergy,
+    JointLimitAvoidance,
+    JointPositionLimits,
+    Manipulability,
+    Objective,
+    Task,
+    VelocityLimits,
+)
+
+__all__ = ["PaperWeights", "paper_metric", "paper_objectives", "paper_stack"]
+
+
+@dataclass(frozen=True)
+class PaperWeights:
+    """Weights of ``H`` and the descent gain (see the module docstring)."""
+
+    energy: float = 0.5
+    limits_arms: float = 0.05
+    limits_waist: float = 30.0
+    manipulability: float = 0.0
+    gain: float = 1.0
+    wheel_metric: float = 0.01
+
+
+def default_stiffness(robot: Robot) -> StiffnessModel:
+    """The robot's learned stiffness model if it ships one, else a constant 0.1 N m/rad."""
+    from wholebody.resources import robots_dir
+
+    path = robots_dir() / robot.name / "stiffness.npz"
+    if path.is_file():
+        try:
+            from wholebody.humanlike.network import NetworkStiffness
+        except ImportError:  # pragma: no cover - the network module arrives with issue 6
+            return ConstantStiffness(0.1)
+        return NetworkStiffness.load(path)
+    return ConstantStiffness(0.1)
+
+
+def paper_metric(robot: Robot, weights: PaperWeights = PaperWeights()) -> np.ndarray:
+    """Velocity metric: ``weights.wheel_metric`` on the base actuators, 1 elsewhere."""
+    metric = np.ones(robot.nu)
+    metric[: len(robot.base.actuators)] = weights.wheel_metric
+    return metric
+
+
+def paper_objectives(
+    robot: Robot,
+    weights: PaperWeights = PaperWeights(),
+    stiffness: float | StiffnessModel | None = None,
+) -> list[Objective]:
+    """``f_p`` of every arm, ``h1`` (per group) and, if weighted, ``h2`` of the arms' tools."""
+    k = default_stiffness(robot) if stiffness is None else stiffness
+    objectives: list[Objective] = [
+        ArmPotentialEnergy(robot, arm, k, weight=weights.energy) for arm in robot.arms
+    ]
+    arm_groups = [a.group.name for a in robot.arms.values() if a.group is not None]
+    others = [g for g in robot.groups if g not in arm_groups and _limited(robot, g)]
+    if arm_groups:
+        objectives.append(JointLimitAvoidance(robot, arm_groups, weight=weights.limits_arms,
+                                              name="joint_limits_arms"))  # fmt: skip
+    if others:
+        objectives.append(JointLimitAvoidance(robot, others, weight=weights.limits_waist,
+                                              name="joint_limits_body"))  # fmt: skip
+    if weights.manipulability:
+        objectives.append(Manipulability(robot, [a.tool for a in robot.arms.values()],
+                                         weight=-weights.manipulability))  # fmt: skip
+    return objectives
+
+
+def _limited(robot: Robot, group: str) -> bool:
+    lower, upper = robot.position_limits
+    idx = robot.group(group).indices
+    return bool(np.all(np.isfinite(lower[idx]) & np.isfinite(upper[idx])))
+
+
+def paper_stack(
+    robot: Robot,
+    tasks: Sequence[Task],
+    *,
+    objectives: bool = True,
+    weights: PaperWeights = PaperWeights(),
+    stiffness: float | StiffnessModel | None = None,
+    extra_levels: Sequence[Level] = (),
+) -> Stack:
+    """The paper's stack: ``tasks`` on top, then ``H`` (omitted with ``objectives=False``:
+    the plain pseudo-inverse baseline), joint position and velocity limits, the metric."""
+    levels: list[Level] = [Level(tuple(tasks), name="tasks")]
+    if objectives:
+        levels.append(Level(tuple(paper_objectives(robot, weights, stiffness)),
+                            gain=weights.gain, name="objectives"))  # fmt: skip
+    levels += list(extra_levels)
+    return Stack(robot, levels, [JointPositionLimits(robot), VelocityLimits(robot)],
+                 metric=paper_metric(robot, weights))  # fmt: skip

@@ -1,0 +1,75 @@
+"""What a solver returns: the actuated velocity and what happened."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["SolverResult", "SolverStatus"]
+
+
+class SolverStatus(enum.IntEnum):
+    """Outcome of one solve, from best to worst."""
+
+    OK = 0
+    """Every level solved; no bound active."""
+    BOUNDS_ACTIVE = 1
+    """Every level solved as well as the higher levels allow, with some bounds active."""
+    SCALED = 2
+    """The projection backend scaled a level's motion down to respect the bounds."""
+    INFEASIBLE = 3
+    """A level could not be met within tolerance (see ``infeasible``); ``u`` is the best
+    feasible answer."""
+    FAILED = 4
+    """A numerical failure; ``u`` is a safe fallback that respects the bounds."""
+
+
+@dataclass
+class SolverResult:
+    """The result of :meth:`Solver.solve`.
+
+    Attributes
+    ----------
+    u
+        Actuated velocity (nu,), never NaN; always inside the box of the stack's constraints.
+    status
+        See :class:`SolverStatus`.
+    level_residuals
+        Per level, the weighted residual norm ``||A u~ - b||`` of its equality rows.
+    task_residuals
+        Per equality task, the residual norm of its rows ``||J u - v||`` (unweighted).
+    active_bounds
+        Indices of the entries of ``u`` at a bound of the box.
+    scale
+        Per level, the factor its motion was scaled by (1 = not scaled; projection only).
+    infeasible
+        ``(level name, task name)`` of the tasks a level could not meet.
+    solve_time
+        Wall time of the solve, seconds.
+    message
+        Free text (engine status, fallback taken).
+    """
+
+    u: np.ndarray
+    status: SolverStatus
+    level_residuals: np.ndarray
+    task_residuals: dict[str, float] = field(default_factory=dict)
+    active_bounds: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    scale: np.ndarray = field(default_factory=lambda: np.ones(0))
+    infeasible: list[tuple[str, str]] = field(default_factory=list)
+    solve_time: float = 0.0
+    message: str = ""
+
+    @property
+    def limit_hit(self) -> bool:
+        """Whether any bound was active or any motion scaled down."""
+        return self.status in (SolverStatus.BOUNDS_ACTIVE, SolverStatus.SCALED) or bool(
+            self.active_bounds.size
+        )
+
+    @property
+    def ok(self) -> bool:
+        """Whether every level was solved (possibly with bounds active)."""
+        return self.status <= SolverStatus.SCALED

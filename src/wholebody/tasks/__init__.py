@@ -1,0 +1,40 @@
+"""Composable tasks, objectives and constraints (velocity level, actuated coordinates)."""
+
+from __future__ import annotations
+
+from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
+from wholebody.tasks.base import (
+    Bounds,
+    Constraint,
+    InequalityRows,
+    InequalityTask,
+    Objective,
+    ObjectiveValue,
+    Task,
+    TaskRows,
+)
+from wholebody.tasks.frame import FrameTask
+from wholebody.tasks.limits import JointPositionLimits, VelocityLimits
+from wholebody.tasks.objectives import JointLimitAvoidance, Manipulability
+from wholebody.tasks.posture import PostureTask
+from wholebody.tasks.relative import RelativeFrameTask
+
+__all__ = [
+    "ArmEnergyValue",
+    "ArmPotentialEnergy",
+    "Bounds",
+    "Constraint",
+    "FrameTask",
+    "InequalityRows",
+    "InequalityTask",
+    "JointLimitAvoidance",
+    "JointPositionLimits",
+    "Manipulability",
+    "Objective",
+    "ObjectiveValue",
+    "PostureTask",
+    "RelativeFrameTask",
+    "Task",
+    "TaskRows",
+    "VelocityLimits",
+]

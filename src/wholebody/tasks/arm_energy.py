@@ -1,0 +1,168 @@
+"""The paper's arm potential energy ``f_p = f_g + f_e`` as an objective.
+
+* Gravity: ``f_g = g (m1 h1 + m2 h2)``, the heights (m) of the upper-arm and forearm centres
+  of mass, masses and centres of mass from the robot model (hand excluded). **Decision:**
+  heights are measured from the arm's shoulder centre (``reference="shoulder"``, default), so
+  the energy describes the arm's posture: bending the waist or lowering the body earns
+  nothing. (With world heights, ``reference="world"``, leaning the trunk forward lowers both
+  centres of mass, and the objective then rewards exactly the waist motion the paper's
+  method is meant to avoid.) The stiffness label ``d f_g / d alpha`` at fixed shoulder and
+  wrist is the same with either reference.
+* Virtual torsion spring about the shoulder-wrist line: ``f_e = 1/2 k (pi - |alpha|_s)^2 w``
+  with the arm angle alpha (:mod:`wholebody.humanlike.arm_geometry`, 0 = elbow lowest), rest
+  angle pi, and stiffness k constant or a model ``k(wrist)``
+  (:class:`~wholebody.humanlike.stiffness.StiffnessModel`).
+
+Two regularisations make the energy smooth everywhere (documented decisions):
+
+* ``|alpha|_s`` is the Huber-smoothed magnitude: ``alpha^2 / (2 delta) + delta / 2`` for
+  ``|alpha| < delta``, else ``|alpha|`` (``delta`` = ``smoothing``, rad). It equals |alpha|
+  away from 0, so the spring is the paper's there, and its gradient does not jump where the
+  elbow passes its lowest point.
+* ``w = rho^2 / (rho^2 + eps^2)`` with ``rho^2 = x^2 + y^2 = |d|^2 sin^2(theta_u)``, eps =
+  ``fade`` (m): alpha is undefined for a straight arm or a vertical shoulder-wrist line
+  (``rho = 0``), where rotating about that line changes nothing, so the spring fades out
+  there. ``w dalpha = (x dy - y dx) / (rho^2 + eps^2)`` stays bounded, and the gradient exists
+  everywhere. With eps = 1 cm, w > 0.96 once rho > 5 cm.
+
+Gradient in actuated coordinates, with ``J_S, J_E, J_W`` the linear Jacobians of the joint
+centres, ``J_c1, J_c2`` those of the centres of mass and ``s = |alpha|_s``::
+
+    d f_g = g (m1 (J_c1[z] - J_S[z]) + m2 (J_c2[z] - J_S[z]))     (shoulder reference)
+    d f_e = 1/2 (pi - s)^2 w dk  -  k (pi - s) s'(alpha) w dalpha  +  1/2 k (pi - s)^2 dw
+
+The stiffness model's input is the wrist relative to the shoulder in the arm's canonical body
+axes (x forward, y medial, z up; see :mod:`wholebody.humanlike.stiffness`):
+``p = Mirror R_b^T (W - S)`` with ``R_b`` the base yaw, so
+``dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wholebody.errors import DimensionError
+from wholebody.humanlike.arm_geometry import arm_angle_with_gradient
+from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.robot import ArmChain, Robot, RobotState
+from wholebody.tasks.base import Objective, ObjectiveValue
+
+__all__ = ["ArmEnergyValue", "ArmPotentialEnergy"]
+
+
+@dataclass(frozen=True)
+class ArmEnergyValue(ObjectiveValue):
+    """The arm energy with its parts, for logging (J, J, rad, N m/rad, m). ``rho`` is
+    ``|d| sin(theta_u)``, how well the arm angle is defined (0: undefined)."""
+
+    gravity: float = 0.0
+    spring: float = 0.0
+    arm_angle: float = 0.0
+    stiffness: float = 0.0
+    rho: float = 0.0
+
+
+def _skew(r: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+class ArmPotentialEnergy(Objective):
+    """Gravity plus virtual-spring energy of one arm (J).
+
+    Parameters
+    ----------
+    robot, arm
+        The robot and the arm chain (name or :class:`~wholebody.robot.ArmChain`).
+    stiffness
+        Constant k (N m/rad) or a :class:`StiffnessModel`.
+    smoothing
+        ``delta`` of the smoothed |alpha| (rad).
+    fade
+        ``eps`` of the spring's fade-out where alpha is undefined (m).
+    reference
+        ``"shoulder"`` (default) or ``"world"``: what the heights of the gravity term are
+        measured from (see the module docstring).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        arm: str | ArmChain,
+        stiffness: float | StiffnessModel,
+        *,
+        weight: float = 1.0,
+        smoothing: float = 0.05,
+        fade: float = 0.01,
+        reference: str = "shoulder",
+        name: str | None = None,
+    ) -> None:
+        self.robot = robot
+        self.arm = arm if isinstance(arm, ArmChain) else robot.arms[arm]
+        self.name = name or f"{self.arm.name}_arm_energy"
+        self.weight = float(weight)
+        self.stiffness = (stiffness if isinstance(stiffness, StiffnessModel)
+                          else ConstantStiffness(stiffness))  # fmt: skip
+        if not smoothing > 0 or not fade > 0:
+            raise DimensionError(f"{self.name}: smoothing and fade must be > 0")
+        self.smoothing, self.fade = float(smoothing), float(fade)
+        if reference not in ("shoulder", "world"):
+            raise DimensionError(f"{self.name}: reference must be 'shoulder' or 'world', "
+                                 f"got {reference!r}")  # fmt: skip
+        self.reference = reference
+        self.side = 1.0 if self.arm.side == "left" else -1.0
+        self.g = float(np.linalg.norm(robot.model.gravity.linear))
+        self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
+        self._constant = isinstance(self.stiffness, ConstantStiffness)
+
+    def evaluate(self, state: RobotState) -> ArmEnergyValue:
+        arm, g = self.arm, self.g
+        m1, m2 = arm.upper_arm.mass, arm.forearm.mass
+        # Gravity: only the z rows of the centre-of-mass Jacobians are needed,
+        # v_com,z = v_o,z + w_x r_y - w_y r_x with r the body-frame-to-com offset.
+        S, E, W = (state.position(f) for f in (arm.shoulder, arm.elbow, arm.wrist))
+        JS = state.jacobian(arm.shoulder)
+        grad = np.zeros(self.robot.nu)
+        gravity = 0.0
+        for body, m in ((arm.upper_arm, m1), (arm.forearm, m2)):
+            c = state.com_position(body)
+            J = state.jacobian(body.frame)
+            rx, ry, _ = c - state.position(body.frame)
+            gravity += g * m * c[2]
+            grad += (g * m) * (J[2] + ry * J[3] - rx * J[4])
+        if self.reference == "shoulder":
+            gravity -= g * (m1 + m2) * S[2]
+            grad -= g * (m1 + m2) * JS[2]
+
+        aa = arm_angle_with_gradient(S, E, W, self.side)
+        x, y, alpha = aa.x, aa.y, aa.alpha
+        rho2, eps2 = aa.rho2, self.fade**2
+        w = rho2 / (rho2 + eps2)
+        delta = self.smoothing
+        if abs(alpha) < delta:
+            s, ds = alpha * alpha / (2 * delta) + delta / 2, alpha / delta
+        else:
+            s, ds = abs(alpha), float(np.sign(alpha))
+        rest = np.pi - s
+        r = W - S
+        Rb = state.rotation(self.robot.base_frame)
+        k, dk_dp = self.stiffness.evaluate(self._mirror * (Rb.T @ r))
+        spring = 0.5 * k * rest * rest * w
+        # d f_e = k rest (1/2 rest dw - s' w dalpha): a combination of dx and dy, with
+        # dw = 2 eps^2 (x dx + y dy) / (rho^2 + eps^2)^2, w dalpha = (x dy - y dx)/(rho^2+eps^2)
+        den = rho2 + eps2
+        cw = k * rest * 0.5 * rest * 2 * eps2 / (den * den)
+        ca = -k * rest * ds / den
+        coef_x = cw * x - ca * y
+        coef_y = cw * y + ca * x
+        G = coef_x * aa.dx + coef_y * aa.dy  # (3, 3): d f_e / d(S, E, W)
+        JS, JE, JW = JS[:3], state.jacobian(arm.elbow)[:3], state.jacobian(arm.wrist)[:3]
+        grad += G[0] @ JS + G[1] @ JE + G[2] @ JW
+        if not self._constant:
+            Jb = state.jacobian(self.robot.base_frame)[3:]
+            dp = (self._mirror[:, None] * Rb.T) @ (JW - JS + _skew(r) @ Jb)
+            grad += 0.5 * rest * rest * w * (dk_dp @ dp)
+        return ArmEnergyValue(value=gravity + spring, gradient=grad, gravity=gravity,
+                              spring=spring, arm_angle=alpha, stiffness=k,
+                              rho=float(np.sqrt(rho2)))  # fmt: skip

@@ -1,0 +1,161 @@
+"""The contracts between tasks, objectives, constraints and solvers.
+
+Everything is at the velocity level, in the robot's **actuated velocity** ``u`` (size nu,
+see :class:`wholebody.Robot`), for one control step of ``dt`` seconds:
+
+* a :class:`Task` returns equality rows ``J u = v`` (:class:`TaskRows`): ``v`` already holds
+  the feed-forward and the feedback correction, so "achieve the task" means "solve the rows";
+* an :class:`InequalityTask` returns rows ``lower <= C u <= upper`` (:class:`InequalityRows`);
+* an :class:`Objective` returns a cost ``f(q)`` and its gradient in actuated coordinates,
+  ``g_k = d f / d t`` along ``u = e_k`` (:class:`ObjectiveValue`); a solver descends it;
+* a :class:`Constraint` returns a box ``lower <= u <= upper`` (:class:`Bounds`) that every
+  level must respect.
+
+Tasks never call solvers and solvers know tasks only through these contracts.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from wholebody.robot import RobotState
+
+__all__ = [
+    "Bounds",
+    "Constraint",
+    "InequalityRows",
+    "InequalityTask",
+    "Objective",
+    "ObjectiveValue",
+    "Task",
+    "TaskRows",
+]
+
+
+@dataclass(frozen=True)
+class TaskRows:
+    """Equality rows ``J u = v`` with non-negative per-row weights.
+
+    Within one level the solvers minimise ``sum_i weights_i (J_i u - v_i)^2``.
+    """
+
+    J: np.ndarray  # (m, nu)
+    v: np.ndarray  # (m,)
+    weights: np.ndarray  # (m,)
+
+
+@dataclass(frozen=True)
+class InequalityRows:
+    """Inequality rows ``lower <= C u <= upper`` (entries may be infinite)."""
+
+    C: np.ndarray  # (m, nu)
+    lower: np.ndarray  # (m,)
+    upper: np.ndarray  # (m,)
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """A box on the actuated velocity: ``lower <= u <= upper`` (rad/s, m/s; may be inf)."""
+
+    lower: np.ndarray  # (nu,)
+    upper: np.ndarray  # (nu,)
+
+
+@dataclass(frozen=True)
+class ObjectiveValue:
+    """A cost, its gradient in actuated coordinates (``d cost / d u``-direction) and,
+    optionally, a non-negative estimate of the diagonal of its Hessian (``curvature``), which
+    makes the descent step semi-implicit (see :mod:`wholebody.solvers.stack`)."""
+
+    value: float
+    gradient: np.ndarray  # (nu,)
+    curvature: np.ndarray | None = None  # (nu,) >= 0, or None when not available
+
+
+class Task(ABC):
+    """Equality rows ``J u = v`` at the velocity level.
+
+    Attributes
+    ----------
+    name
+        Unique within a stack; used in logs, results and error messages.
+    weight
+        Scalar or per-row weight inside its level (relative importance among the tasks of
+        one level; priorities between levels are strict).
+    """
+
+    name: str
+    weight: float | np.ndarray
+
+    @property
+    @abstractmethod
+    def dim(self) -> int:
+        """Number of rows."""
+
+    @abstractmethod
+    def compute(self, state: RobotState) -> TaskRows:
+        """The rows at ``state``."""
+
+    def error(self, state: RobotState) -> np.ndarray:
+        """The task error at ``state`` (what the feedback drives to zero), for logging."""
+        return np.zeros(self.dim)
+
+    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:  # noqa: B027
+        """Advance internal state (integrators) by one control step of ``dt`` seconds, after
+        the step was solved at ``state``. ``saturated`` tells that the solver could not
+        realise the rows exactly (bounds active or task scaled), for anti-windup."""
+
+    def reset(self) -> None:  # noqa: B027
+        """Forget internal state (integrators)."""
+
+    def _weights(self) -> np.ndarray:
+        w = np.broadcast_to(np.asarray(self.weight, dtype=float), (self.dim,))
+        return np.ascontiguousarray(w)
+
+
+class InequalityTask(ABC):
+    """Inequality rows ``lower <= C u <= upper`` at the velocity level."""
+
+    name: str
+
+    @property
+    @abstractmethod
+    def dim(self) -> int:
+        """Number of rows."""
+
+    @abstractmethod
+    def compute(self, state: RobotState, dt: float) -> InequalityRows:
+        """The rows at ``state`` for a step of ``dt`` seconds."""
+
+
+class Objective(ABC):
+    """A scalar cost of the configuration with its analytic gradient.
+
+    Attributes
+    ----------
+    name
+        Unique within a stack.
+    weight
+        The objective's coefficient in its level's sum ``H = sum_i weight_i f_i`` (a
+        negative weight maximises, as the paper's manipulability term).
+    """
+
+    name: str
+    weight: float
+
+    @abstractmethod
+    def evaluate(self, state: RobotState) -> ObjectiveValue:
+        """Cost and gradient (unweighted) at ``state``."""
+
+
+class Constraint(ABC):
+    """A hard box on the actuated velocity for one control step."""
+
+    name: str
+
+    @abstractmethod
+    def bounds(self, state: RobotState, dt: float) -> Bounds:
+        """The box at ``state`` for a step of ``dt`` seconds."""

@@ -1,0 +1,110 @@
+"""Configuration objectives of the paper: joint-limit avoidance ``h1`` and manipulability ``h2``.
+
+Both return a value and its analytic gradient in actuated coordinates (see
+:class:`~wholebody.tasks.base.Objective`); the paper's ``H = w1 f_p + w2 h1 - w3 h2`` is the
+weighted sum a stack level forms from its objectives (manipulability with a negative weight).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from wholebody.errors import DimensionError, WholebodyError
+from wholebody.robot import Frame, Robot, RobotState
+from wholebody.robot.hessian import JacobianDerivativeContraction
+from wholebody.tasks.base import Objective, ObjectiveValue
+
+__all__ = ["JointLimitAvoidance", "Manipulability"]
+
+
+class JointLimitAvoidance(Objective):
+    """The paper's ``h1 = sum_i (qmax_i - qmin_i)^2 / (4 (qmax_i - q_i)(q_i - qmin_i))``.
+
+    Summed over the joints with finite limits (by default all of them: the 19 revolute joints
+    of the paper's robot; wheels have none). It is 1 per joint at mid-range and grows without
+    bound at a limit. Gradient, with ``a = qmax - q``, ``b = q - qmin``, ``c = range^2 / 4``:
+    ``d h1 / d q = c (b - a) / (a b)^2``; the Hessian is diagonal,
+    ``d2 h1 / d q2 = 2 c (a b + (b - a)^2) / (a b)^3``, and is reported as ``curvature`` so the
+    descent step stays stable however steep h1 gets near a limit. A joint at or beyond a limit
+    is evaluated at ``range * 1e-6`` inside it, so value and gradient stay finite and point
+    inwards.
+
+    Parameters
+    ----------
+    joints
+        Group names and/or joint names to include (default: every joint with finite limits).
+    """
+
+    def __init__(self, robot: Robot, joints: Sequence[str] | None = None, *,
+                 weight: float = 1.0, name: str = "joint_limit_avoidance") -> None:  # fmt: skip
+        lower, upper = robot.position_limits
+        limited = np.isfinite(lower) & np.isfinite(upper)
+        if joints is None:
+            idx = np.flatnonzero(limited)
+        else:
+            parts = [robot.groups[j].indices if j in robot.groups else [robot.index(j)]
+                     for j in joints]  # fmt: skip
+            idx = np.unique(np.concatenate(parts)).astype(int)
+            if not np.all(limited[idx]):
+                bad = [robot.actuated_joints[i] for i in idx if not limited[i]]
+                raise WholebodyError(f"{name}: joints without position limits: {bad}")
+        if idx.size == 0:
+            raise WholebodyError(f"{name}: no joint with finite limits to act on")
+        self.name, self.weight, self.robot = name, float(weight), robot
+        self.indices = idx
+        self._lo, self._hi = lower[idx], upper[idx]
+        span = self._hi - self._lo
+        self._c = span**2 / 4
+        self._eps = 1e-6 * span
+
+    def evaluate(self, state: RobotState) -> ObjectiveValue:
+        q = np.clip(state.joint_positions()[self.indices], self._lo + self._eps,
+                    self._hi - self._eps)  # fmt: skip
+        a = self._hi - q
+        b = q - self._lo
+        ab = a * b
+        grad = np.zeros(self.robot.nu)
+        grad[self.indices] = self._c * (b - a) / (ab * ab)
+        curv = np.zeros(self.robot.nu)
+        curv[self.indices] = 2 * self._c * (ab + (b - a) ** 2) / (ab * ab * ab)
+        return ObjectiveValue(float(np.sum(self._c / ab)), grad, curv)
+
+
+class Manipulability(Objective):
+    """Yoshikawa's manipulability ``h2 = sqrt(det(J J^T))`` of the frames' stacked Jacobian.
+
+    ``J`` is the 6F x nu actuated Jacobian of the frames (for the paper: both hands, 12 x 23,
+    wheel columns through the Mecanum matrix). Gradient, exact:
+    ``d h2 / d u_l = h2 <(J J^T)^-1 J, d J / d u_l>_F``, the Jacobian derivatives from the
+    kinematic-Hessian identity (:mod:`wholebody.robot.hessian`), never finite differences.
+    Where ``J J^T`` is singular (h2 = 0) the gradient is taken as zero.
+
+    To maximise manipulability give it a **negative** weight (the paper's ``-w3 h2``).
+    """
+
+    def __init__(self, robot: Robot, frames: Sequence[str | Frame], *, weight: float = -1.0,
+                 name: str = "manipulability") -> None:  # fmt: skip
+        if not frames:
+            raise DimensionError(f"{name}: needs at least one frame")
+        self.name, self.weight, self.robot = name, float(weight), robot
+        self.frames = [robot.frame(f) for f in frames]
+        if 6 * len(self.frames) > robot.nu:
+            raise DimensionError(f"{name}: {6 * len(self.frames)} rows exceed nu = {robot.nu}; "
+                                 "J J^T is always singular")  # fmt: skip
+        self._contract = JacobianDerivativeContraction(robot, self.frames)
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        """The stacked 6F x nu Jacobian."""
+        return np.vstack([state.jacobian(f) for f in self.frames])
+
+    def evaluate(self, state: RobotState) -> ObjectiveValue:
+        J = self.jacobian(state)
+        JJt = J @ J.T
+        sign, logdet = np.linalg.slogdet(JJt)
+        if sign <= 0 or logdet < -200:
+            return ObjectiveValue(0.0, np.zeros(self.robot.nu))
+        h2 = float(np.exp(0.5 * logdet))
+        P = np.linalg.solve(JJt, J)
+        return ObjectiveValue(h2, h2 * self._contract(state, P))

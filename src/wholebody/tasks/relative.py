@@ -1,0 +1,118 @@
+"""Relative pose of two frames: the dual-arm closed chain.
+
+The pose of frame b in frame a, ``T_ab = T_a^-1 T_b``, tracks a target (for a carried object,
+the constant ``T_ab = T_a,obj T_b,obj^-1`` of the two grasps). In a's axes, with
+``r = p_b - p_a``, the relative twist is::
+
+    v_ab = R_a^T (v_b - v_a + [r]x w_a)          w_ab = R_a^T (w_b - w_a)
+
+so the relative Jacobian is ``R_a^T [J_b,lin - J_a,lin + [r]x J_a,ang ; J_b,ang - J_a,ang]``.
+The rows and the PI law are those of :class:`~wholebody.tasks.frame.FrameTask`, in a's axes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from wholebody.robot import Frame, Robot, RobotState
+from wholebody.tasks.base import Task, TaskRows
+from wholebody.tasks.frame import (
+    FrameTask,
+    check_pose,
+    check_twist,
+    integrate_error,
+    pose_error,
+    pose_rows,
+)
+
+__all__ = ["RelativeFrameTask"]
+
+
+class RelativeFrameTask(Task):
+    """Keep frame ``b``'s pose in frame ``a`` at a target (6 rows, or 3 by mask).
+
+    Parameters are those of :class:`FrameTask`; the target is the pose of b in a (4x4) and the
+    target twist is b's relative twist in a's axes (zero for a rigid grasp).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        frame_a: str | Frame,
+        frame_b: str | Frame,
+        *,
+        name: str | None = None,
+        position: bool = True,
+        orientation: bool = True,
+        kp: float | Sequence[float] = 10.0,
+        ki: float | Sequence[float] = 0.0,
+        integral_limit: float = 0.05,
+        weight: float | Sequence[float] = 1.0,
+    ) -> None:
+        # Reuse FrameTask's argument checks and gain handling.
+        proto = FrameTask(robot, frame_b, name=name, position=position, orientation=orientation,
+                          kp=kp, ki=ki, integral_limit=integral_limit, weight=weight)  # fmt: skip
+        self.robot = robot
+        self.frame_a = robot.frame(frame_a)
+        self.frame_b = proto.frame
+        self.name = name or f"{self.frame_a.name}->{self.frame_b.name}"
+        self.rows, self.kp, self.ki = proto.rows, proto.kp, proto.ki
+        self.integral_limit = proto.integral_limit
+        self.weight = weight
+        self.target: np.ndarray | None = None
+        self.target_twist = np.zeros(6)
+        self.integral = np.zeros(6)
+
+    @property
+    def dim(self) -> int:
+        return self.rows.size
+
+    def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
+        """Target pose of b in a (4x4 or SE3) and relative twist (a's axes; zero if omitted)."""
+        self.target = check_pose(pose, f"{self.name}: target pose")
+        self.target_twist = check_twist(twist, f"{self.name}: target twist")
+
+    def relative_pose(self, state: RobotState) -> np.ndarray:
+        """The current pose of b in a (4x4)."""
+        Ta, Tb = state.pose(self.frame_a), state.pose(self.frame_b)
+        return np.linalg.solve(Ta, Tb)
+
+    def relative_jacobian(self, state: RobotState) -> np.ndarray:
+        """6 x nu Jacobian of b's twist relative to a, in a's axes."""
+        Ja, Jb = state.jacobian(self.frame_a), state.jacobian(self.frame_b)
+        Ra = state.rotation(self.frame_a)
+        r = state.position(self.frame_b) - state.position(self.frame_a)
+        J = Jb - Ja
+        J[:3] += np.cross(r, Ja[3:].T).T
+        return np.vstack([Ra.T @ J[:3], Ra.T @ J[3:]])
+
+    def _relative(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        T = self.relative_pose(state)
+        if self.target is None:  # hold the current relative pose
+            self.target = T.copy()
+        return T[:3, 3], T[:3, :3], self.target
+
+    def compute(self, state: RobotState) -> TaskRows:
+        p, R, target = self._relative(state)
+        A, v, _ = pose_rows(self.relative_jacobian(state), p, R, target, self.target_twist,
+                            self.kp, self.ki, self.integral, self.rows)  # fmt: skip
+        return TaskRows(A, v, self._weights())
+
+    def error(self, state: RobotState) -> np.ndarray:
+        """(dim,) relative pose error in a's axes: position (m) and/or orientation (rad)."""
+        e, _ = pose_error(*self._relative(state))
+        return e[self.rows]
+
+    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
+        if np.any(self.ki):
+            e, _ = pose_error(*self._relative(state))
+            integrate_error(self.integral, e, dt, saturated, self.integral_limit)
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+
+    def __repr__(self) -> str:
+        return f"RelativeFrameTask({self.name!r}, rows={self.dim})"

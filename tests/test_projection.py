@@ -1,0 +1,193 @@
+"""The projection backend: the paper's formula, the plain pseudo-inverse by configuration, the
+box under Saturation in the Null Space, null-space flow and singularities."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_tasks import configurations
+
+from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
+from wholebody.tasks import (
+    ArmPotentialEnergy,
+    FrameTask,
+    JointLimitAvoidance,
+    JointPositionLimits,
+    Manipulability,
+    PostureTask,
+    VelocityLimits,
+)
+
+DT = 0.01
+
+
+def hands(robot, kp=10.0):
+    return FrameTask(robot, "left_tool", kp=kp), FrameTask(robot, "right_tool", kp=kp)
+
+
+def near_targets(robot, state, tasks, rng, reach=0.05):
+    for t in tasks:
+        T = state.pose(t.frame)
+        T[:3, 3] += rng.uniform(-reach, reach, 3)
+        t.set_target(T, rng.uniform(-0.05, 0.05, 6))
+
+
+def box(stack, state, dt=DT):
+    p = stack.evaluate(state, dt)
+    return p.lower * p.scale, p.upper * p.scale
+
+
+def objectives(robot):
+    return [ArmPotentialEnergy(robot, "left", 0.3), ArmPotentialEnergy(robot, "right", 0.3),
+            JointLimitAvoidance(robot, weight=0.1),
+            Manipulability(robot, ["left_tool", "right_tool"], weight=-0.5)]  # fmt: skip
+
+
+@pytest.mark.parametrize("with_limits_term", [False, True])
+def test_projection_is_the_papers_formula(humanoid, rng, with_limits_term):
+    """u = J+ v - k (I - J+ J) grad H, exactly, whenever no bound is active; with the
+    joint-limit term, whose curvature is known, the step is the semi-implicit
+    -k grad / (1 + k dt h'') (see wholebody.solvers.stack)."""
+    L, R = hands(humanoid)
+    objs = [o for o in objectives(humanoid)
+            if with_limits_term or not isinstance(o, JointLimitAvoidance)]  # fmt: skip
+    k = 0.05
+    stack = Stack(humanoid, [[L, R], Level(objs, gain=k)],
+                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    solver, checked = ProjectionSolver(), 0
+    for _ in range(20):
+        state = humanoid.update(humanoid.random_configuration(rng, margin=0.15))
+        near_targets(humanoid, state, (L, R), rng)
+        result = solver.solve(stack, state, DT)
+        if result.status != SolverStatus.OK:
+            continue
+        rows = [t.compute(state) for t in (L, R)]
+        J = np.vstack([r.J for r in rows])
+        v = np.concatenate([r.v for r in rows])
+        grad = sum(o.weight * o.evaluate(state).gradient for o in objs)
+        curvature = sum(o.weight * o.evaluate(state).curvature for o in objs
+                        if isinstance(o, JointLimitAvoidance))  # fmt: skip
+        Jp = np.linalg.pinv(J)
+        step = grad / (1 + k * DT * curvature) if with_limits_term else grad
+        paper = Jp @ v - k * (np.eye(humanoid.nu) - Jp @ J) @ step
+        np.testing.assert_allclose(result.u, paper, atol=1e-9)
+        checked += 1
+    assert checked >= 10
+
+
+def test_plain_pseudo_inverse_is_the_same_solver_without_objectives(humanoid, rng):
+    L, R = hands(humanoid)
+    stack = Stack(humanoid, [[L, R]], [JointPositionLimits(humanoid), VelocityLimits(humanoid)])
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.15))
+    near_targets(humanoid, state, (L, R), rng)
+    result = ProjectionSolver().solve(stack, state, DT)
+    assert result.status == SolverStatus.OK
+    J = np.vstack([t.compute(state).J for t in (L, R)])
+    v = np.concatenate([t.compute(state).v for t in (L, R)])
+    np.testing.assert_allclose(result.u, np.linalg.pinv(J) @ v, atol=1e-10)
+
+
+def test_box_is_never_violated_and_the_task_stays_exact_when_it_can(humanoid, rng):
+    L, R = hands(humanoid, kp=30.0)
+    stack = Stack(humanoid, [[L, R], Level(objectives(humanoid), gain=1.0)],
+                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    solver = ProjectionSolver()
+    counts = dict.fromkeys(SolverStatus, 0)
+    exact_with_bounds = 0
+    for _ in range(150):
+        state = humanoid.update(humanoid.random_configuration(rng, margin=0.01))
+        near_targets(humanoid, state, (L, R), rng, reach=rng.choice([0.02, 0.3, 1.0]))
+        result = solver.solve(stack, state, DT)
+        lo, hi = box(stack, state)
+        assert np.all(np.isfinite(result.u))
+        assert np.all(result.u >= lo - 1e-9) and np.all(result.u <= hi + 1e-9)
+        counts[result.status] += 1
+        if result.status == SolverStatus.BOUNDS_ACTIVE and result.level_residuals[0] < 1e-8:
+            exact_with_bounds += 1
+    assert counts[SolverStatus.SCALED] > 0 and exact_with_bounds > 0, counts
+
+
+def test_clipping_the_textbook_solution_wrecks_the_task_where_sns_does_not(humanoid, rng):
+    L, R = hands(humanoid, kp=10.0)
+    stack = Stack(humanoid, [[L, R]], [JointPositionLimits(humanoid), VelocityLimits(humanoid)])
+    sns, free = ProjectionSolver(), ProjectionSolver(saturate=False)
+    found = 0
+    for _ in range(100):
+        # joints near their limits, moderate hand speeds: feasible, but only with bounds
+        state = humanoid.update(configurations(humanoid, rng, n=2)[1])
+        near_targets(humanoid, state, (L, R), rng, reach=0.02)
+        a, b = sns.solve(stack, state, DT), free.solve(stack, state, DT)
+        lo, hi = box(stack, state)
+        clipped = np.clip(b.u, lo, hi)
+        if a.status != SolverStatus.BOUNDS_ACTIVE or np.allclose(clipped, b.u):
+            continue
+        J = np.vstack([t.compute(state).J for t in (L, R)])
+        v = np.concatenate([t.compute(state).v for t in (L, R)])
+        assert np.linalg.norm(J @ a.u - v) < 1e-8  # SNS: still exact
+        assert np.linalg.norm(J @ clipped - v) > 1e-3  # clipping: the hands go astray
+        found += 1
+    assert found >= 3
+
+
+def test_lower_levels_do_not_disturb_higher_ones(humanoid, rng):
+    L, R = hands(humanoid)
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.2))
+    near_targets(humanoid, state, (L, R), rng, reach=0.02)
+    limits = [VelocityLimits(humanoid, scale=100.0)]
+    one = ProjectionSolver().solve(Stack(humanoid, [[L, R]], limits), state, DT)
+    conflicting = PostureTask(humanoid, target=rng.uniform(-0.3, 0.3, humanoid.nu), kp=50.0)
+    two = ProjectionSolver().solve(Stack(humanoid, [[L, R], [conflicting]], limits), state, DT)
+    assert two.level_residuals[0] == pytest.approx(one.level_residuals[0], abs=1e-8)
+    assert two.level_residuals[0] < 1e-8 < 1e-2 < two.level_residuals[1]
+
+
+def test_null_space_flow_lowers_the_energy_with_the_hands_held(humanoid):
+    """Hands held still (level 1), arm energy descended in the null space (level 2): the
+    energy decreases at every step and neither hand drifts by 1e-6 m."""
+    robot = humanoid
+    q = robot.configuration(
+        {
+            "left_shoulder_flexion": 0.6,
+            "left_shoulder_abduction": 0.8,
+            "left_elbow_flexion": 1.4,
+            "right_shoulder_flexion": 0.5,
+            "right_shoulder_abduction": 0.9,
+            "right_elbow_flexion": 1.2,
+        }
+    )
+    L, R = hands(robot, kp=20.0)
+    state = robot.update(q)
+    start = {t.name: state.position(t.frame) for t in (L, R)}
+    for t in (L, R):
+        t.set_target(state.pose(t.frame))
+    energy = [ArmPotentialEnergy(robot, "left", 0.1), ArmPotentialEnergy(robot, "right", 0.1)]
+    stack = Stack(robot, [[L, R], Level(energy, gain=0.2)],
+                  [JointPositionLimits(robot), VelocityLimits(robot)])  # fmt: skip
+    solver, dt = ProjectionSolver(), 0.002
+    values, drift = [], 0.0
+    for _ in range(400):
+        state = robot.update(q)
+        values.append(sum(e.evaluate(state).value for e in energy))
+        drift = max(drift, *(np.linalg.norm(state.position(t.frame) - start[t.name])
+                             for t in (L, R)))  # fmt: skip
+        q = robot.integrate(q, solver.solve(stack, state, dt).u, dt)
+    steps = np.diff(values)
+    assert np.all(steps < 0), f"energy rose at steps {np.flatnonzero(steps >= 0)}"
+    assert values[0] - values[-1] > 0.05  # it really moved (J)
+    assert drift < 1e-6
+
+
+def test_singular_configuration_gives_a_bounded_answer(humanoid):
+    """Straight hanging arms are a singularity of the hand Jacobians: the damped inverse
+    still answers, finite and inside the box."""
+    L, R = hands(humanoid)
+    state = humanoid.update(humanoid.neutral())
+    for t in (L, R):
+        T = state.pose(t.frame)
+        T[2, 3] -= 0.05  # straight down: along the singular direction
+        t.set_target(T)
+    stack = Stack(humanoid, [[L, R]], [JointPositionLimits(humanoid), VelocityLimits(humanoid)])
+    result = ProjectionSolver().solve(stack, state, DT)
+    lo, hi = box(stack, state)
+    assert np.all(np.isfinite(result.u)) and np.all(result.u >= lo - 1e-9)
+    assert np.all(result.u <= hi + 1e-9)

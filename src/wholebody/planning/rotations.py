@@ -1,0 +1,103 @@
+"""SO(3) maths for orientation interpolation: exponential, logarithm and slerp.
+
+Rotations are 3x3 matrices; rotation vectors ``phi = theta * axis`` (rad). The slerp from
+``R0`` to ``R1`` at progress ``sigma`` in [0, 1] is the geodesic
+
+    R(sigma) = R0 Exp(sigma phi),        phi = Log(R0^T R1)   (body axes of R0),
+
+a rotation at constant rate about the fixed world axis ``R0 phi`` (the axis is the same in
+every ``R(sigma)``'s body axes, since ``R0 Exp(sigma phi) phi = R0 phi``). So if the progress
+follows a time scaling ``sigma(t)``, the world angular velocity and acceleration are exactly
+
+    omega(t) = sigma'(t) R0 phi,         alpha(t) = sigma''(t) R0 phi.
+
+``Log`` goes through the unit quaternion (Shepperd's method), which stays accurate near
+``theta = 0`` and ``theta = pi``; at exactly ``pi`` the sign of the axis is arbitrary.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["exp_so3", "hat", "log_so3", "slerp"]
+
+
+def hat(w: np.ndarray) -> np.ndarray:
+    """Skew matrices ``[w]x`` (..., 3, 3) of vectors ``w`` (..., 3): ``[w]x y = w x y``."""
+    w = np.asarray(w, dtype=float)
+    K = np.zeros((*w.shape[:-1], 3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -w[..., 2], w[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = w[..., 2], -w[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -w[..., 1], w[..., 0]
+    return K
+
+
+def exp_so3(phi: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors ``phi`` (..., 3) (Rodrigues).
+
+    ``Exp(phi) = I + (sin t / t) K + ((1 - cos t) / t^2) K^2`` with ``K = [phi]x``,
+    ``t = |phi|``; Taylor series below ``t = 1e-4``.
+    """
+    phi = np.asarray(phi, dtype=float)
+    t2 = np.sum(phi * phi, axis=-1)
+    t = np.sqrt(t2)
+    small = t < 1e-4
+    ts = np.where(small, 1.0, t)
+    a = np.where(small, 1.0 - t2 / 6.0, np.sin(ts) / ts)
+    b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(ts)) / (ts * ts))
+    K = hat(phi)
+    R = a[..., None, None] * K + b[..., None, None] * (K @ K)
+    R[..., 0, 0] += 1.0
+    R[..., 1, 1] += 1.0
+    R[..., 2, 2] += 1.0
+    return R
+
+
+def log_so3(R: np.ndarray) -> np.ndarray:
+    """Rotation vector (3,) of one rotation matrix, ``theta`` in [0, pi] (rad)."""
+    R = np.asarray(R, dtype=float)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    # Shepperd: build the quaternion from its largest component.
+    k = int(np.argmax((tr, R[0, 0], R[1, 1], R[2, 2])))
+    if k == 0:
+        r = np.sqrt(max(1.0 + tr, 0.0))
+        w = 0.5 * r
+        v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) * (0.5 / r)
+    else:
+        i = k - 1
+        j, m = (i + 1) % 3, (i + 2) % 3
+        r = np.sqrt(max(1.0 + R[i, i] - R[j, j] - R[m, m], 0.0))
+        v = np.empty(3)
+        v[i] = 0.5 * r
+        v[j] = (R[j, i] + R[i, j]) * (0.5 / r)
+        v[m] = (R[m, i] + R[i, m]) * (0.5 / r)
+        w = (R[m, j] - R[j, m]) * (0.5 / r)
+    if w < 0.0:  # same rotation, angle in [0, pi]
+        w, v = -w, -v
+    s = float(np.linalg.norm(v))
+    if s < 1e-12:
+        return 2.0 * v / w
+    return (2.0 * np.arctan2(s, w) / s) * v
+
+
+def slerp(R0: np.ndarray, R1: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Geodesic interpolation ``R0 Exp(sigma Log(R0^T R1))``.
+
+    Parameters
+    ----------
+    R0, R1
+        Start and end rotations (3, 3).
+    sigma
+        Progress (N,), 0 at ``R0`` and 1 at ``R1``.
+
+    Returns
+    -------
+    rotations
+        (N, 3, 3).
+    axis
+        The world rotation vector ``R0 Log(R0^T R1)`` (3,) (rad): the angular velocity is
+        ``sigma'(t) * axis`` and the angular acceleration ``sigma''(t) * axis``.
+    """
+    phi = log_so3(R0.T @ R1)
+    sigma = np.asarray(sigma, dtype=float)
+    return R0 @ exp_so3(sigma[:, None] * phi), R0 @ phi

@@ -1,14 +1,83 @@
-"""The paper's motion principle: arm angle, arm energy, stiffness models, human data."""
+"""The paper's motion principle: arm angle, arm energy, stiffness models, human data.
+
+Numpy only at import: the training (``training``, PyTorch), the SVR baseline (``svr``,
+scikit-learn), the pipeline, the report and the command line are imported on demand.
+"""
 
 from __future__ import annotations
 
+from wholebody.humanlike.arm_angle_model import (
+    CALIBRATED,
+    ArmAngleModel,
+    calibrate,
+    elbow_on_circle,
+    kim_arm_angle,
+)
 from wholebody.humanlike.arm_geometry import ArmAngle, arm_angle, arm_angle_with_gradient
+from wholebody.humanlike.dataset import (
+    DEFAULT_TEST_PARTICIPANTS,
+    StiffnessDataset,
+    build_dataset,
+)
+from wholebody.humanlike.evaluation import regression_scores
+from wholebody.humanlike.labels import (
+    StiffnessLabels,
+    frame_rules,
+    gravity_energy,
+    stiffness_labels,
+)
+from wholebody.humanlike.mapping import (
+    ArmParameters,
+    canonical_to_lab,
+    lab_to_canonical,
+    map_to_robot,
+)
+from wholebody.humanlike.network import NetworkStiffness, default_stiffness
+from wholebody.humanlike.recordings import (
+    Recording,
+    load_participants,
+    load_recording,
+    load_recordings,
+    save_npz_recording,
+)
 from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.humanlike.synthetic import (
+    DEFAULT_PARTICIPANTS,
+    VirtualParticipant,
+    generate_synthetic,
+)
 
 __all__ = [
+    "CALIBRATED",
+    "DEFAULT_PARTICIPANTS",
+    "DEFAULT_TEST_PARTICIPANTS",
     "ArmAngle",
+    "ArmAngleModel",
+    "ArmParameters",
     "ConstantStiffness",
+    "NetworkStiffness",
+    "Recording",
+    "StiffnessDataset",
+    "StiffnessLabels",
     "StiffnessModel",
+    "VirtualParticipant",
     "arm_angle",
     "arm_angle_with_gradient",
+    "build_dataset",
+    "calibrate",
+    "canonical_to_lab",
+    "default_stiffness",
+    "elbow_on_circle",
+    "frame_rules",
+    "generate_synthetic",
+    "gravity_energy",
+    "kim_arm_angle",
+    "lab_to_canonical",
+    "load_participants",
+    "load_recording",
+    "load_recordings",
+    "map_to_robot",
+    "regression_scores",
+    "save_npz_recording",
+    "stiffness_labels",
 ]

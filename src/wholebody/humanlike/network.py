@@ -1,0 +1,268 @@
+"""The stiffness network in numpy: ``k(wrist)`` and its analytic gradient, and its file.
+
+The network (Niu et al. 2024, Figure 6a: fully connected, wrist (x, y, z) in, k out) is a
+multilayer perceptron with tanh hidden layers (smooth, so the gradient the controller uses
+has no kinks), trained in PyTorch (:mod:`wholebody.humanlike.training`) and evaluated here
+with plain numpy (no torch at run time)::
+
+    z   = (p - x_mean) / x_scale                     p: canonical wrist (m), see stiffness.py
+    h_1 = tanh(W_1 z + b_1),  h_i = tanh(W_i h_{i-1} + b_i)
+    r   = k_mean + k_scale (w_out . h_L + b_out)     (N m/rad)
+    k   = softplus_beta(r) = log(1 + exp(beta r)) / beta
+
+The last step is a smooth floor: a stiffness is never negative, and ``k = r`` to within
+``log(2)/beta`` where ``r`` is well above zero (``beta`` is stored in the file; 1/beta is
+1 % of ``k_scale``). The gradient is exact for the value returned::
+
+    dk/dp = sigmoid(beta r) k_scale  w_out^T D_L W_L ... D_1 W_1 / x_scale,  D_i = diag(1 - h_i^2)
+
+Outside the training data (its bounding box is stored as ``input_low``/``input_high``) the
+tanh units saturate, so ``k`` levels off to a bounded value with a vanishing gradient
+instead of growing; the floor keeps it >= 0. :meth:`NetworkStiffness.in_range` says whether
+a point lies in the box.
+
+File (``.npz``, no pickled objects)
+-----------------------------------
+``format`` ("wholebody.stiffness_mlp/1"), ``n_layers`` (hidden layers + 1), ``W0``, ``b0``, ...
+(``W_i`` of shape (out, in); the last is the output layer (1, H)), ``activation``
+("tanh"), ``x_mean``, ``x_scale`` (3,) m, ``k_mean``, ``k_scale`` N m/rad, ``floor_beta``
+rad/(N m), ``input_low``, ``input_high`` (3,) m and ``meta`` (0-d JSON string: robot, data,
+split, training settings, scores, date).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from wholebody.errors import DataError, DimensionError
+from wholebody.humanlike.stiffness import StiffnessModel
+from wholebody.resources import robots_dir
+
+__all__ = ["FORMAT", "NetworkStiffness", "default_stiffness"]
+
+FORMAT = "wholebody.stiffness_mlp/1"
+
+
+class NetworkStiffness(StiffnessModel):
+    """The trained stiffness network as a :class:`StiffnessModel` (module docstring).
+
+    Parameters
+    ----------
+    weights, biases
+        Per layer, hidden layers first, then the output layer (1 row).
+    x_mean, x_scale
+        Input normalisation (m).
+    k_mean, k_scale
+        Output de-normalisation (N m/rad).
+    floor_beta
+        Sharpness of the smooth floor (rad/(N m)).
+    input_low, input_high
+        Bounding box of the training inputs (m), for :meth:`in_range`.
+    meta
+        Provenance (free-form, JSON-serialisable).
+    """
+
+    def __init__(
+        self,
+        weights: Sequence[np.ndarray],
+        biases: Sequence[np.ndarray],
+        x_mean: np.ndarray,
+        x_scale: np.ndarray,
+        k_mean: float,
+        k_scale: float,
+        floor_beta: float,
+        input_low: np.ndarray | None = None,
+        input_high: np.ndarray | None = None,
+        meta: dict | None = None,
+    ) -> None:
+        if len(weights) != len(biases) or len(weights) < 2:
+            raise DimensionError("NetworkStiffness: need matching weights and biases for at "
+                                 "least one hidden layer and the output layer")  # fmt: skip
+        self.weights = [np.array(w, dtype=float) for w in weights]
+        self.biases = [np.array(b, dtype=float).reshape(-1) for b in biases]
+        fan_in = 3
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
+                raise DimensionError(f"NetworkStiffness: layer {i}: weight {w.shape} and bias "
+                                     f"{b.shape} do not fit an input of {fan_in}")  # fmt: skip
+            fan_in = w.shape[0]
+        if fan_in != 1:
+            raise DimensionError("NetworkStiffness: the output layer must have 1 unit")
+        self.x_mean = np.array(x_mean, dtype=float).reshape(3)
+        self.x_scale = np.array(x_scale, dtype=float).reshape(3)
+        self.k_mean, self.k_scale = float(k_mean), float(k_scale)
+        self.floor_beta = float(floor_beta)
+        if not (np.all(self.x_scale > 0) and self.k_scale > 0 and self.floor_beta > 0):
+            raise DimensionError("NetworkStiffness: x_scale, k_scale and floor_beta must be > 0")
+        self.input_low = None if input_low is None else np.array(input_low, dtype=float)
+        self.input_high = None if input_high is None else np.array(input_high, dtype=float)
+        self.meta = dict(meta or {})
+        # Fold the normalisations into the first and last layers for the control loop:
+        # W_1 z + b_1 = (W_1 / x_scale) p + (b_1 - (W_1 / x_scale) x_mean)
+        # r = (k_scale w_out) . h + (k_mean + k_scale b_out)
+        W1 = self.weights[0] / self.x_scale
+        self._layers = [(W1, self.biases[0] - W1 @ self.x_mean)]
+        self._layers += list(zip(self.weights[1:-1], self.biases[1:-1], strict=True))
+        self._w_out = self.k_scale * self.weights[-1][0]
+        self._b_out = float(self.k_mean + self.k_scale * self.biases[-1][0])
+        self._wT = [W.T.copy() for W, _ in self._layers]
+
+    # ----------------------------------------------------------------- inference
+    def raw(self, P: np.ndarray) -> np.ndarray:
+        """The network output before the floor, ``r`` (N m/rad), for points (..., 3)."""
+        h = np.asarray(P, dtype=float)
+        for W, b in self._layers:
+            h = np.tanh(h @ W.T + b)
+        return h @ self._w_out + self._b_out
+
+    def predict(self, P: np.ndarray) -> np.ndarray:
+        """Stiffness (N m/rad) at canonical wrist positions (..., 3) (m), vectorised."""
+        r = self.raw(P) * self.floor_beta
+        return (np.maximum(r, 0.0) + np.log1p(np.exp(-np.abs(r)))) / self.floor_beta
+
+    def gradient(self, P: np.ndarray) -> np.ndarray:
+        """``dk/dp`` (..., 3) (N m/rad per m), vectorised."""
+        P = np.asarray(P, dtype=float)
+        hs = []
+        h = P
+        for W, b in self._layers:
+            h = np.tanh(h @ W.T + b)
+            hs.append(h)
+        r = h @ self._w_out + self._b_out
+        g = (0.5 * (1.0 + np.tanh(0.5 * self.floor_beta * r)))[..., None] * self._w_out
+        for (W, _), h in zip(reversed(self._layers), reversed(hs), strict=True):
+            g = (g * (1.0 - h * h)) @ W
+        return g
+
+    def evaluate(self, wrist: np.ndarray) -> tuple[float, np.ndarray]:
+        """``k`` (N m/rad) and ``dk/dwrist`` (3,) at one canonical wrist position (m).
+
+        Plain numpy on preloaded arrays (a few microseconds): it runs twice per control step.
+        """
+        h = wrist
+        hs = []
+        for W, b in self._layers:
+            h = np.tanh(W @ h + b)
+            hs.append(h)
+        r = float(self._w_out @ h) + self._b_out
+        br = self.floor_beta * r
+        if br > 30.0:
+            k, s = r, 1.0
+        else:
+            e = math.exp(br) if br < 0 else math.exp(-br)
+            k = (max(br, 0.0) + math.log1p(e)) / self.floor_beta
+            s = 1.0 / (1.0 + e) if br >= 0 else e / (1.0 + e)
+        g = self._w_out * s
+        for WT, h in zip(reversed(self._wT), reversed(hs), strict=True):
+            g = WT @ (g * (1.0 - h * h))
+        return k, g
+
+    def in_range(self, P: np.ndarray) -> np.ndarray:
+        """Whether points (..., 3) lie in the bounding box of the training inputs."""
+        if self.input_low is None or self.input_high is None:
+            raise DataError("this network has no stored training range")
+        P = np.asarray(P, dtype=float)
+        return np.all((self.input_low <= P) & (self.input_high >= P), axis=-1)
+
+    @property
+    def hidden_sizes(self) -> tuple[int, ...]:
+        return tuple(w.shape[0] for w in self.weights[:-1])
+
+    def __repr__(self) -> str:
+        return f"NetworkStiffness(hidden={self.hidden_sizes}, tanh)"
+
+    # ----------------------------------------------------------------- file
+    def save(self, path: str | Path) -> Path:
+        """Write the network (module docstring layout)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays: dict[str, np.ndarray] = {}
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            arrays[f"W{i}"], arrays[f"b{i}"] = w, b
+        lo = self.input_low if self.input_low is not None else np.full(3, -np.inf)
+        hi = self.input_high if self.input_high is not None else np.full(3, np.inf)
+        np.savez(
+            path,
+            format=np.array(FORMAT),
+            n_layers=np.array(len(self.weights)),
+            activation=np.array("tanh"),
+            x_mean=self.x_mean,
+            x_scale=self.x_scale,
+            k_mean=np.array(self.k_mean),
+            k_scale=np.array(self.k_scale),
+            floor_beta=np.array(self.floor_beta),
+            input_low=lo,
+            input_high=hi,
+            meta=np.array(json.dumps(self.meta, sort_keys=True)),
+            **arrays,
+        )
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> NetworkStiffness:
+        """Read a network file.
+
+        Raises
+        ------
+        DataError
+            Not a network file, a missing key, or inconsistent shapes (named).
+        """
+        path = Path(path)
+        try:
+            z = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
+        with z:
+            need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
+                    "floor_beta")  # fmt: skip
+            missing = [k for k in need if k not in z.files]
+            if missing:
+                raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
+            if str(z["format"]) != FORMAT:
+                raise DataError(f"{path}: format {str(z['format'])!r}, expected {FORMAT!r}")
+            if str(z["activation"]) != "tanh":
+                raise DataError(f"{path}: activation {str(z['activation'])!r} is not supported")
+            n = int(z["n_layers"])
+            keys = [f"{p}{i}" for i in range(n) for p in ("W", "b")]
+            missing = [k for k in keys if k not in z.files]
+            if missing:
+                raise DataError(f"{path}: missing layer key(s) {', '.join(missing)}")
+            lo = z["input_low"] if "input_low" in z.files else None
+            hi = z["input_high"] if "input_high" in z.files else None
+            try:
+                meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+            except json.JSONDecodeError as exc:
+                raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
+            try:
+                return cls(
+                    [z[f"W{i}"] for i in range(n)],
+                    [z[f"b{i}"] for i in range(n)],
+                    z["x_mean"],
+                    z["x_scale"],
+                    float(z["k_mean"]),
+                    float(z["k_scale"]),
+                    float(z["floor_beta"]),
+                    lo,
+                    hi,
+                    meta,
+                )
+            except DimensionError as exc:
+                raise DataError(f"{path}: {exc}") from None
+
+
+def default_stiffness(robot: object | str = "mobile_humanoid") -> NetworkStiffness:
+    """The trained network shipped with a robot: ``robots/<name>/stiffness.npz``.
+
+    ``robot`` is a :class:`~wholebody.robot.Robot` or a bundled robot name.
+    """
+    name = robot if isinstance(robot, str) else str(getattr(robot, "name", ""))
+    path = robots_dir() / name / "stiffness.npz"
+    if not path.is_file():
+        raise DataError(f"{path}: robot {name!r} ships no trained stiffness network; train one "
+                        "with `wholebody stiffness fit`")  # fmt: skip
+    return NetworkStiffness.load(path)

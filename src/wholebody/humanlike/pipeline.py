@@ -1,0 +1,306 @@
+"""End to end: recordings -> dataset, and dataset -> trained, evaluated models.
+
+:func:`make_dataset` gathers the real recordings and the synthetic ones, labels them for a
+robot and writes the dataset; :func:`fit_and_evaluate` splits the dataset by participant,
+trains the network and the SVR baseline on the training participants and scores both (and a
+mean predictor) on the held-out participants. Optionally it also scores the paper's own
+protocol (300 random records held out, participants shared), for comparison only.
+Torch and scikit-learn are imported only when a model is fitted.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from wholebody.errors import DataError
+from wholebody.humanlike.arm_angle_model import (
+    CALIBRATED,
+    ArmAngleModel,
+    Calibration,
+    calibrate,
+    summarise_arm_angles,
+)
+from wholebody.humanlike.dataset import (
+    DEFAULT_TEST_PARTICIPANTS,
+    BuildReport,
+    StiffnessDataset,
+    build_dataset,
+)
+from wholebody.humanlike.evaluation import regression_scores
+from wholebody.humanlike.mapping import ArmParameters
+from wholebody.humanlike.network import NetworkStiffness
+from wholebody.humanlike.recordings import Recording, load_participants, load_recordings
+from wholebody.humanlike.synthetic import (
+    DEFAULT_PARTICIPANTS,
+    SyntheticSummary,
+    VirtualParticipant,
+    generate_synthetic,
+)
+
+__all__ = [
+    "PAPER_SCORES",
+    "FitOutcome",
+    "fit_and_evaluate",
+    "gradient_norms",
+    "group_folds",
+    "make_dataset",
+    "select_model",
+]
+
+PAPER_SCORES = {"network": {"r2": 0.9304, "mse": 0.1673}, "svr": {"r2": 0.9169, "mse": 0.2352}}
+
+
+def make_dataset(
+    params: ArmParameters,
+    *,
+    recordings_dir: str | Path | None = None,
+    real: bool = True,
+    synthetic: Sequence[VirtualParticipant] = DEFAULT_PARTICIPANTS,
+    seed: int = 0,
+    n_records: int = 5000,
+    recalibrate: bool = False,
+    progress: bool = False,
+) -> tuple[StiffnessDataset, BuildReport, dict]:
+    """Build the dataset of real and synthetic reaches for one robot arm.
+
+    Returns the dataset, the frame counts and a dict of provenance (calibration, arm-angle
+    comparison of the synthetic tabletop block with the real reaches) that is also stored
+    in the dataset's metadata.
+    """
+    recs: list[Recording] = []
+    info: dict = {"seed": seed}
+    real_recs: list[Recording] = []
+    if real:
+        real_recs = load_recordings(recordings_dir, progress=progress)
+        recs += real_recs
+        turned = [r.name for r in real_recs if "turned 180" in r.note]
+        info["real"] = {
+            "source": "UE_ADLdatabase (M. Huang, SFSU, 2021; MIT), subset in "
+            "data/human_reaching: seated forward/across reaches, both arms, 100 Hz",
+            "participants": sorted({r.participant for r in real_recs}),
+            "trials": len(real_recs),
+            "turned_180": turned,
+        }
+    model: ArmAngleModel = CALIBRATED
+    if recalibrate:
+        if not real_recs:
+            real_recs = load_recordings(recordings_dir, progress=progress)
+        cal: Calibration = calibrate(real_recs, load_participants())
+        model = cal.model
+        info["calibration"] = cal.summary()
+    info["arm_angle_model"] = {
+        "criterion": "Kim et al. 2012 (IEEE TBME 59(6):1770): maximise the projection of the "
+        "wrist manipulability ellipsoid's major axis on the wrist-to-head-target vector",
+        "target_x_stature": list(model.target),
+        "bias_deg": float(np.degrees(model.bias)),
+        "sd_deg": {
+            "participant": float(np.degrees(model.sd_participant)),
+            "block": float(np.degrees(model.sd_block)),
+            "trial": float(np.degrees(model.sd_trial)),
+            "within_trial": float(np.degrees(model.sd_within)),
+        },
+        "tau_within_s": model.tau_within,
+    }
+    if synthetic:
+        summary = SyntheticSummary()
+        syn = generate_synthetic(synthetic, seed=seed, model=model, summary=summary)
+        recs += syn
+        info["synthetic"] = {
+            "participants": [{"id": p.id, "sex": p.sex, "stature_m": p.stature} for p in synthetic],
+            "trials": summary.trials,
+            "frames": summary.frames,
+            "clamped_targets": summary.clamped_targets,
+            "note": "SYNTHETIC: paper's protocol (27 standing + 9 tabletop targets), "
+            "minimum-jerk wrist paths, elbow from the calibrated arm-angle model",
+        }
+        tab = [r for r in syn if r.task == "tabletop"]
+        comparison = {"synthetic_tabletop": summarise_arm_angles(tab),
+                      "synthetic_standing": summarise_arm_angles(
+                          [r for r in syn if r.task == "standing"])}  # fmt: skip
+        if real_recs:
+            comparison["real"] = summarise_arm_angles(real_recs)
+        info["arm_angle_comparison_deg"] = comparison
+    ds, report = build_dataset(recs, params, n_records=n_records, progress=progress, meta=info)
+    return ds, report, info
+
+
+def gradient_norms(net: NetworkStiffness, n: int = 21) -> dict[str, float]:
+    """|dk/dp| (N m/rad per m) on an n^3 grid over the training inputs' bounding box: median,
+    99th percentile and maximum, and the same for k (N m/rad)."""
+    lo, hi = net.input_low, net.input_high
+    if lo is None or hi is None or not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return {}
+    axes = [np.linspace(a, b, n) for a, b in zip(lo, hi, strict=True)]
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    g = np.linalg.norm(net.gradient(P), axis=1)
+    k = net.predict(P)
+    return {
+        "grad_median": float(np.median(g)),
+        "grad_p99": float(np.percentile(g, 99)),
+        "grad_max": float(g.max()),
+        "k_min": float(k.min()),
+        "k_max": float(k.max()),
+    }
+
+
+def group_folds(groups: np.ndarray, n_splits: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(train, validation) index pairs holding out whole groups: the sorted group names are
+    dealt round-robin into ``n_splits`` folds."""
+    names = sorted(set(np.asarray(groups).tolist()))
+    n = min(n_splits, len(names))
+    if n < 2:
+        raise DataError(f"group_folds: need >= 2 groups, got {len(names)}")
+    folds = []
+    for i in range(n):
+        val = np.isin(groups, names[i::n])
+        folds.append((np.flatnonzero(~val), np.flatnonzero(val)))
+    return folds
+
+
+def _n_parameters(hidden: Sequence[int]) -> int:
+    sizes = [3, *hidden, 1]
+    return sum((a + 1) * b for a, b in itertools.pairwise(sizes))
+
+
+def select_model(
+    train: StiffnessDataset,
+    candidates: Sequence[dict],
+    config: object,
+    *,
+    n_splits: int = 3,
+    progress: bool = False,
+) -> tuple[dict, list[dict]]:
+    """Choose training settings by grouped cross-validation on the training participants.
+
+    Each candidate (a dict of :class:`~wholebody.humanlike.training.TrainingConfig` fields,
+    e.g. ``{"hidden": (16,), "weight_decay": 1e-3}``) is trained on every fold of
+    :func:`group_folds` and scored by its mean validation MSE and that mean's standard error
+    over the folds. One-standard-error rule: among the candidates whose mean is within one
+    standard error of the best mean, the simplest wins: largest weight decay, then fewest
+    parameters (smoother k, smaller gradient spikes for the controller).
+    """
+    from wholebody.humanlike.training import train_network
+
+    folds = group_folds(train.participant, n_splits)
+    table = []
+    for cand in candidates:
+        cfg = replace(config, **cand)  # type: ignore[type-var]
+        mses, r2s = [], []
+        for tr, va in folds:
+            res = train_network(train.wrist[tr], train.k[tr], cfg, progress=progress)
+            s = regression_scores(train.k[va], res.network.predict(train.wrist[va]))
+            mses.append(s["mse"])
+            r2s.append(s["r2"])
+        table.append({
+            "hidden": list(cfg.hidden),  # type: ignore[attr-defined]
+            "weight_decay": float(cfg.weight_decay),  # type: ignore[attr-defined]
+            "cv_mse": float(np.mean(mses)),
+            "cv_mse_se": float(np.std(mses, ddof=1) / np.sqrt(len(mses))),
+            "cv_r2": float(np.mean(r2s)),
+        })  # fmt: skip
+    best = min(table, key=lambda r: r["cv_mse"])
+    ok = [r for r in table if r["cv_mse"] <= best["cv_mse"] + best["cv_mse_se"]]
+    pick = min(ok, key=lambda r: (-r["weight_decay"], _n_parameters(r["hidden"]), r["cv_mse"]))
+    for r in table:
+        r["chosen"] = r is pick
+    return {"hidden": tuple(pick["hidden"]), "weight_decay": pick["weight_decay"]}, table
+
+
+@dataclass
+class FitOutcome:
+    """Trained network, held-out scores and what was held out."""
+
+    network: NetworkStiffness
+    scores: dict[str, dict[str, float]]
+    test_participants: list[str]
+    train_participants: list[str]
+    svr_params: dict | None = None
+    paper_protocol: dict[str, dict[str, float]] | None = None
+    loss: list[float] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def fit_and_evaluate(
+    dataset: StiffnessDataset,
+    *,
+    test_participants: Sequence[str] = DEFAULT_TEST_PARTICIPANTS,
+    config: object | None = None,
+    svr: bool = True,
+    svr_grid: dict | None = None,
+    paper_protocol: bool = False,
+    candidates: Sequence[dict] | None = None,
+    progress: bool = False,
+) -> FitOutcome:
+    """Split by participant, train the network (``config``: a
+    :class:`~wholebody.humanlike.training.TrainingConfig`) and the SVR on the training
+    participants, and score both and the training mean on the held-out participants.
+
+    With ``candidates`` the training settings are first chosen by :func:`select_model` on
+    the training participants. With ``paper_protocol`` the two models are also trained and
+    scored on the paper's split (300 random records held out); those numbers go in
+    ``paper_protocol``, for comparison.
+    """
+    from wholebody.humanlike.training import TrainingConfig, train_network
+
+    config = config or TrainingConfig()
+    train, test = dataset.split(test_participants)
+    selection = None
+    if candidates:
+        chosen, selection = select_model(train, candidates, config, progress=progress)
+        config = replace(config, **chosen)  # type: ignore[type-var]
+    meta = {
+        "robot": dataset.meta.get("robot", ""),
+        "split": {
+            "test_participants": sorted(set(test_participants)),
+            "train_records": len(train),
+            "test_records": len(test),
+        },
+    }
+    result = train_network(train.wrist, train.k, config, progress=progress, meta=meta)  # type: ignore[arg-type]
+    net = result.network
+    net.meta["gradient_norm"] = gradient_norms(net)
+    scores = {
+        "network": regression_scores(test.k, net.predict(test.wrist)),
+        "mean": regression_scores(test.k, np.full(len(test), train.k.mean())),
+        "network_train": regression_scores(train.k, net.predict(train.wrist)),
+    }
+    svr_params = None
+    if svr:
+        from wholebody.humanlike.svr import fit_svr, select_svr
+
+        svr_params, _ = select_svr(train.wrist, train.k, train.participant, grid=svr_grid,
+                                   progress=progress)  # fmt: skip
+        model = fit_svr(train.wrist, train.k, **svr_params)
+        scores["svr"] = regression_scores(test.k, model.predict(test.wrist))
+    paper = None
+    if paper_protocol:
+        rng = np.random.default_rng(config.seed)  # type: ignore[attr-defined]
+        idx = rng.permutation(len(dataset))
+        te, tr = idx[:300], idx[300:]
+        r2 = train_network(dataset.wrist[tr], dataset.k[tr], config, progress=progress)  # type: ignore[arg-type]
+        paper = {"network": regression_scores(dataset.k[te], r2.network.predict(dataset.wrist[te]))}
+        if svr:
+            m2 = fit_svr(dataset.wrist[tr], dataset.k[tr], **(svr_params or {}))
+            paper["svr"] = regression_scores(dataset.k[te], m2.predict(dataset.wrist[te]))
+    net.meta["scores_held_out_participants"] = scores
+    if selection is not None:
+        net.meta["model_selection"] = selection
+    if svr_params is not None:
+        net.meta["svr_params"] = svr_params
+    if paper is not None:
+        net.meta["scores_paper_protocol"] = paper
+    return FitOutcome(
+        net,
+        scores,
+        sorted(set(test.participant.tolist())),
+        sorted(set(train.participant.tolist())),
+        svr_params,
+        paper,
+        result.loss,
+        result.seconds,
+    )

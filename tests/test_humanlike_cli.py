@@ -1,0 +1,102 @@
+"""The stiffness command line, the SVR baseline and the shipped data card."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("sklearn")
+
+from wholebody.humanlike.cli import add_stiffness_parser
+from wholebody.humanlike.dataset import StiffnessDataset
+from wholebody.humanlike.network import NetworkStiffness
+from wholebody.resources import robots_dir
+
+
+def _run(*argv: str) -> int:
+    parser = argparse.ArgumentParser(prog="wholebody")
+    sub = parser.add_subparsers(dest="command", required=True)
+    add_stiffness_parser(sub)
+    args = parser.parse_args(["stiffness", *argv])
+    return args.func(args)
+
+
+def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
+    ds_path = tmp_path / "ds.npz"
+    assert _run("dataset", "--no-real", "--synthetic-participants", "3", "--records", "300",
+                "--quiet", "--out", str(ds_path)) == 0  # fmt: skip
+    ds = StiffnessDataset.load(ds_path)
+    assert 250 <= len(ds) <= 300
+    assert set(ds.source) == {"synthetic"} and set(ds.participant) == {"SYN01", "SYN02", "SYN03"}
+    assert ds.meta["robot"] == "mobile_humanoid"
+    assert ds.meta["counts"]["synthetic"]["vertical"] > 0  # the hanging starts are dropped
+    out = capsys.readouterr().out
+    assert "synthetic: 108 trials" in out
+
+    net_path, card = tmp_path / "k.npz", tmp_path / "card.md"
+    assert _run("fit", "--dataset", str(ds_path), "--test-participants", "SYN03",
+                "--hidden", "4,4", "--epochs", "3", "--quiet", "--date", "2026-11-22",
+                "--out", str(net_path), "--card", str(card)) == 0  # fmt: skip
+    net = NetworkStiffness.load(net_path)
+    scores = net.meta["scores_held_out_participants"]
+    assert set(scores) >= {"network", "svr", "mean"}
+    assert net.meta["split"]["test_participants"] == ["SYN03"]
+    text = card.read_text()
+    assert "2026-11-22" in text and "SYN03" in text
+    assert f"{scores['svr']['r2']:.3f}" in text
+
+    rep = tmp_path / "rep"
+    assert _run("report", "--model", str(net_path), "--dataset", str(ds_path), "--quiet",
+                "--out", str(rep)) == 0  # fmt: skip
+    assert (rep / "k_workspace.png").stat().st_size > 10_000
+    saved = json.loads((rep / "scores.json").read_text())
+    again = saved["recomputed_network_held_out"]
+    assert again["r2"] == pytest.approx(scores["network"]["r2"], abs=1e-9)
+
+
+def test_svr_baseline_on_a_noise_free_slice(humanoid):
+    import dataclasses
+
+    from wholebody.humanlike.arm_angle_model import CALIBRATED
+    from wholebody.humanlike.dataset import build_dataset
+    from wholebody.humanlike.evaluation import regression_scores
+    from wholebody.humanlike.mapping import ArmParameters
+    from wholebody.humanlike.svr import fit_svr, select_svr
+    from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS, generate_synthetic
+
+    model = dataclasses.replace(CALIBRATED, sd_participant=0.0, sd_block=0.0, sd_trial=0.0,
+                                sd_within=0.0)  # fmt: skip
+    recs = generate_synthetic(DEFAULT_PARTICIPANTS[:4], seed=0, model=model)
+    ds, _ = build_dataset(recs, ArmParameters.from_robot(humanoid), n_records=600)
+    train, test = ds.split(["SYN02"])
+    params, table = select_svr(train.wrist, train.k, train.participant,
+                               grid={"C": (1.0, 10.0), "gamma": (1.0,)})  # fmt: skip
+    assert len(table) == 2 and params["C"] in (1.0, 10.0)
+    s = regression_scores(test.k, fit_svr(train.wrist, train.k, **params).predict(test.wrist))
+    assert s["r2"] > 0.5
+
+
+def test_shipped_card_reports_the_full_run():
+    """The card beside the shipped network states the scores stored in the network file,
+    next to the paper's, the split and the date."""
+    folder = robots_dir() / "mobile_humanoid"
+    net = NetworkStiffness.load(folder / "stiffness.npz")
+    text = (folder / "stiffness_card.md").read_text()
+    tr = net.meta["training"]
+    assert (tr["epochs"], tr["lr"], tr["batch_size"]) == (1000, 0.01, 32)
+    assert "2026-11-22" in text
+    scores = net.meta["scores_held_out_participants"]
+    for name, label in (("network", "network"), ("svr", "SVR (RBF)")):
+        row = next(line for line in text.splitlines() if line.startswith(f"| {label} |"))
+        assert f"{scores[name]['r2']:.3f}" in row and f"{scores[name]['mse']:.4f}" in row
+    assert "0.9304 / 0.1673" in text and "0.9169 / 0.2352" in text
+    for p in net.meta["split"]["test_participants"]:
+        assert p in text
+    assert re.search(r"SYNTHETIC", text)
+    assert np.isfinite(scores["network"]["r2"])

@@ -1,0 +1,92 @@
+"""The stiffness dataset: labelling, frame rules, per-trial subsampling, split and file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wholebody.errors import DataError
+from wholebody.humanlike.dataset import (
+    DEFAULT_TEST_PARTICIPANTS,
+    StiffnessDataset,
+    build_dataset,
+    label_recording,
+)
+from wholebody.humanlike.mapping import ArmParameters
+from wholebody.humanlike.recordings import load_recording, real_recordings_dir
+from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS, generate_synthetic
+from wholebody.resources import data_dir
+
+
+@pytest.fixture(scope="module")
+def params(humanoid) -> ArmParameters:
+    return ArmParameters.from_robot(humanoid, "right")
+
+
+@pytest.fixture(scope="module")
+def recordings():
+    real = [load_recording(real_recordings_dir() / f"ADL00{i}_{t}_{s}1.csv")
+            for i in (1, 2, 9) for t in ("forward", "across") for s in "RL"]  # fmt: skip
+    return real + generate_synthetic(DEFAULT_PARTICIPANTS[:2], seed=0)
+
+
+def test_records_are_robot_wrists_in_canonical_axes(recordings, params):
+    """Left and right arms both reach forward (+x) and below the shoulder, at the robot's
+    reach, and the labels are those of the mapped robot posture."""
+    for rec in recordings[:12]:
+        lab = label_recording(rec, params)
+        W = lab["wrist"]
+        assert np.all(np.linalg.norm(W, axis=1) <= params.upper_arm + params.forearm + 1e-12)
+        assert W[-1, 0] > 0.15 and W[-1, 2] < 0.0, rec.name
+        assert np.all(lab["k"] >= 0)
+
+
+def test_build_subsamples_evenly_per_trial(recordings, params):
+    ds, report = build_dataset(recordings, params, n_records=400)
+    n_trials = len(recordings)
+    assert len(ds) == 400
+    per_trial = {t: int((ds.trial == t).sum()) for t in set(ds.trial)}
+    assert len(per_trial) == n_trials
+    assert max(per_trial.values()) - min(per_trial.values()) <= 1
+    c = report.counts
+    assert c["real"]["trials"] == 12 and c["synthetic"]["trials"] == 72
+    assert c["synthetic"]["vertical"] > 0  # hanging-arm starts
+    for src in ("real", "synthetic"):
+        assert c[src]["kept"] + c[src]["dropped"] == c[src]["frames"]
+    # records are well-conditioned frames, in time order within a trial
+    t = ds.time_s[ds.trial == ds.trial[0]]
+    assert np.all(np.diff(t) > 0)
+    assert set(ds.source) == {"real", "synthetic"}
+
+
+def test_split_by_participant_and_file_round_trip(recordings, params, tmp_path: Path):
+    ds, _ = build_dataset(recordings, params, n_records=300)
+    train, test = ds.split(["ADL002", "SYN02"])
+    assert not set(train.participant) & set(test.participant)
+    assert set(test.participant) == {"ADL002", "SYN02"}
+    assert len(train) + len(test) == len(ds)
+    with pytest.raises(DataError, match="ADL013"):
+        ds.split(["ADL013"])
+    back = StiffnessDataset.load(ds.save(tmp_path / "ds.npz"))
+    np.testing.assert_array_equal(back.wrist, ds.wrist)
+    np.testing.assert_array_equal(back.participant, ds.participant)
+    assert back.meta["robot"] == "mobile_humanoid"
+    with np.load(tmp_path / "ds.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files if k != "k"}
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(DataError, match="missing key"):
+        StiffnessDataset.load(tmp_path / "bad.npz")
+
+
+def test_shipped_dataset():
+    ds = StiffnessDataset.load(data_dir() / "stiffness" / "mobile_humanoid.npz")
+    assert 4900 <= len(ds) <= 5000
+    assert set(ds.source) == {"real", "synthetic"}
+    assert set(DEFAULT_TEST_PARTICIPANTS) <= set(ds.participant)
+    assert all(p.startswith("SYN") for p in ds.participant[ds.source == "synthetic"])
+    assert np.all(ds.k >= 0)
+    assert ds.meta["real"]["turned_180"] and all(
+        t.startswith("ADL009") for t in ds.meta["real"]["turned_180"]
+    )

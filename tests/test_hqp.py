@@ -1,0 +1,440 @@
+"""The hierarchical QP backend against an independent certificate of lexicographic optimality.
+
+The reference is not another solver but the optimality conditions themselves: ``x`` solves
+level k of the lexicographic problem (minimise ``||A_k x - b_k||`` over the box and the optimal
+sets of the levels above, ``A_j x = A_j x*``) exactly when the gradient
+``A_k^T (A_k x - b_k)`` is a combination of the rows ``A_j`` (j < k) and of the active bounds
+with multipliers of the right sign (KKT; sufficient for a convex problem). That is checked with
+a bounded least squares (scipy's BVLS) per level, and once more for the final minimum-norm
+choice. On synthetic stacks (rank-deficient levels, tight boxes, a box excluding 0) and on the
+robot's stack. Then the properties the controller relies on: strict priority, redundant
+levels, inequality rows, infeasibility and failure reporting, out-of-limits recovery, warm
+start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+from wholebody.errors import SolverError
+from wholebody.solvers import Level, SolverStatus, Stack
+from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.solvers.qp import ENGINES, QPStatus, available_engines, make_engine
+from wholebody.solvers.stack import LevelProblem, StackProblem
+from wholebody.tasks import (
+    ArmPotentialEnergy,
+    FrameTask,
+    JointLimitAvoidance,
+    JointPositionLimits,
+    PostureTask,
+    RelativeFrameTask,
+    Task,
+    TaskRows,
+    VelocityLimits,
+)
+from wholebody.tasks.inequality import FrameHalfSpace
+
+DT = 0.01
+ENGINE_NAMES = [e for e in ENGINES if e in available_engines()]
+METHODS = ["native", "cascade"]  # with daqp: its own hierarchy, or the null-space cascade
+
+
+# ---------------------------------------------------------------------- the certificate
+def kkt_residuals(levels, lower, upper, x, act=1e-7):
+    """Relative KKT residual of each level, and of the final minimum-norm choice."""
+    n = x.size
+    lo_act = np.flatnonzero(x <= lower + act)
+    up_act = np.flatnonzero(x >= upper - act)
+    B = np.zeros((n, lo_act.size + up_act.size))
+    B[lo_act, np.arange(lo_act.size)] = -1.0
+    B[up_act, lo_act.size + np.arange(up_act.size)] = 1.0
+    out, E = [], np.zeros((0, n))
+    for A, b in [*levels, (np.eye(n), np.zeros(n))]:
+        g = A.T @ (A @ x - b)
+        K = np.hstack([E.T, B])
+        if K.shape[1]:
+            lb = np.r_[np.full(E.shape[0], -np.inf), np.zeros(B.shape[1])]
+            fit = lsq_linear(K, -g, bounds=(lb, np.inf), method="bvls", tol=1e-14)
+            res = np.linalg.norm(K @ fit.x + g)
+        else:
+            res = np.linalg.norm(g)
+        out.append(res / max(1.0, np.linalg.norm(A.T @ b)))
+        E = np.vstack([E, A])
+    return np.array(out)
+
+
+def synthetic(rng, n=8, box=0.5, shift=False):
+    """A random 3-level stack: a rank-deficient level (duplicated rows), a conflicting one and
+    an objective-like identity level; box of half-width ``box`` (shifted off 0 if asked)."""
+    A1 = rng.normal(size=(3, n))
+    A1 = np.vstack([A1, A1[:1] * 2.0])  # redundant row, consistent right-hand side
+    b1 = rng.normal(size=3) * 2.0
+    b1 = np.r_[b1, 2.0 * b1[0]]
+    A2 = rng.normal(size=(4, n))
+    b2 = rng.normal(size=4) * 2.0
+    A3 = np.eye(n) * 0.5
+    b3 = rng.normal(size=n)
+    levels = []
+    for i, (A, b) in enumerate(((A1, b1), (A2, b2), (A3, b3))):
+        if i < 2:
+            rows = {"t1": slice(0, 2), "t2": slice(2, A.shape[0])}
+        else:
+            rows = {"objectives": slice(0, n)}
+        levels.append(LevelProblem(f"level {i}", A, b, np.zeros((0, n)), np.zeros(0),
+                                   np.zeros(0), rows, {}, 0.5 if i == 2 else 0.0))  # fmt: skip
+    centre = rng.uniform(-0.4, 0.4, n) if shift else np.zeros(n)
+    lower = centre - box * rng.uniform(0.2, 1.0, n)
+    upper = centre + box * rng.uniform(0.2, 1.0, n)
+    if shift:  # some entries must move: 0 is outside the box
+        lower[0], upper[0] = 0.2, 0.4
+    return StackProblem(levels, lower, upper, np.ones(n), {})
+
+
+def equalities(problem):
+    return [(lv.A, lv.b) for lv in problem.levels]
+
+
+# ---------------------------------------------------------------------- engines
+@pytest.mark.parametrize("name", ENGINE_NAMES)
+def test_engine_solves_a_box_qp_and_warm_starts(name, rng):
+    eng, cold = make_engine(name), make_engine(name, warm_start=False)
+    ref = make_engine("daqp", warm_start=False)
+    n = 12
+    M = rng.normal(size=(20, n))
+    for _ in range(15):
+        M += 0.05 * rng.normal(size=M.shape)  # a slowly changing problem, same structure
+        H = M.T @ M + 1e-3 * np.eye(n)
+        g = rng.normal(size=n) * 5
+        C = rng.normal(size=(3, n))
+        lo, hi = -np.ones(3), np.r_[1.0, 1.0, np.inf]
+        lb, ub = -0.3 * np.ones(n), 0.3 * np.ones(n)
+        exact = ref.solve(H, g, C, lo, hi, lb, ub)
+        for e in (eng, cold):
+            sol = e.solve(H, g, C, lo, hi, lb, ub)
+            assert sol.status == QPStatus.SOLVED, sol.message
+            np.testing.assert_allclose(sol.x, exact.x, atol=1e-5)
+    assert eng.setups == 1  # the workspace was reused
+
+
+def test_unknown_engine_is_a_clear_error():
+    with pytest.raises(SolverError, match="unknown QP engine 'gurobi'"):
+        HierarchicalQPSolver("gurobi")
+    with pytest.raises(SolverError, match="tolerance"):
+        HierarchicalQPSolver(tolerance=0.0)
+    with pytest.raises(SolverError, match="'native' with engine 'daqp'"):
+        HierarchicalQPSolver("osqp", method="native")
+    assert HierarchicalQPSolver("proxsuite").method == "cascade"
+    assert HierarchicalQPSolver().method == "native"
+
+
+# ---------------------------------------------------------------------- lexicographic optimum
+@pytest.mark.parametrize("shift", [False, True])
+@pytest.mark.parametrize("method", METHODS)
+def test_lexicographic_optimum_on_synthetic_stacks(rng, shift, method):
+    solver = HierarchicalQPSolver(method=method)
+    with_qp = 0
+    for _ in range(40):
+        problem = synthetic(rng, box=rng.choice([0.3, 1.0, 5.0]), shift=shift)
+        result = solver.solve_problem(problem)
+        x = result.u
+        assert np.all(np.isfinite(x))
+        assert np.all(x >= problem.lower) and np.all(x <= problem.upper)
+        kkt = kkt_residuals(equalities(problem), problem.lower, problem.upper, x)
+        assert kkt.max() < 1e-6, kkt
+        with_qp += any(rep.qp for rep in solver.levels)
+    assert with_qp >= 10  # the box mattered in many of them
+
+
+@pytest.mark.parametrize("name", [e for e in ENGINE_NAMES if e != "daqp"])
+def test_other_engines_reach_the_same_optimum_or_report(name, rng):
+    """proxsuite and osqp are first-order/proximal: looser, and allowed to fail, but never
+    outside the box or NaN, and a failure is reported as FAILED."""
+    solver = HierarchicalQPSolver(name)
+    good = 0
+    for _ in range(25):
+        problem = synthetic(rng, box=rng.choice([0.3, 1.0]))
+        result = solver.solve_problem(problem)
+        assert np.all(np.isfinite(result.u))
+        assert np.all(result.u >= problem.lower) and np.all(result.u <= problem.upper)
+        kkt = kkt_residuals(equalities(problem), problem.lower, problem.upper, result.u)
+        good += kkt.max() < 1e-4
+        if result.status == SolverStatus.FAILED:
+            assert name in result.message
+    assert good >= 20
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_without_active_bounds_it_is_the_recursive_pseudo_inverse(rng, method):
+    problem = synthetic(rng, box=1e6)
+    solver = HierarchicalQPSolver(method=method)
+    result = solver.solve_problem(problem)
+    assert result.status == SolverStatus.OK and not any(r.qp for r in solver.levels)
+    x, P = np.zeros(8), np.eye(8)
+    for A, b in equalities(problem):
+        M = A @ P
+        x = x + np.linalg.pinv(M, rcond=1e-9) @ (b - A @ x)
+        P = P - np.linalg.pinv(M, rcond=1e-9) @ M
+    np.testing.assert_allclose(result.u, x, atol=1e-9)
+
+
+# ---------------------------------------------------------------------- the robot
+def hands(robot, kp=10.0):
+    return FrameTask(robot, "left_tool", kp=kp), FrameTask(robot, "right_tool", kp=kp)
+
+
+def limits(robot):
+    return [JointPositionLimits(robot), VelocityLimits(robot)]
+
+
+def set_targets(state, tasks, rng, reach):
+    for t in tasks:
+        T = state.pose(t.frame).copy()
+        T[:3, 3] += rng.uniform(-reach, reach, 3)
+        t.set_target(T)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_robot_stack_is_lexicographically_optimal(humanoid, rng, method):
+    L, R = hands(humanoid)
+    energy = [ArmPotentialEnergy(humanoid, "left", 0.1), ArmPotentialEnergy(humanoid, "right", 0.1)]
+    stack = Stack(humanoid, [[L, R], Level(energy, gain=0.5)], limits(humanoid),
+                  metric=np.r_[np.full(4, 0.01), np.ones(humanoid.nu - 4)])  # fmt: skip
+    solver = HierarchicalQPSolver(method=method)
+    bound_limited = 0
+    for _ in range(30):
+        state = humanoid.update(humanoid.random_configuration(rng, margin=0.02))
+        set_targets(state, (L, R), rng, reach=rng.choice([0.02, 0.3]))
+        result = solver.solve(stack, state, DT)
+        problem = stack.evaluate(state, DT)
+        x = result.u / problem.scale
+        assert np.all(x >= problem.lower) and np.all(x <= problem.upper)
+        kkt = kkt_residuals(equalities(problem), problem.lower, problem.upper, x)
+        assert kkt.max() < 1e-6, kkt
+        bound_limited += result.status == SolverStatus.INFEASIBLE
+    assert bound_limited >= 1
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_strict_priority(humanoid, rng, method):
+    """The hands' residual does not change when lower levels are added, removed or made to
+    conflict, also when bounds are active."""
+    L, R = hands(humanoid, kp=30.0)
+    energy = Level([ArmPotentialEnergy(humanoid, "left", 0.1)], gain=2.0)
+    solver = HierarchicalQPSolver(method=method)
+    for reach in (0.02, 0.5):
+        for _ in range(5):
+            state = humanoid.update(humanoid.random_configuration(rng, margin=0.05))
+            set_targets(state, (L, R), rng, reach)
+            posture = PostureTask(humanoid, target=rng.uniform(-1, 1, humanoid.nu), kp=50.0)
+            stacks = [
+                [[L, R]],
+                [[L, R], energy],
+                [[L, R], [posture]],
+                [[L, R], [posture], energy],
+                [[L, R], Level([posture, *energy.entries])],
+            ]
+            res = [solver.solve(Stack(humanoid, s, limits(humanoid)), state, DT) for s in stacks]
+            top = [r.level_residuals[0] for r in res]
+            assert max(top) - min(top) <= 1e-8 * (1 + top[0]), top
+            if reach == 0.02:
+                assert max(top) < 1e-8  # the hands are met exactly
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_redundant_level_solves(humanoid, rng, method):
+    """Both hands, the closed chain between them and an identical duplicate of a hand task:
+    18 + 6 rows of rank 12 in one level."""
+    L, R = hands(humanoid)
+    chain = RelativeFrameTask(humanoid, "left_tool", "right_tool", name="closed_chain")
+    twin = FrameTask(humanoid, "left_tool", kp=10.0, name="left_twin")
+    energy = Level([ArmPotentialEnergy(humanoid, "left", 0.1),
+                    ArmPotentialEnergy(humanoid, "right", 0.1)], gain=0.5)  # fmt: skip
+    stack = Stack(humanoid, [[L, R, chain, twin], energy, [JointLimitAvoidance(humanoid)]],
+                  limits(humanoid))  # fmt: skip
+    solver = HierarchicalQPSolver(method=method)
+    for reach in (0.01, 0.3):
+        state = humanoid.update(humanoid.random_configuration(rng, margin=0.05))
+        set_targets(state, (L, R), rng, reach)
+        twin.set_target(L.target)
+        TL, TR = L.target, R.target
+        chain.set_target(np.linalg.solve(TL, TR))  # consistent with the hands' targets
+        result = solver.solve(stack, state, DT)
+        assert result.status != SolverStatus.FAILED, result.message
+        assert np.all(np.isfinite(result.u))
+        assert solver.levels[0].rank == 12
+        assert solver.levels[2].free == 0  # the objective level used up the freedom
+        assert result.task_residuals[L.name] == pytest.approx(
+            result.task_residuals["left_twin"], abs=1e-9)  # fmt: skip
+        if reach == 0.01:
+            assert result.level_residuals[0] < 1e-8
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_infeasible_level_is_named_and_the_answer_is_the_best_feasible(humanoid, rng, method):
+    L, R = hands(humanoid, kp=10.0)
+    stack = Stack(humanoid, [[L, R]], limits(humanoid))
+    state = humanoid.update(humanoid.home())
+    T = state.pose(L.frame).copy()
+    T[:3, 3] += [0.0, 0.0, 2.0]  # 20 m/s asked of the left hand
+    L.set_target(T)
+    R.set_target(state.pose(R.frame))
+    result = HierarchicalQPSolver(method=method).solve(stack, state, DT)
+    problem = stack.evaluate(state, DT)
+    lo, hi = problem.lower * problem.scale, problem.upper * problem.scale
+    assert result.status == SolverStatus.INFEASIBLE
+    assert ("level 0", L.name) in result.infeasible
+    assert np.all(result.u >= lo) and np.all(result.u <= hi)
+    assert result.active_bounds.size > 0
+    # the best feasible answer: the KKT certificate of the level holds
+    x = result.u / problem.scale
+    assert kkt_residuals(equalities(problem), problem.lower, problem.upper, x).max() < 1e-6
+
+
+class BrokenTask(Task):
+    """Rows that turn NaN (a task evaluated at a singular point, say)."""
+
+    name, weight = "broken", 1.0
+
+    @property
+    def dim(self) -> int:
+        return 2
+
+    def compute(self, state):
+        J = np.zeros((2, state.robot.nu))
+        J[0, 5] = np.nan
+        return TaskRows(J, np.array([np.nan, 0.0]), np.ones(2))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_non_finite_level_is_reported_and_skipped(humanoid, rng, method):
+    L, R = hands(humanoid)
+    stack = Stack(humanoid, [[L, R], [BrokenTask()], [PostureTask(humanoid)]], limits(humanoid))
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
+    set_targets(state, (L, R), rng, 0.01)
+    result = HierarchicalQPSolver(method=method).solve(stack, state, DT)
+    assert result.status == SolverStatus.FAILED
+    assert ("level 1", "broken") in result.infeasible and "broken" in result.message
+    assert np.all(np.isfinite(result.u))
+    assert result.level_residuals[0] < 1e-8  # the levels above were still solved
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_inequality_task_keeps_the_hand_above_a_table(humanoid, method):
+    """A half-space above the hands' level, the hand asked to go 20 cm below it: with the
+    inequality on top the hand stops at the table; below the hand task it is ignored."""
+    robot = humanoid
+    q0 = robot.home()
+    z0 = robot.frame_pose(q0, "left_tool")[2, 3]
+    for order in ("table_first", "hand_first"):
+        state = robot.update(q0)
+        L = FrameTask(robot, "left_tool", kp=5.0, orientation=False)
+        table = FrameHalfSpace(robot, "left_tool", [0, 0, 1], z0 - 0.05, gain=0.5, name="table")
+        T = state.pose(L.frame).copy()
+        T[2, 3] -= 0.2
+        L.set_target(T)
+        levels = [[table], [L]] if order == "table_first" else [[L], [table]]
+        stack = Stack(robot, [*levels, [PostureTask(robot, kp=1.0)]], limits(robot))
+        solver, q = HierarchicalQPSolver(method=method), q0.copy()
+        lowest = np.inf
+        for _ in range(150):
+            s = robot.update(q)
+            result = solver.solve(stack, s, DT)
+            assert np.all(np.isfinite(result.u))
+            q = robot.integrate(q, result.u, DT)
+            lowest = min(lowest, table.distance(robot.update(q)))
+        if order == "table_first":
+            assert lowest > -1e-3  # never through the table (first order, one step at most)
+            assert table.distance(robot.update(q)) < 0.01  # and resting on it
+        else:
+            assert lowest < -0.1
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_out_of_limits_start_recovers(humanoid, rng, method):
+    """Joints 0.1 rad outside their limits are steered back: the violation never grows, and
+    is below 1e-6 rad within 25 steps of 10 ms. Never NaN, never beyond the velocity limits.
+
+    The box (JointPositionLimits, gain 0.5) asks a joint outside its limits to cover half of
+    the remaining distance per step once the velocity limit allows it (before that it moves
+    back at full speed): the QP honours exactly that, so the violation first shrinks by
+    ``v_max dt`` per step, then halves each step. 0.1 rad at 1 rad/s: 8 steps, then 2e-2 rad
+    halved 15 times."""
+    robot = humanoid
+    lower, upper = robot.position_limits
+    L, R = hands(robot)
+    stack = Stack(robot, [[L, R], Level([ArmPotentialEnergy(robot, "left", 0.1)], gain=0.5)],
+                  limits(robot))  # fmt: skip
+
+    def violation(q):
+        jp = robot.joint_positions(q)
+        return float(np.max(np.maximum(lower - jp, jp - upper)[np.isfinite(lower)]))
+
+    for _ in range(3):
+        q = robot.random_configuration(rng, margin=0.1)
+        jp = robot.joint_positions(q)
+        idx = rng.choice(np.flatnonzero(np.isfinite(lower)), size=4, replace=False)
+        jp[idx] = np.where(rng.random(4) < 0.5, lower[idx] - 0.1, upper[idx] + 0.1)
+        for i, j in enumerate(robot.actuated_joints):
+            if np.isfinite(lower[i]):
+                q[robot.model.joints[robot.model.getJointId(j)].idx_q] = jp[i]
+        assert violation(q) == pytest.approx(0.1)
+        state = robot.update(q)
+        for t in (L, R):  # the hands want to stay where they are
+            t.set_target(state.pose(t.frame))
+        solver = HierarchicalQPSolver(method=method)
+        history = [violation(q)]
+        for _ in range(25):
+            state = robot.update(q)
+            result = solver.solve(stack, state, DT)
+            assert np.all(np.isfinite(result.u))
+            assert np.all(np.abs(result.u) <= robot.velocity_limits + 1e-9)
+            q = robot.integrate(q, result.u, DT)
+            history.append(violation(q))
+        assert np.all(np.diff(history) <= 1e-12), history
+        assert history[-1] < 1e-6, history
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_warm_start_changes_nothing_but_time(humanoid, rng, method):
+    L, R = hands(humanoid, kp=30.0)
+    stack = Stack(humanoid, [[L, R], Level([ArmPotentialEnergy(humanoid, "left", 0.1)])],
+                  limits(humanoid))  # fmt: skip
+    warm, cold = (
+        HierarchicalQPSolver(method=method),
+        HierarchicalQPSolver(warm_start=False, method=method),
+    )
+    q = humanoid.random_configuration(rng, margin=0.05)
+    state = humanoid.update(q)
+    set_targets(state, (L, R), rng, 0.3)
+    qps = 0
+    for _ in range(30):
+        state = humanoid.update(q)
+        a, b = warm.solve(stack, state, DT), cold.solve(stack, state, DT)
+        np.testing.assert_allclose(a.u, b.u, atol=1e-6)
+        qps += any(r.qp for r in warm.levels)
+        q = humanoid.integrate(q, a.u, DT)
+    assert qps >= 5
+    if method == "native":
+        assert warm._native_model is not None  # one daqp workspace, kept
+    else:
+        assert len(warm._engines) and warm._engines[0].setups <= 2
+
+
+def test_result_fields(humanoid, rng):
+    L = FrameTask(humanoid, "left_tool", kp=10.0, weight=4.0)
+    stack = Stack(humanoid, [[L], [PostureTask(humanoid, kp=0.2)]], limits(humanoid))
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
+    set_targets(state, (L,), rng, 0.01)
+    result = HierarchicalQPSolver().solve(stack, state, DT)
+    rows = L.compute(state)
+    assert result.task_residuals[L.name] == pytest.approx(
+        np.linalg.norm(rows.J @ result.u - rows.v), abs=1e-10)  # fmt: skip
+    post = PostureTask(humanoid, kp=0.2)  # unweighted
+    pr = post.compute(state)
+    assert result.task_residuals["posture"] == pytest.approx(
+        np.linalg.norm(pr.J @ result.u - pr.v), rel=1e-9)  # fmt: skip
+    assert result.level_residuals.shape == (2,) and result.scale.tolist() == [1.0, 1.0]
+    assert result.solve_time > 0 and "daqp" in result.message
+    assert result.status in (SolverStatus.OK, SolverStatus.BOUNDS_ACTIVE)

@@ -28,9 +28,14 @@ def reach(robot, objectives: bool):
     goal[:3, :3] = pin.exp3(np.array([0.0, -np.pi / 2, 0.0])) @ start[:3, :3]
     stack = paper_stack(robot, [hand], objectives=objectives, stiffness=0.1)
     monitors = [ArmPotentialEnergy(robot, arm, 0.1) for arm in ("left", "right")]
-    controller = Controller(robot, stack, ProjectionSolver(), dt=0.01,
-                            references={hand: MinimumJerkTrajectory(start, goal, 5.0)},
-                            monitors=monitors)  # fmt: skip
+    controller = Controller(
+        robot,
+        stack,
+        ProjectionSolver(),
+        dt=0.01,
+        references={hand: MinimumJerkTrajectory(start, goal, 5.0)},
+        monitors=monitors,
+    )
     return controller.run(q0, 5.0)
 
 
@@ -51,8 +56,10 @@ def test_single_arm_reach_tracks_within_a_millimetre(runs):
 
 def test_energy_objective_moves_more_arm_and_less_waist_than_the_pseudo_inverse(runs):
     paper, pinv = summary(runs["paper"]), summary(runs["pinv"])
-    assert paper["arm_energy_j"]["right"]["gravity_final"] < pinv["arm_energy_j"]["right"][
-        "gravity_final"]  # fmt: skip
+    assert (
+        paper["arm_energy_j"]["right"]["gravity_final"]
+        < pinv["arm_energy_j"]["right"]["gravity_final"]
+    )
     assert paper["joint_travel_rad"]["waist"] < pinv["joint_travel_rad"]["waist"]
     # the arm angle stays in a human range where it is defined (paper: mostly 0-0.8 rad)
     assert paper["arm_angle_rad"]["right"]["min"] >= 0.0
@@ -66,8 +73,9 @@ def test_run_log_round_trip(runs, tmp_path):
     for name in ("t", "q", "u", "joint_positions", "step_time", "status", "level_residuals"):
         np.testing.assert_array_equal(getattr(back, name), getattr(log, name))
     np.testing.assert_array_equal(back.arms["right"].arm_angle, log.arms["right"].arm_angle)
-    np.testing.assert_array_equal(back.frame_positions["right_tool"],
-                                  log.frame_positions["right_tool"])  # fmt: skip
+    np.testing.assert_array_equal(
+        back.frame_positions["right_tool"], log.frame_positions["right_tool"]
+    )
     assert back.meta == log.meta
     assert summary(back) == summary(log)
     with np.load(path, allow_pickle=False) as z:  # no pickle in the file

@@ -412,7 +412,10 @@ def test_warm_start_changes_nothing_but_time(humanoid, rng, method):
     for _ in range(30):
         state = humanoid.update(q)
         a, b = warm.solve(stack, state, DT), cold.solve(stack, state, DT)
-        np.testing.assert_allclose(a.u, b.u, atol=1e-6)
+        # the same optimum: equal level residuals; u itself agrees to the engines' tolerance
+        # (a cascade fixes level 1 to its tolerance, which the lower level then exploits)
+        np.testing.assert_allclose(a.level_residuals, b.level_residuals, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(a.u, b.u, atol=1e-3)
         qps += any(r.qp for r in warm.levels)
         q = humanoid.integrate(q, a.u, DT)
     assert qps >= 5

@@ -109,8 +109,7 @@ def test_manipulability_gradient(humanoid, rng, frames):
 
 
 def test_kinematic_hessian_matches_finite_differences(humanoid, torso, rng):
-    for robot, frames in ((humanoid, ["left_tool", "right_wrist_centre"]),
-                          (torso, ["right_tool"])):  # fmt: skip
+    for robot, frames in ((humanoid, ["left_tool", "right_wrist_centre"]), (torso, ["right_tool"])):
         mask = actuated_support_mask(robot)
         q = robot.random_configuration(rng, margin=0.05)
         for name in frames:
@@ -155,9 +154,11 @@ def test_arm_angle_equal_for_mirrored_postures(humanoid, rng):
     # on the robot: the same joint values give mirror postures, hence equal arm angles
     names_l, names_r = humanoid.group("left_arm").joints, humanoid.group("right_arm").joints
     values = rng.uniform(-0.4, 0.4, 8) + np.array([0, 0.6, 0.3, 0, 1.0, 0, 0, 0])
-    q = humanoid.configuration({**dict(zip(names_l, values, strict=True)),
-                                **dict(zip(names_r, values, strict=True))})  # fmt: skip
+    q = humanoid.configuration(
+        {**dict(zip(names_l, values, strict=True)), **dict(zip(names_r, values, strict=True))}
+    )
     state = humanoid.update(q)
-    angles = [ArmPotentialEnergy(humanoid, a, 1.0).evaluate(state).arm_angle
-              for a in ("left", "right")]  # fmt: skip
+    angles = [
+        ArmPotentialEnergy(humanoid, a, 1.0).evaluate(state).arm_angle for a in ("left", "right")
+    ]
     assert angles[0] == pytest.approx(angles[1], abs=1e-12)

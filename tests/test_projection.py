@@ -38,9 +38,12 @@ def box(stack, state, dt=DT):
 
 
 def objectives(robot):
-    return [ArmPotentialEnergy(robot, "left", 0.3), ArmPotentialEnergy(robot, "right", 0.3),
-            JointLimitAvoidance(robot, weight=0.1),
-            Manipulability(robot, ["left_tool", "right_tool"], weight=-0.5)]  # fmt: skip
+    return [
+        ArmPotentialEnergy(robot, "left", 0.3),
+        ArmPotentialEnergy(robot, "right", 0.3),
+        JointLimitAvoidance(robot, weight=0.1),
+        Manipulability(robot, ["left_tool", "right_tool"], weight=-0.5),
+    ]
 
 
 @pytest.mark.parametrize("with_limits_term", [False, True])
@@ -49,11 +52,17 @@ def test_projection_is_the_papers_formula(humanoid, rng, with_limits_term):
     joint-limit term, whose curvature is known, the step is the semi-implicit
     -k grad / (1 + k dt h'') (see wholebody.solvers.stack)."""
     L, R = hands(humanoid)
-    objs = [o for o in objectives(humanoid)
-            if with_limits_term or not isinstance(o, JointLimitAvoidance)]  # fmt: skip
+    objs = [
+        o
+        for o in objectives(humanoid)
+        if with_limits_term or not isinstance(o, JointLimitAvoidance)
+    ]
     k = 0.05
-    stack = Stack(humanoid, [[L, R], Level(objs, gain=k)],
-                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [[L, R], Level(objs, gain=k)],
+        [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
+    )
     solver, checked = ProjectionSolver(), 0
     for _ in range(20):
         state = humanoid.update(humanoid.random_configuration(rng, margin=0.15))
@@ -65,8 +74,11 @@ def test_projection_is_the_papers_formula(humanoid, rng, with_limits_term):
         J = np.vstack([r.J for r in rows])
         v = np.concatenate([r.v for r in rows])
         grad = sum(o.weight * o.evaluate(state).gradient for o in objs)
-        curvature = sum(o.weight * o.evaluate(state).curvature for o in objs
-                        if isinstance(o, JointLimitAvoidance))  # fmt: skip
+        curvature = sum(
+            o.weight * o.evaluate(state).curvature
+            for o in objs
+            if isinstance(o, JointLimitAvoidance)
+        )
         Jp = np.linalg.pinv(J)
         step = grad / (1 + k * DT * curvature) if with_limits_term else grad
         paper = Jp @ v - k * (np.eye(humanoid.nu) - Jp @ J) @ step
@@ -89,8 +101,11 @@ def test_plain_pseudo_inverse_is_the_same_solver_without_objectives(humanoid, rn
 
 def test_box_is_never_violated_and_the_task_stays_exact_when_it_can(humanoid, rng):
     L, R = hands(humanoid, kp=30.0)
-    stack = Stack(humanoid, [[L, R], Level(objectives(humanoid), gain=1.0)],
-                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [[L, R], Level(objectives(humanoid), gain=1.0)],
+        [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
+    )
     solver = ProjectionSolver()
     counts = dict.fromkeys(SolverStatus, 0)
     exact_with_bounds = 0
@@ -161,15 +176,19 @@ def test_null_space_flow_lowers_the_energy_with_the_hands_held(humanoid):
     for t in (L, R):
         t.set_target(state.pose(t.frame))
     energy = [ArmPotentialEnergy(robot, "left", 0.1), ArmPotentialEnergy(robot, "right", 0.1)]
-    stack = Stack(robot, [[L, R], Level(energy, gain=0.2)],
-                  [JointPositionLimits(robot), VelocityLimits(robot)])  # fmt: skip
+    stack = Stack(
+        robot,
+        [[L, R], Level(energy, gain=0.2)],
+        [JointPositionLimits(robot), VelocityLimits(robot)],
+    )
     solver, dt = ProjectionSolver(), 0.002
     values, drift = [], 0.0
     for _ in range(400):
         state = robot.update(q)
         values.append(sum(e.evaluate(state).value for e in energy))
-        drift = max(drift, *(np.linalg.norm(state.position(t.frame) - start[t.name])
-                             for t in (L, R)))  # fmt: skip
+        drift = max(
+            drift, *(np.linalg.norm(state.position(t.frame) - start[t.name]) for t in (L, R))
+        )
         q = robot.integrate(q, solver.solve(stack, state, dt).u, dt)
     steps = np.diff(values)
     assert np.all(steps < 0), f"energy rose at steps {np.flatnonzero(steps >= 0)}"

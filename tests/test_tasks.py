@@ -63,8 +63,9 @@ def _rot(w):
 @pytest.mark.parametrize("frame", ["left_tool", "right_tool", "right_elbow_centre"])
 @pytest.mark.parametrize("mask", ["pose", "position", "orientation"])
 def test_frame_task_jacobian_is_the_exact_error_rate(humanoid, rng, frame, mask):
-    task = FrameTask(humanoid, frame, kp=0.0, position=mask != "orientation",
-                     orientation=mask != "position")  # fmt: skip
+    task = FrameTask(
+        humanoid, frame, kp=0.0, position=mask != "orientation", orientation=mask != "position"
+    )
     assert task.dim == (6 if mask == "pose" else 3)
     for q in configurations(humanoid, rng):
         # orientation errors up to 2.5 rad exercise the full log3 Jacobian
@@ -107,8 +108,9 @@ def test_frame_task_paper_law_and_feedforward(humanoid, rng):
     rows = task.compute(state)
     e = np.array([0.01, -0.02, 0.03, 0, 0, 0])
     np.testing.assert_allclose(rows.J, state.jacobian(task.frame), atol=1e-12)
-    np.testing.assert_allclose(rows.v, twist + np.arange(1, 7) * e + 0.5 * task.integral,
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        rows.v, twist + np.arange(1, 7) * e + 0.5 * task.integral, atol=1e-12
+    )
 
 
 def test_integral_anti_windup(humanoid):

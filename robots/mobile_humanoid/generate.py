@@ -97,8 +97,15 @@ ARM_JOINTS = (  # Table 1 joints 4-11 (left) and 12-19 (right), prefixed by the 
     "wrist_rotation",  # about the hand's long axis
 )
 ARM_LINKS = (
-    "clavicle", "shoulder_1", "shoulder_2", "upper_arm", "elbow", "forearm", "wrist", "hand"
-)  # fmt: skip
+    "clavicle",
+    "shoulder_1",
+    "shoulder_2",
+    "upper_arm",
+    "elbow",
+    "forearm",
+    "wrist",
+    "hand",
+)
 
 # Human-like ranges of motion (rad) in the conventions above: typical adult active ranges
 # (AAOS; Norkin & White) trimmed for a robot: trunk flexion and extension 30 deg (symmetric,
@@ -197,8 +204,11 @@ def base_and_wheels() -> tuple[list[Link], list[Joint]]:
     side = WHEEL_MASS * (3 * WHEEL_RADIUS**2 + WHEEL_WIDTH**2) / 12
     wheel_inertia = np.diag([side, WHEEL_MASS * WHEEL_RADIUS**2 / 2, side])
     for name, sx, sy in (
-        ("front_left", 1, 1), ("front_right", 1, -1), ("rear_left", -1, 1), ("rear_right", -1, -1)
-    ):  # fmt: skip
+        ("front_left", 1, 1),
+        ("front_right", 1, -1),
+        ("rear_left", -1, 1),
+        ("rear_right", -1, -1),
+    ):
         links.append(
             Link(
                 f"wheel_{name}_link",

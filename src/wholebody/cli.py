@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
-from wholebody.errors import WholebodyError
+from wholebody.errors import ConfigError, WholebodyError
 
 __all__ = ["main"]
 
@@ -21,10 +23,103 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from wholebody.robot import load_robot
+def _scenario_path(name: str) -> Path:
+    """A scenario file path, or the name of a bundled one (``coordinated_carry``)."""
+    from wholebody.resources import tasks_dir
 
-    print(load_robot("mobile_humanoid").summary())
+    path = Path(name)
+    if path.is_file():
+        return path
+    bundled = tasks_dir() / (name if name.endswith(".toml") else f"{name}.toml")
+    if bundled.is_file():
+        return bundled
+    names = sorted(p.stem for p in tasks_dir().glob("*.toml"))
+    raise ConfigError(f"no scenario {name!r}: expected a file or one of {', '.join(names)}")
+
+
+def _display_available() -> bool:
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) -> int:
+    from wholebody.scenarios import load_scenario, run_scenario
+    from wholebody.scenarios.outputs import write_run
+
+    spec = load_scenario(path)
+    scene = live = None
+    if viz:
+        from wholebody.scenarios.visual import LiveView, draw_objects
+        from wholebody.viz.scene import Scene
+
+        scene = Scene(load_robot_for(spec))
+        print(f"MeshCat (localhost only): {scene.url}")
+        draw_objects(scene, spec)
+        scene.show(scene.robot.neutral())
+        live = LiveView(scene, spec.dt)
+    run = run_scenario(spec, backend=backend, progress=True, on_step=live)
+    files = write_run(run, out)
+    m = run.metrics
+    print(
+        f"{spec.name} [{run.backend}]: {len(run.log)} steps in {run.wall_time:.1f} s; "
+        f"control step {m['step_time_us']['median']:.0f} us median "
+        f"({m['frequency_hz']:.0f} Hz); limit violations {m['limit_violations']}, "
+        f"solver failures {m['solver_failures']}"
+    )
+    for phase, entry in m["phases"].items():
+        worst = max((v for hand in entry["mae_m"].values() for v in hand.values()), default=0.0)
+        chain = entry.get("closed_chain_error_max_m")
+        extra = f", closed chain <= {chain * 1e3:.3f} mm" if chain is not None else ""
+        print(f"  {phase:16s} worst hand MAE {worst * 1e3:.3f} mm{extra}")
+    for name, f in files.items():
+        print(f"  {name:17s} {f}")
+    if scene is not None:
+        from wholebody.scenarios.visual import show_run
+
+        show_run(scene, run)
+        print(f"replay: the run is loaded as an animation at {scene.url}")
+        if hold:
+            input("press Enter to close the viewer ")
+        scene.close()
+    return 0
+
+
+def load_robot_for(spec):
+    from wholebody.scenarios.runner import _robot
+
+    return _robot(spec)
+
+
+def _run(args: argparse.Namespace) -> int:
+    path = _scenario_path(args.scenario)
+    out = Path(args.out) if args.out else Path("runs") / path.stem
+    return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty())
+
+
+def _demo(args: argparse.Namespace) -> int:
+    viz = args.viz or _display_available()
+    if not viz:
+        print("no display: running the demo headless (use --viz for the MeshCat viewer)")
+    out = Path(args.out) if args.out else Path("runs") / "demo"
+    return _run_one(
+        _scenario_path("coordinated_carry"), None, viz, out, hold=viz and sys.stdin.isatty()
+    )
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from wholebody.scenarios import load_scenario, run_scenario
+    from wholebody.scenarios.outputs import comparison, comparison_markdown, write_comparison
+
+    path = _scenario_path(args.scenario)
+    spec = load_scenario(path)
+    out = Path(args.out) if args.out else Path("runs") / f"{path.stem}_comparison"
+    runs = []
+    for backend in args.backends:
+        print(f"running {spec.name} with {backend} ...")
+        runs.append(run_scenario(spec, backend=backend, progress=True))
+    files = write_comparison(runs, out)
+    print(comparison_markdown(comparison(runs), spec.title or spec.name))
+    for name, f in files.items():
+        print(f"  {name:9s} {f}")
     return 0
 
 
@@ -38,8 +133,41 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("robot", nargs="?", default="mobile_humanoid")
     info.add_argument("--list", action="store_true", help="list the bundled robots")
     info.set_defaults(func=_info)
-    demo = sub.add_parser("demo", help="run the demo scenario")
+    run = sub.add_parser("run", help="run a scenario file (or a bundled scenario's name)")
+    run.add_argument("scenario")
+    run.add_argument(
+        "--backend",
+        choices=("projection", "pinv", "hqp"),
+        default=None,
+        help="override the scenario's backend",
+    )
+    run.add_argument("--viz", action="store_true", help="live MeshCat view and replay")
+    run.add_argument("--out", default=None, help="output directory (default runs/NAME)")
+    run.set_defaults(func=_run)
+    compare = sub.add_parser(
+        "compare",
+        help="the paper's Table 2 for a scenario: pseudo-inverse vs projection vs hierarchical QP",
+    )
+    compare.add_argument("scenario")
+    compare.add_argument("--out", default=None, help="output directory")
+    compare.add_argument(
+        "--backends",
+        nargs="+",
+        default=["pinv", "projection", "hqp"],
+        choices=("projection", "pinv", "hqp"),
+    )
+    compare.set_defaults(func=_compare)
+    demo = sub.add_parser(
+        "demo",
+        help="the coordinated dual-arm carry: live in MeshCat with "
+        "--viz or a display, headless otherwise",
+    )
+    demo.add_argument("--viz", action="store_true")
+    demo.add_argument("--out", default=None, help="output directory (default runs/demo)")
     demo.set_defaults(func=_demo)
+    from wholebody.humanlike.cli import add_stiffness_parser
+
+    add_stiffness_parser(sub)
     return parser
 
 

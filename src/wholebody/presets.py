@@ -29,7 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wholebody.humanlike.network import default_stiffness as network_stiffness
 from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.resources import robots_dir
 from wholebody.robot import Robot
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import (
@@ -58,16 +60,10 @@ class PaperWeights:
 
 
 def default_stiffness(robot: Robot) -> StiffnessModel:
-    """The robot's learned stiffness model if it ships one, else a constant 0.1 N m/rad."""
-    from wholebody.resources import robots_dir
-
-    path = robots_dir() / robot.name / "stiffness.npz"
-    if path.is_file():
-        try:
-            from wholebody.humanlike.network import NetworkStiffness
-        except ImportError:  # pragma: no cover - the network module arrives with issue 6
-            return ConstantStiffness(0.1)
-        return NetworkStiffness.load(path)
+    """The robot's learned stiffness network if it ships one (``robots/<name>/stiffness.npz``,
+    see :func:`wholebody.humanlike.default_stiffness`), else a constant 0.1 N m/rad."""
+    if (robots_dir() / robot.name / "stiffness.npz").is_file():
+        return network_stiffness(robot)
     return ConstantStiffness(0.1)
 
 
@@ -91,14 +87,23 @@ def paper_objectives(
     arm_groups = [a.group.name for a in robot.arms.values() if a.group is not None]
     others = [g for g in robot.groups if g not in arm_groups and _limited(robot, g)]
     if arm_groups:
-        objectives.append(JointLimitAvoidance(robot, arm_groups, weight=weights.limits_arms,
-                                              name="joint_limits_arms"))  # fmt: skip
+        objectives.append(
+            JointLimitAvoidance(
+                robot, arm_groups, weight=weights.limits_arms, name="joint_limits_arms"
+            )
+        )
     if others:
-        objectives.append(JointLimitAvoidance(robot, others, weight=weights.limits_waist,
-                                              name="joint_limits_body"))  # fmt: skip
+        objectives.append(
+            JointLimitAvoidance(
+                robot, others, weight=weights.limits_waist, name="joint_limits_body"
+            )
+        )
     if weights.manipulability:
-        objectives.append(Manipulability(robot, [a.tool for a in robot.arms.values()],
-                                         weight=-weights.manipulability))  # fmt: skip
+        objectives.append(
+            Manipulability(
+                robot, [a.tool for a in robot.arms.values()], weight=-weights.manipulability
+            )
+        )
     return objectives
 
 
@@ -115,14 +120,28 @@ def paper_stack(
     objectives: bool = True,
     weights: PaperWeights = PaperWeights(),
     stiffness: float | StiffnessModel | None = None,
-    extra_levels: Sequence[Level] = (),
+    first: Sequence[Task] = (),
 ) -> Stack:
     """The paper's stack: ``tasks`` on top, then ``H`` (omitted with ``objectives=False``:
-    the plain pseudo-inverse baseline), joint position and velocity limits, the metric."""
-    levels: list[Level] = [Level(tuple(tasks), name="tasks")]
+    the plain pseudo-inverse baseline), joint position and velocity limits, the metric.
+
+    ``first`` puts tasks in a level above ``tasks``: for a carried object, the closed chain
+    (the hands' relative pose) above the hands' absolute poses, the usual cooperative
+    task-space priority. The relative rows are then met exactly and the hands'
+    rows, redundant with them, in the least-squares sense below."""
+    levels: list[Level] = [Level(tuple(first), name="closed chain")] if first else []
+    levels.append(Level(tuple(tasks), name="tasks"))
     if objectives:
-        levels.append(Level(tuple(paper_objectives(robot, weights, stiffness)),
-                            gain=weights.gain, name="objectives"))  # fmt: skip
-    levels += list(extra_levels)
-    return Stack(robot, levels, [JointPositionLimits(robot), VelocityLimits(robot)],
-                 metric=paper_metric(robot, weights))  # fmt: skip
+        levels.append(
+            Level(
+                tuple(paper_objectives(robot, weights, stiffness)),
+                gain=weights.gain,
+                name="objectives",
+            )
+        )
+    return Stack(
+        robot,
+        levels,
+        [JointPositionLimits(robot), VelocityLimits(robot)],
+        metric=paper_metric(robot, weights),
+    )

@@ -78,8 +78,9 @@ class Controller:
         stacked = set(map(id, stack.tasks))
         for task in self.references:
             if id(task) not in stacked:
-                raise WholebodyError(f"reference given for task {task.name!r}, which is not in "
-                                     "the stack")  # fmt: skip
+                raise WholebodyError(
+                    f"reference given for task {task.name!r}, which is not in the stack"
+                )
         self.monitors = list(monitors)
         self.feedforward = feedforward
 
@@ -147,8 +148,14 @@ class Controller:
 class _Recorder:
     """Preallocated log arrays filled step by step."""
 
-    def __init__(self, robot: Robot, stack: Stack, monitors: Sequence[ArmPotentialEnergy],
-                 tracked: list[FrameTask], n: int) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        stack: Stack,
+        monitors: Sequence[ArmPotentialEnergy],
+        tracked: list[FrameTask],
+        n: int,
+    ) -> None:
         self.robot, self.monitors, self.tracked = robot, monitors, tracked
         self.tasks: list[Task] = stack.tasks
         self.t = np.zeros(n)
@@ -178,22 +185,35 @@ class _Recorder:
             self.errors[task.name][k] = task.error(state)
         for task in self.tracked:
             self.pos[task.name][k] = state.position(task.frame)
-            self.ref[task.name][k] = (task.target[:3, 3] if task.target is not None
-                                      else np.nan)  # fmt: skip
+            self.ref[task.name][k] = task.target[:3, 3] if task.target is not None else np.nan
         for m in self.monitors:
             v = m.evaluate(state)
-            self.arms[m.arm.name][k] = (v.value, v.gravity, v.spring, v.arm_angle, v.stiffness,
-                                        v.rho)  # fmt: skip
+            self.arms[m.arm.name][k] = (
+                v.value,
+                v.gravity,
+                v.spring,
+                v.arm_angle,
+                v.stiffness,
+                v.rho,
+            )
 
     def finish(self, meta: dict) -> RunLog:
         return RunLog(
-            t=self.t, q=self.q, u=self.u, joint_positions=self.jp, step_time=self.step_time,
-            solve_time=self.solve_time, status=self.status, limit_hit=self.limit_hit,
-            level_residuals=self.level_res, task_errors=self.errors, frame_positions=self.pos,
+            t=self.t,
+            q=self.q,
+            u=self.u,
+            joint_positions=self.jp,
+            step_time=self.step_time,
+            solve_time=self.solve_time,
+            status=self.status,
+            limit_hit=self.limit_hit,
+            level_residuals=self.level_res,
+            task_errors=self.errors,
+            frame_positions=self.pos,
             reference_positions=self.ref,
             arms={a: ArmTrace(*v.T.copy()) for a, v in self.arms.items()},
             meta=meta,
-        )  # fmt: skip
+        )
 
 
 def _progress(n: int, enabled: bool):

@@ -21,7 +21,7 @@ import numpy as np
 
 from wholebody.errors import DataError
 
-__all__ = ["ArmTrace", "RunLog"]
+__all__ = ["ArmTrace", "RunLog", "concatenate"]
 
 ARM_FIELDS = ("energy", "gravity", "spring", "arm_angle", "stiffness", "rho")
 
@@ -70,8 +70,10 @@ class RunLog:
         try:
             return np.asarray(self.meta["groups"][group], dtype=int)
         except KeyError:
-            raise DataError(f"run log has no joint group {group!r}; it has "
-                            f"{sorted(self.meta.get('groups', {}))}") from None  # fmt: skip
+            raise DataError(
+                f"run log has no joint group {group!r}; it has "
+                f"{sorted(self.meta.get('groups', {}))}"
+            ) from None
 
     def phase_mask(self, phase: str) -> np.ndarray:
         """Boolean mask of the steps inside a named phase (``meta['phases']``)."""
@@ -86,13 +88,21 @@ class RunLog:
         """Write the log as a compressed ``.npz`` (no pickle)."""
         path = Path(path)
         arrays: dict[str, np.ndarray] = {
-            "t": self.t, "q": self.q, "u": self.u, "joint_positions": self.joint_positions,
-            "step_time": self.step_time, "solve_time": self.solve_time, "status": self.status,
-            "limit_hit": self.limit_hit, "level_residuals": self.level_residuals,
-        }  # fmt: skip
-        for prefix, table in (("task_error", self.task_errors),
-                              ("frame_position", self.frame_positions),
-                              ("reference_position", self.reference_positions)):  # fmt: skip
+            "t": self.t,
+            "q": self.q,
+            "u": self.u,
+            "joint_positions": self.joint_positions,
+            "step_time": self.step_time,
+            "solve_time": self.solve_time,
+            "status": self.status,
+            "limit_hit": self.limit_hit,
+            "level_residuals": self.level_residuals,
+        }
+        for prefix, table in (
+            ("task_error", self.task_errors),
+            ("frame_position", self.frame_positions),
+            ("reference_position", self.reference_positions),
+        ):
             for name, value in table.items():
                 arrays[f"{prefix}/{name}"] = value
         for arm, trace in self.arms.items():
@@ -113,14 +123,26 @@ class RunLog:
                 data = {k: z[k] for k in z.files}
         except (OSError, ValueError) as exc:
             raise DataError(f"{path}: not a run log (.npz): {exc}") from exc
-        required = ("t", "q", "u", "joint_positions", "step_time", "solve_time", "status",
-                    "limit_hit", "level_residuals", "meta")  # fmt: skip
+        required = (
+            "t",
+            "q",
+            "u",
+            "joint_positions",
+            "step_time",
+            "solve_time",
+            "status",
+            "limit_hit",
+            "level_residuals",
+            "meta",
+        )
         missing = [k for k in required if k not in data]
         if missing:
             raise DataError(f"{path}: run log lacks {missing}")
         tables: dict[str, dict[str, np.ndarray]] = {
-            "task_error": {}, "frame_position": {}, "reference_position": {}
-        }  # fmt: skip
+            "task_error": {},
+            "frame_position": {},
+            "reference_position": {},
+        }
         arms: dict[str, dict[str, np.ndarray]] = {}
         for key, value in data.items():
             head, _, rest = key.partition("/")
@@ -137,3 +159,69 @@ class RunLog:
             arms={a: ArmTrace(**{f: v[f] for f in ARM_FIELDS}) for a, v in arms.items()},
             meta=json.loads(str(data["meta"])),
         )
+
+
+def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
+    """One log from consecutive runs (e.g. the phases of a scenario), times shifted to run on.
+
+    Tasks, tracked frames or arms present in only some of the runs are padded with NaN where
+    absent; level residuals are padded to the largest number of levels.
+    """
+    if not logs:
+        raise DataError("nothing to concatenate")
+    t, offset = [], 0.0
+    for log in logs:
+        t.append(log.t + offset)
+        offset += len(log) * log.dt
+    width = max(log.level_residuals.shape[1] for log in logs)
+
+    def pad_levels(a: np.ndarray) -> np.ndarray:
+        out = np.full((a.shape[0], width), np.nan)
+        out[:, : a.shape[1]] = a
+        return out
+
+    def merge(tables: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        keys: dict[str, int] = {}
+        for tab in tables:
+            for k, v in tab.items():
+                keys.setdefault(k, v.shape[1] if v.ndim > 1 else 0)
+        out = {}
+        for k, cols in keys.items():
+            parts = []
+            for log, tab in zip(logs, tables, strict=True):
+                shape = (len(log), cols) if cols else (len(log),)
+                parts.append(tab.get(k, np.full(shape, np.nan)))
+            out[k] = np.concatenate(parts)
+        return out
+
+    arms = {}
+    for arm in {a for log in logs for a in log.arms}:
+        arms[arm] = ArmTrace(
+            **{
+                f: np.concatenate(
+                    [
+                        getattr(log.arms[arm], f) if arm in log.arms else np.full(len(log), np.nan)
+                        for log in logs
+                    ]
+                )
+                for f in ARM_FIELDS
+            }
+        )
+    base = dict(logs[-1].meta)
+    base.update(meta or {})
+    return RunLog(
+        t=np.concatenate(t),
+        q=np.concatenate([log.q for log in logs]),
+        u=np.concatenate([log.u for log in logs]),
+        joint_positions=np.concatenate([log.joint_positions for log in logs]),
+        step_time=np.concatenate([log.step_time for log in logs]),
+        solve_time=np.concatenate([log.solve_time for log in logs]),
+        status=np.concatenate([log.status for log in logs]),
+        limit_hit=np.concatenate([log.limit_hit for log in logs]),
+        level_residuals=np.concatenate([pad_levels(log.level_residuals) for log in logs]),
+        task_errors=merge([log.task_errors for log in logs]),
+        frame_positions=merge([log.frame_positions for log in logs]),
+        reference_positions=merge([log.reference_positions for log in logs]),
+        arms=arms,
+        meta=base,
+    )

@@ -38,18 +38,22 @@ class Tracking:
 def tracking(log: RunLog, task: str, mask: np.ndarray | None = None) -> Tracking:
     """Position tracking of a frame task against its reference over the masked steps."""
     if task not in log.frame_positions:
-        raise DataError(f"run log has no tracked frame task {task!r}; it has "
-                        f"{sorted(log.frame_positions)}")  # fmt: skip
+        raise DataError(
+            f"run log has no tracked frame task {task!r}; it has {sorted(log.frame_positions)}"
+        )
     err = log.frame_positions[task] - log.reference_positions[task]
     if mask is not None:
         err = err[mask]
+    err = err[~np.isnan(err).any(axis=1)]  # steps where the task was not in the stack
     if err.size == 0:
         raise DataError(f"no steps selected for {task!r}")
     mse = np.mean(err**2, axis=0)
     mae = np.mean(np.abs(err), axis=0)
-    return Tracking(dict(zip(AXES, map(float, mse), strict=True)),
-                    dict(zip(AXES, map(float, mae), strict=True)),
-                    float(np.max(np.linalg.norm(err, axis=1))))  # fmt: skip
+    return Tracking(
+        dict(zip(AXES, map(float, mse), strict=True)),
+        dict(zip(AXES, map(float, mae), strict=True)),
+        float(np.max(np.linalg.norm(err, axis=1))),
+    )
 
 
 def limit_violations(log: RunLog, tolerance: float = 1e-9) -> int:
@@ -67,6 +71,7 @@ def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -
     e = log.task_errors[task][:, :3]
     if mask is not None:
         e = e[mask]
+    e = e[~np.isnan(e).any(axis=1)]
     return float(np.max(np.linalg.norm(e, axis=1))) if e.size else 0.0
 
 
@@ -100,6 +105,8 @@ def summary(log: RunLog) -> dict:
         out["mae_m"][task] = tr.mae_m
         out["max_tracking_error_m"][task] = tr.max_m
     for arm, trace in log.arms.items():
+        if np.isnan(trace.energy).all():
+            continue
         out["arm_energy_j"][arm] = {
             "initial": float(trace.energy[0]),
             "final": float(trace.energy[-1]),

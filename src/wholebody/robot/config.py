@@ -35,18 +35,14 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 from wholebody.errors import ConfigError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from wholebody.tomlreader import TomlReader as _Reader
+from wholebody.tomlreader import load_toml
 
 __all__ = ["ArmConfig", "BaseConfig", "RobotConfig", "read_robot_config"]
 
@@ -103,95 +99,6 @@ class RobotConfig:
         return ConfigError(f"{self.path}: [{key}] {message}")
 
 
-class _Reader:
-    """Typed access to a TOML table with errors that name the file and the key."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.path}: [{key}] {message}")
-
-    def table(self, data: Mapping[str, Any], key: str, where: str, required: bool) -> dict:
-        full = f"{where}.{key}" if where else key
-        if key not in data:
-            if required:
-                raise self.fail(full, "missing table: expected a TOML table here")
-            return {}
-        value = data[key]
-        if not isinstance(value, dict):
-            raise self.fail(full, f"expected a table, got {type(value).__name__}")
-        return value
-
-    def only(self, data: Mapping[str, Any], where: str, allowed: tuple[str, ...]) -> None:
-        unknown = sorted(set(data) - set(allowed))
-        if unknown:
-            raise self.fail(
-                f"{where}.{unknown[0]}" if where else unknown[0],
-                f"unknown key; expected one of: {', '.join(allowed)}",
-            )
-
-    def string(
-        self,
-        data: Mapping[str, Any],
-        key: str,
-        where: str,
-        default: str | None = None,
-        choices: tuple[str, ...] | None = None,
-    ) -> str:
-        full = f"{where}.{key}"
-        if key not in data:
-            if default is None:
-                raise self.fail(full, "missing key: expected a string")
-            return default
-        value = data[key]
-        if not isinstance(value, str) or not value:
-            raise self.fail(full, f"expected a non-empty string, got {value!r}")
-        if choices is not None and value not in choices:
-            raise self.fail(full, f"got {value!r}; expected one of: {', '.join(choices)}")
-        return value
-
-    def number(
-        self,
-        data: Mapping[str, Any],
-        key: str,
-        where: str,
-        default: float | None = None,
-        positive: bool = False,
-    ) -> float:
-        full = f"{where}.{key}"
-        if key not in data:
-            if default is None:
-                raise self.fail(
-                    full, "missing key: expected a number" + (" > 0" if positive else "")
-                )
-            return default
-        value = data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(full, f"expected a number, got {value!r}")
-        if value != value or value in (float("inf"), float("-inf")):
-            raise self.fail(full, f"expected a finite number, got {value!r}")
-        if positive and value <= 0:
-            raise self.fail(full, f"expected a number > 0, got {value!r}")
-        return float(value)
-
-    def names(
-        self, data: Mapping[str, Any], key: str, where: str, count: int | None = None
-    ) -> tuple[str, ...]:
-        full = f"{where}.{key}" if where else key
-        if key not in data:
-            raise self.fail(full, "missing key: expected a list of joint names")
-        value = data[key]
-        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
-            raise self.fail(full, f"expected a list of non-empty strings, got {value!r}")
-        if count is not None and len(value) != count:
-            raise self.fail(full, f"expected exactly {count} names, got {len(value)}")
-        duplicates = sorted({v for v in value if value.count(v) > 1})
-        if duplicates:
-            raise self.fail(full, f"names listed twice: {', '.join(duplicates)}")
-        return tuple(value)
-
-
 def read_robot_config(path: str | Path) -> RobotConfig:
     """Read and schema-check a ``robot.toml``.
 
@@ -203,14 +110,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     """
     path = Path(path)
     r = _Reader(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read robot configuration ({exc.strerror})") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from exc
+    data = load_toml(path, "robot configuration")
 
     r.only(data, "", ("robot", "base", "groups", "arms", "home"))
     robot = r.table(data, "robot", "", required=True)

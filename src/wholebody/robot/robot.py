@@ -23,7 +23,7 @@ from __future__ import annotations
 import difflib
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +39,7 @@ __all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 WORLD = pin.ReferenceFrame.WORLD
 WHEEL_PLACEMENT_TOLERANCE = 1e-3  # m, between robot.toml's base geometry and the URDF
+_FLOAT = np.dtype(float)
 
 
 @dataclass(frozen=True)
@@ -163,6 +164,7 @@ class Robot:
         self.actuated_joints: tuple[str, ...] = tuple(names)
         self.nu = len(names)
         self.nq, self.nv = model.nq, model.nv
+        self._q_shape = (model.nq,)
         A = np.zeros((model.nv, self.nu))
         lower = np.full(self.nu, -np.inf)
         upper = np.full(self.nu, np.inf)
@@ -454,7 +456,15 @@ class Robot:
     def update(self, q: np.ndarray) -> RobotState:
         """Forward kinematics and all joint Jacobians at ``q``; a view valid until the next
         call."""
-        q = self.check_configuration(q)
+        # Fast acceptance of the common case (a finite float vector of the right shape; a NaN
+        # or inf makes q.q non-finite, an overflow of q.q only sends q to the full check).
+        if not (
+            q.__class__ is np.ndarray
+            and q.dtype == _FLOAT
+            and q.shape == self._q_shape
+            and math.isfinite(q @ q)
+        ):
+            q = self.check_configuration(q)
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
         self._version += 1
@@ -515,8 +525,14 @@ class RobotState:
     """Kinematics of a robot at one configuration (a view of the robot's Pinocchio data).
 
     Returned by :meth:`Robot.update`. Jacobians are computed once per frame and cached;
-    the arrays returned are read-only views of that cache. The view is invalidated by the
+    the arrays returned are read-only views of that cache (fresh arrays per state: a
+    Jacobian read from an older state keeps its values). The view is invalidated by the
     next :meth:`Robot.update`; using it afterwards raises :class:`WholebodyError`.
+
+    :meth:`prefetch` (or :meth:`jacobians`) computes the Jacobians of many frames at once,
+    with one product with the actuation matrix instead of one per frame; a
+    :class:`~wholebody.solvers.Stack` prefetches the frames its entries declare before
+    evaluating them.
     """
 
     __slots__ = ("_cache", "_version", "q", "robot")
@@ -552,6 +568,13 @@ class RobotState:
         """3x3 world orientation of the frame."""
         return self._data().oMf[frame.index].rotation.copy()
 
+    def rotation_translation(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's world rotation (3x3) and position (3,) **without a copy**: views of the
+        robot's data, overwritten by the next :meth:`Robot.update`; read, never write, them
+        (for the control loop; :meth:`rotation` and :meth:`position` return copies)."""
+        M = self._data().oMf[frame.index]
+        return M.rotation, M.translation
+
     def jacobian(self, frame: Frame) -> np.ndarray:
         """6 x nu Jacobian (world-aligned axes at the frame origin, linear rows first)."""
         J = self._cache.get(frame.index)
@@ -562,6 +585,45 @@ class RobotState:
             J.setflags(write=False)
             self._cache[frame.index] = J
         return J
+
+    def prefetch(self, frames: Sequence[Frame]) -> None:
+        """Compute and cache the Jacobians of ``frames`` not cached yet, in one batch.
+
+        The same numbers as :meth:`jacobian` frame by frame: Pinocchio's frame Jacobians
+        stacked into one (6F x nv) array and multiplied by the actuation matrix once.
+        """
+        cache = self._cache
+        missing = [f.index for f in frames if f.index not in cache]
+        if not missing:
+            return
+        robot = self.robot
+        model, data = robot.model, self._data()
+        if len(missing) == 1:
+            J = pin.getFrameJacobian(model, data, missing[0], LWA) @ robot.actuation
+            J.setflags(write=False)
+            cache[missing[0]] = J
+            return
+        get = pin.getFrameJacobian
+        Jm = np.concatenate([get(model, data, i, LWA) for i in missing])
+        J = (Jm @ robot.actuation).reshape(len(missing), 6, robot.nu)
+        J.setflags(write=False)
+        for k, i in enumerate(missing):
+            cache.setdefault(i, J[k])
+
+    def jacobians(self, frames: Sequence[Frame]) -> np.ndarray:
+        """(F, 6, nu) Jacobians of ``frames`` stacked (see :meth:`jacobian`), read-only.
+
+        Cached per tuple of frames; the frames not cached yet are computed in one batch.
+        """
+        key = ("stack", *(f.index for f in frames))
+        block = self._cache.get(key)
+        if block is None:
+            self.prefetch(frames)
+            cache = self._cache
+            block = np.stack([cache[f.index] for f in frames])
+            block.setflags(write=False)
+            cache[key] = block
+        return block
 
     def world_jacobian(self, frame: Frame) -> np.ndarray:
         """6 x nv model Jacobian in Pinocchio's ``WORLD`` convention (spatial velocity at

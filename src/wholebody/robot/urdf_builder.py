@@ -80,11 +80,24 @@ def mdh(alpha: float, a: float, d: float, theta: float) -> np.ndarray:
 
 
 def rpy_from_matrix(R: np.ndarray) -> tuple[float, float, float]:
-    """URDF roll, pitch, yaw of a rotation matrix (``R = Rz(yaw) Ry(pitch) Rx(roll)``)."""
+    """URDF roll, pitch, yaw of a rotation matrix (``R = Rz(yaw) Ry(pitch) Rx(roll)``).
+
+    Entries below 1e-15 are set to +0 first, so that a half turn is always +pi (``atan2``
+    turns the sign of a zero produced by rounding into the sign of pi)."""
+    R = np.where(np.abs(R) < 1e-15, 0.0, R)
     pitch = math.atan2(-R[2, 0], math.hypot(R[0, 0], R[1, 0]))
     if abs(math.cos(pitch)) < 1e-9:  # gimbal lock: put the whole turn in yaw
-        return 0.0, pitch, math.atan2(-R[0, 1], R[1, 1])
-    return math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])
+        angles = (0.0, pitch, math.atan2(-R[0, 1], R[1, 1]))
+    else:
+        angles = (math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0]))
+    return tuple(_snap_quarter_turn(a) for a in angles)
+
+
+def _snap_quarter_turn(angle: float) -> float:
+    """``angle`` made an exact multiple of pi/2 when it is one to 1e-12 rad, so the generated
+    file does not depend on the last bit of the platform's trigonometry."""
+    k = round(angle / (math.pi / 2))
+    return k * (math.pi / 2) if abs(angle - k * (math.pi / 2)) < 1e-12 else angle
 
 
 def frame_with_z(direction: np.ndarray) -> np.ndarray:
@@ -165,9 +178,15 @@ class Inertial:
     def xml(self) -> str:
         terms = " ".join(
             f'{key}="{_fmt((self.inertia[i, j],))}"'
-            for key, i, j in (("ixx", 0, 0), ("ixy", 0, 1), ("ixz", 0, 2), ("iyy", 1, 1),
-                              ("iyz", 1, 2), ("izz", 2, 2))
-        )  # fmt: skip
+            for key, i, j in (
+                ("ixx", 0, 0),
+                ("ixy", 0, 1),
+                ("ixz", 0, 2),
+                ("iyy", 1, 1),
+                ("iyz", 1, 2),
+                ("izz", 2, 2),
+            )
+        )
         return (
             f'    <inertial><origin xyz="{_fmt(self.com)}" rpy="0 0 0"/>'
             f'<mass value="{_fmt((self.mass,))}"/><inertia {terms}/></inertial>\n'

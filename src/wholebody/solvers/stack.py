@@ -20,6 +20,11 @@ least-squares and minimum-norm choice is made in ``||u||_W``, e.g. cheap wheels 
 move more. Internally solvers work in ``u~ = W^(1/2) u``; :meth:`Stack.evaluate` returns the
 rows already in those coordinates (:class:`StackProblem`) and ``u = D u~`` with
 ``D = W^(-1/2)``.
+
+Evaluation cost: the stack computes the Jacobians of every frame its entries declare
+(``jacobian_frames()``) in one batch, lets each task write its rows straight into the level's
+buffer (:meth:`~wholebody.tasks.Task.write_rows`) and scales them in one product with a cached
+factor ``sqrt(w_i) D_j``, rebuilt only when a weight or the metric changes.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wholebody.errors import DimensionError, WholebodyError
-from wholebody.robot import Robot, RobotState
+from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
 __all__ = ["Level", "LevelProblem", "Stack", "StackProblem"]
@@ -144,22 +149,33 @@ class Stack:
                 level.name = f"level {i}"
             self.levels.append(level)
         self.constraints = list(constraints)
-        nu = robot.nu
-        if metric is None:
-            self.metric = np.ones(nu)
-        else:
-            self.metric = np.asarray(metric, dtype=float)
-            if (
-                self.metric.shape != (nu,)
-                or not np.all(np.isfinite(self.metric))
-                or np.any(self.metric <= 0)
-            ):
-                raise DimensionError(
-                    f"stack metric must be {nu} finite positive weights, got {metric!r}"
-                )
-        self.scale = 1.0 / np.sqrt(self.metric)
+        self._scale_version = 0
+        self.metric = np.ones(robot.nu) if metric is None else metric
         self._check_entries()
         self._allocate()
+
+    @property
+    def metric(self) -> np.ndarray:
+        """The metric ``W`` (read-only; assign a new one to change it)."""
+        return self._metric
+
+    @metric.setter
+    def metric(self, value: np.ndarray | Sequence[float]) -> None:
+        nu = self.robot.nu
+        m = np.array(value, dtype=float)
+        if m.shape != (nu,) or not np.all(np.isfinite(m)) or np.any(m <= 0):
+            raise DimensionError(f"stack metric must be {nu} finite positive weights, got {value!r}")
+        scale = 1.0 / np.sqrt(m)
+        m.setflags(write=False)
+        scale.setflags(write=False)
+        self._metric, self._scale = m, scale
+        self._scale_sq = scale * scale
+        self._scale_version += 1
+
+    @property
+    def scale(self) -> np.ndarray:
+        """``D = W^(-1/2)``, ``u = D u~`` (read-only; follows :attr:`metric`)."""
+        return self._scale
 
     # ------------------------------------------------------------------ checks
     def _check_entries(self) -> None:
@@ -189,22 +205,30 @@ class Stack:
     def _allocate(self) -> None:
         nu = self.robot.nu
         self._buffers: list[LevelProblem] = []
+        self._plans: list[_LevelPlan] = []
+        frames: dict[int, Frame] = {}
         for level in self.levels:
+            tasks, inequalities, objectives = level.tasks, level.inequalities, level.objectives
             rows, k = {}, 0
-            for t in level.tasks:
+            for t in tasks:
                 rows[t.name] = slice(k, k + t.dim)
                 k += t.dim
-            if level.objectives:
+            if objectives:
                 rows["objectives"] = slice(k, k + nu)
                 k += nu
             irows, p = {}, 0
-            for t in level.inequalities:
+            for t in inequalities:
                 irows[t.name] = slice(p, p + t.dim)
                 p += t.dim
-            self._buffers.append(
-                LevelProblem(level.name, np.zeros((k, nu)), np.zeros(k), np.zeros((p, nu)),
-                             np.zeros(p), np.zeros(p), rows, irows)
-            )  # fmt: skip
+            buf = LevelProblem(level.name, np.zeros((k, nu)), np.zeros(k), np.zeros((p, nu)),
+                               np.zeros(p), np.zeros(p), rows, irows)  # fmt: skip
+            self._buffers.append(buf)
+            self._plans.append(_LevelPlan(level, buf, tasks, inequalities, objectives))
+            for e in level.entries:
+                for f in e.jacobian_frames():
+                    frames.setdefault(f.index, f)
+        self._frames = tuple(frames.values())
+        self._all_tasks = [t for plan in self._plans for t in plan.tasks]
         self._lower = np.empty(nu)
         self._upper = np.empty(nu)
 
@@ -223,59 +247,77 @@ class Stack:
         coordinates, see the module docstring)."""
         if not dt > 0:
             raise DimensionError(f"control step dt must be > 0 s, got {dt}")
-        D = self.scale
+        for level, plan in zip(self.levels, self._plans, strict=True):
+            if level.entries is not plan.entries:  # entries replaced: lay the buffers out anew
+                self._check_entries()
+                self._allocate()
+                break
+        D = self._scale
+        state.prefetch(self._frames)
         values: dict[str, ObjectiveValue] = {}
-        for level, buf in zip(self.levels, self._buffers, strict=True):
-            for t in level.tasks:
-                r = t.compute(state)
-                sl = buf.task_rows[t.name]
-                sw = np.sqrt(r.weights)
-                np.multiply(r.J * sw[:, None], D, out=buf.A[sl])
-                np.multiply(r.v, sw, out=buf.b[sl])
-            if level.objectives:
-                grad = np.zeros(self.robot.nu)
+        for plan in self._plans:
+            level, buf = plan.level, plan.buffer
+            if plan.tasks:
+                if plan.scale_version != self._scale_version:
+                    plan.rescale(D, self._scale_version)
+                keys = plan.weight_keys
+                for i, t in enumerate(plan.tasks):
+                    Ji, vi = plan.views[i]
+                    w = t.write_rows(state, Ji, vi)
+                    key = keys[i]
+                    if isinstance(w, (float, int)):
+                        if key.__class__ is not float or w != key:
+                            plan.set_weight(i, w, D)
+                    elif not (key.__class__ is np.ndarray and np.array_equal(w, key)):
+                        plan.set_weight(i, w, D)
+                np.multiply(plan.task_A, plan.factor, out=plan.task_A)
+                np.multiply(plan.task_b, plan.row_scale, out=plan.task_b)
+            if plan.objectives:
+                grad = np.zeros(D.size)
                 curv = None
-                for o in level.objectives:
+                for o in plan.objectives:
                     val = o.evaluate(state)
                     values[o.name] = val
                     grad += o.weight * val.gradient
                     if val.curvature is not None and o.weight > 0:
                         curv = o.weight * val.curvature + (0.0 if curv is None else curv)
-                sl = buf.task_rows["objectives"]
-                sw = np.sqrt(level.objective_weight)
-                np.fill_diagonal(buf.A[sl], sw)
-                if not level.tasks:
-                    buf.identity_scale = float(sw)
+                sw = float(np.sqrt(level.objective_weight))
+                if sw != plan.objective_scale:
+                    np.fill_diagonal(plan.objective_A, sw)
+                    plan.objective_scale = sw
+                if not plan.tasks:
+                    buf.identity_scale = sw
                 # u0 = -k W^-1 grad / (1 + k dt W^-1 curv); rows in u~: D^-1 u0 = -k D grad / ...
                 step = -level.gain * sw * D * grad
                 if curv is not None:
-                    step /= 1.0 + level.gain * dt * (D * D) * curv
-                buf.b[sl] = step
-            for t in level.inequalities:
+                    step /= 1.0 + level.gain * dt * self._scale_sq * curv
+                plan.objective_b[:] = step
+            for t in plan.inequalities:
                 r = t.compute(state, dt)
                 sl = buf.inequality_rows[t.name]
                 np.multiply(r.C, D, out=buf.C[sl])
                 buf.lower[sl] = r.lower
                 buf.upper[sl] = r.upper
-        self._lower.fill(-np.inf)
-        self._upper.fill(np.inf)
+        lower, upper = self._lower, self._upper
+        lower.fill(-np.inf)
+        upper.fill(np.inf)
         for c in self.constraints:
             b = c.bounds(state, dt)
-            np.maximum(self._lower, b.lower, out=self._lower)
-            np.minimum(self._upper, b.upper, out=self._upper)
+            np.maximum(lower, b.lower, out=lower)
+            np.minimum(upper, b.upper, out=upper)
         # Where position recovery and velocity limits disagree (a state outside its limits
         # asks for more than the joint's speed), the velocity limit wins: move back at full
         # speed rather than declare the box empty.
-        crossed = self._lower > self._upper
-        if np.any(crossed):
-            mid = np.where(self._lower[crossed] > 0, self._upper[crossed], self._lower[crossed])
-            self._lower[crossed] = mid
-            self._upper[crossed] = mid
-        return StackProblem(self._buffers, self._lower / D, self._upper / D, D, values)
+        crossed = lower > upper
+        if crossed.any():
+            mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
+            lower[crossed] = mid
+            upper[crossed] = mid
+        return StackProblem(self._buffers, lower / D, upper / D, D, values)
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         """Advance every task's internal state (PI integrals) by one step."""
-        for t in self.tasks:
+        for t in self._all_tasks:
             t.advance(state, dt, saturated)
 
     def reset(self) -> None:
@@ -286,3 +328,45 @@ class Stack:
     def __repr__(self) -> str:
         parts = [f"{lv.name}: [{', '.join(e.name for e in lv.entries)}]" for lv in self.levels]
         return f"Stack({'; '.join(parts)}; constraints: {[c.name for c in self.constraints]})"
+
+
+class _LevelPlan:
+    """A level's fixed layout and cached row scaling (internal to :class:`Stack`).
+
+    ``factor[i, j] = sqrt(w_i) D_j`` over the task rows and ``row_scale[i] = sqrt(w_i)``,
+    rebuilt per task when its weight changes (``weight_keys`` hold the weights they were
+    built from) and entirely when the metric changes.
+    """
+
+    def __init__(self, level: Level, buf: LevelProblem, tasks: list[Task],
+                 inequalities: list[InequalityTask], objectives: list[Objective]) -> None:  # fmt: skip
+        self.level, self.buffer, self.entries = level, buf, level.entries
+        self.tasks, self.inequalities, self.objectives = tasks, inequalities, objectives
+        nt = sum(t.dim for t in tasks)
+        self.slices = [buf.task_rows[t.name] for t in tasks]
+        self.views = [(buf.A[sl], buf.b[sl]) for sl in self.slices]
+        self.task_A, self.task_b = buf.A[:nt], buf.b[:nt]
+        self.factor = np.zeros((nt, buf.A.shape[1]))
+        self.row_scale = np.zeros(nt)
+        self.sqrt_weights = [np.zeros(t.dim) for t in tasks]
+        self.weight_keys: list[object] = [None] * len(tasks)
+        self.scale_version = -1
+        if objectives:
+            sl = buf.task_rows["objectives"]
+            self.objective_A, self.objective_b = buf.A[sl], buf.b[sl]
+        self.objective_scale: float | None = None
+
+    def set_weight(self, i: int, w: object, D: np.ndarray) -> None:
+        """Task i's rows now have weight(s) ``w``."""
+        sw = np.sqrt(np.broadcast_to(np.asarray(w, dtype=float), (self.tasks[i].dim,)))
+        self.sqrt_weights[i] = sw
+        self.weight_keys[i] = float(w) if isinstance(w, (float, int)) else np.array(w, float)
+        sl = self.slices[i]
+        np.multiply(sw[:, None], D, out=self.factor[sl])
+        self.row_scale[sl] = sw
+
+    def rescale(self, D: np.ndarray, version: int) -> None:
+        """The metric changed: rebuild the factor from the cached sqrt-weights."""
+        for sl, sw in zip(self.slices, self.sqrt_weights, strict=True):
+            np.multiply(sw[:, None], D, out=self.factor[sl])
+        self.scale_version = version

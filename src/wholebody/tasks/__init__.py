@@ -14,6 +14,7 @@ from wholebody.tasks.base import (
     TaskRows,
 )
 from wholebody.tasks.frame import FrameTask
+from wholebody.tasks.inequality import FrameHalfSpace
 from wholebody.tasks.limits import JointPositionLimits, VelocityLimits
 from wholebody.tasks.objectives import JointLimitAvoidance, Manipulability
 from wholebody.tasks.posture import PostureTask
@@ -24,6 +25,7 @@ __all__ = [
     "ArmPotentialEnergy",
     "Bounds",
     "Constraint",
+    "FrameHalfSpace",
     "FrameTask",
     "InequalityRows",
     "InequalityTask",

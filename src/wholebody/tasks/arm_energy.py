@@ -39,14 +39,15 @@ axes (x forward, y medial, z up; see :mod:`wholebody.humanlike.stiffness`):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from wholebody.errors import DimensionError
-from wholebody.humanlike.arm_geometry import arm_angle_with_gradient
+from wholebody.humanlike.arm_geometry import arm_angle_terms
 from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
-from wholebody.robot import ArmChain, Robot, RobotState
+from wholebody.robot import ArmChain, Frame, Robot, RobotState
 from wholebody.tasks.base import Objective, ObjectiveValue
 
 __all__ = ["ArmEnergyValue", "ArmPotentialEnergy"]
@@ -62,10 +63,6 @@ class ArmEnergyValue(ObjectiveValue):
     arm_angle: float = 0.0
     stiffness: float = 0.0
     rho: float = 0.0
-
-
-def _skew(r: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
 
 
 class ArmPotentialEnergy(Objective):
@@ -115,39 +112,61 @@ class ArmPotentialEnergy(Objective):
         self.g = float(np.linalg.norm(robot.model.gravity.linear))
         self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
         self._constant = isinstance(self.stiffness, ConstantStiffness)
+        arm = self.arm
+        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
+                        arm.forearm.frame)  # fmt: skip
+        self._frames_base = (*self._frames, robot.base_frame)
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
+        stiffness depends on the wrist position."""
+        return self._frames if self._constant else self._frames_base
 
     def evaluate(self, state: RobotState) -> ArmEnergyValue:
+        # Plain floats for the 3-vectors; the gradient is one product of a coefficient row
+        # with the stacked Jacobians of (shoulder, elbow, wrist, upper arm, forearm, base).
         arm, g = self.arm, self.g
         m1, m2 = arm.upper_arm.mass, arm.forearm.mass
+        S = state.rotation_translation(arm.shoulder)[1].tolist()
+        E = state.rotation_translation(arm.elbow)[1].tolist()
+        W = state.rotation_translation(arm.wrist)[1].tolist()
+        C = [0.0] * 36  # coefficients of the 6 rows of each frame, in jacobian_frames() order
         # Gravity: only the z rows of the centre-of-mass Jacobians are needed,
         # v_com,z = v_o,z + w_x r_y - w_y r_x with r the body-frame-to-com offset.
-        S, E, W = (state.position(f) for f in (arm.shoulder, arm.elbow, arm.wrist))
-        JS = state.jacobian(arm.shoulder)
-        grad = np.zeros(self.robot.nu)
         gravity = 0.0
-        for body, m in ((arm.upper_arm, m1), (arm.forearm, m2)):
-            c = state.com_position(body)
-            J = state.jacobian(body.frame)
-            rx, ry, _ = c - state.position(body.frame)
-            gravity += g * m * c[2]
-            grad += (g * m) * (J[2] + ry * J[3] - rx * J[4])
+        for body, m, o in ((arm.upper_arm, m1, 18), (arm.forearm, m2, 24)):
+            R, p = state.rotation_translation(body.frame)
+            (r0, r1, r2), (c0, c1, c2) = R.tolist(), body.com.tolist()
+            rx = r0[0] * c0 + r0[1] * c1 + r0[2] * c2
+            ry = r1[0] * c0 + r1[1] * c1 + r1[2] * c2
+            rz = r2[0] * c0 + r2[1] * c1 + r2[2] * c2
+            gm = g * m
+            gravity += gm * (float(p[2]) + rz)
+            C[o + 2] += gm
+            C[o + 3] += gm * ry
+            C[o + 4] -= gm * rx
         if self.reference == "shoulder":
             gravity -= g * (m1 + m2) * S[2]
-            grad -= g * (m1 + m2) * JS[2]
+            C[2] -= g * (m1 + m2)
 
-        aa = arm_angle_with_gradient(S, E, W, self.side)
-        x, y, alpha = aa.x, aa.y, aa.alpha
-        rho2, eps2 = aa.rho2, self.fade**2
+        alpha, x, y, dx, dy = arm_angle_terms(S, E, W, self.side)
+        rho2, eps2 = x * x + y * y, self.fade**2
         w = rho2 / (rho2 + eps2)
         delta = self.smoothing
         if abs(alpha) < delta:
             s, ds = alpha * alpha / (2 * delta) + delta / 2, alpha / delta
         else:
-            s, ds = abs(alpha), float(np.sign(alpha))
-        rest = np.pi - s
-        r = W - S
-        Rb = state.rotation(self.robot.base_frame)
-        k, dk_dp = self.stiffness.evaluate(self._mirror * (Rb.T @ r))
+            s, ds = abs(alpha), (alpha > 0) - (alpha < 0)
+        rest = math.pi - s
+        stiffness = self.stiffness
+        if type(stiffness) is ConstantStiffness:  # k does not depend on the wrist
+            k, dk_dp = stiffness.k, None
+        else:
+            Rb = state.rotation(self.robot.base_frame)
+            r = np.array([W[0] - S[0], W[1] - S[1], W[2] - S[2]])
+            k, dk_dp = stiffness.evaluate(self._mirror * (Rb.T @ r))
+            if self._constant:
+                dk_dp = None
         spring = 0.5 * k * rest * rest * w
         # d f_e = k rest (1/2 rest dw - s' w dalpha): a combination of dx and dy, with
         # dw = 2 eps^2 (x dx + y dy) / (rho^2 + eps^2)^2, w dalpha = (x dy - y dx)/(rho^2+eps^2)
@@ -156,13 +175,24 @@ class ArmPotentialEnergy(Objective):
         ca = -k * rest * ds / den
         coef_x = cw * x - ca * y
         coef_y = cw * y + ca * x
-        G = coef_x * aa.dx + coef_y * aa.dy  # (3, 3): d f_e / d(S, E, W)
-        JS, JE, JW = JS[:3], state.jacobian(arm.elbow)[:3], state.jacobian(arm.wrist)[:3]
-        grad += G[0] @ JS + G[1] @ JE + G[2] @ JW
-        if not self._constant:
-            Jb = state.jacobian(self.robot.base_frame)[3:]
-            dp = (self._mirror[:, None] * Rb.T) @ (JW - JS + _skew(r) @ Jb)
-            grad += 0.5 * rest * rest * w * (dk_dp @ dp)
+        for i, o in enumerate((0, 1, 2, 6, 7, 8, 12, 13, 14)):  # d f_e / d(S, E, W)
+            C[o] += coef_x * dx[i] + coef_y * dy[i]
+        if dk_dp is not None:
+            # dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang): with q = (c dk_dp Mirror) R_b^T,
+            # q.dp = q.J_W - q.J_S + (q x (W - S)).J_b,ang
+            q0, q1, q2 = ((0.5 * rest * rest * w) * (dk_dp * self._mirror) @ Rb.T).tolist()
+            d0, d1, d2 = r.tolist()
+            for i, qi in enumerate((q0, q1, q2)):
+                C[12 + i] += qi
+                C[i] -= qi
+            C[33] += q1 * d2 - q2 * d1
+            C[34] += q2 * d0 - q0 * d2
+            C[35] += q0 * d1 - q1 * d0
+            J = state.jacobians(self._frames_base)
+            grad = np.array(C) @ J.reshape(36, -1)
+        else:
+            J = state.jacobians(self._frames)
+            grad = np.array(C[:30]) @ J.reshape(30, -1)
         return ArmEnergyValue(value=gravity + spring, gradient=grad, gravity=gravity,
                               spring=spring, arm_angle=alpha, stiffness=k,
-                              rho=float(np.sqrt(rho2)))  # fmt: skip
+                              rho=math.sqrt(rho2))  # fmt: skip

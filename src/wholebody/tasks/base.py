@@ -12,6 +12,11 @@ see :class:`wholebody.Robot`), for one control step of ``dt`` seconds:
   level must respect.
 
 Tasks never call solvers and solvers know tasks only through these contracts.
+
+Two optional hooks serve the control loop's speed, never its results: ``jacobian_frames()``
+lists the frames whose Jacobians an entry reads (a :class:`~wholebody.solvers.Stack` computes
+them in one batch before evaluating its entries), and :meth:`Task.write_rows` writes a task's
+rows into a caller's buffer instead of allocating them.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wholebody.robot import RobotState
+from wholebody.robot import Frame, RobotState
 
 __all__ = [
     "Bounds",
@@ -99,6 +104,19 @@ class Task(ABC):
     def compute(self, state: RobotState) -> TaskRows:
         """The rows at ``state``."""
 
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        """Write the rows at ``state`` into ``J`` (dim x nu) and ``v`` (dim,) and return their
+        weights (a scalar or one per row): :meth:`compute` without its allocations, for the
+        stack's buffers. The default copies :meth:`compute`'s result."""
+        rows = self.compute(state)
+        J[...] = rows.J
+        v[...] = rows.v
+        return rows.weights
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        """Frames whose Jacobians :meth:`compute` reads (for batching; may be incomplete)."""
+        return ()
+
     def error(self, state: RobotState) -> np.ndarray:
         """The task error at ``state`` (what the feedback drives to zero), for logging."""
         return np.zeros(self.dim)
@@ -130,6 +148,10 @@ class InequalityTask(ABC):
     def compute(self, state: RobotState, dt: float) -> InequalityRows:
         """The rows at ``state`` for a step of ``dt`` seconds."""
 
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        """Frames whose Jacobians :meth:`compute` reads (for batching; may be incomplete)."""
+        return ()
+
 
 class Objective(ABC):
     """A scalar cost of the configuration with its analytic gradient.
@@ -149,6 +171,10 @@ class Objective(ABC):
     @abstractmethod
     def evaluate(self, state: RobotState) -> ObjectiveValue:
         """Cost and gradient (unweighted) at ``state``."""
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        """Frames whose Jacobians :meth:`evaluate` reads (for batching; may be incomplete)."""
+        return ()
 
 
 class Constraint(ABC):

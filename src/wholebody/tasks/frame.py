@@ -34,28 +34,42 @@ from wholebody.errors import DimensionError
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
-__all__ = ["FrameTask", "check_pose", "check_twist", "integrate_error", "pose_error", "pose_rows"]
+__all__ = [
+    "FrameTask",
+    "check_pose",
+    "check_twist",
+    "integrate_error",
+    "pose_error",
+    "PoseRows",
+    "pose_rows",
+    "pose_rows_into",
+]
+
+
+_EYE3 = np.eye(3)
 
 
 def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
     """A 4x4 homogeneous transform with an orthonormal rotation, or DimensionError."""
-    T = np.asarray(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+    T = np.array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
+    if T.shape != (4, 4) or not np.isfinite(T).all():
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
     R = T[:3, :3]
-    if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R.tolist()
+    det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+    if det < 0 or np.abs(R.T @ R - _EYE3).max() > 1e-6:
         raise DimensionError(f"{what}: the rotation part is not a rotation matrix")
-    return T.copy()
+    return T
 
 
 def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
     """A finite 6-vector [linear (m/s), angular (rad/s)] (zeros when None)."""
     if twist is None:
         return np.zeros(6)
-    t = np.asarray(twist, dtype=float)
-    if t.shape != (6,) or not np.all(np.isfinite(t)):
+    t = np.array(twist, dtype=float)
+    if t.shape != (6,) or not np.isfinite(t).all():
         raise DimensionError(f"{what}: expected a finite twist of shape (6,), got {t.shape}")
-    return t.copy()
+    return t
 
 
 def _gain(value: float | Sequence[float], what: str) -> np.ndarray:
@@ -87,16 +101,74 @@ def pose_rows(
     ``J`` is the frame's 6 x nu Jacobian in the axes in which ``p, R, target, twist`` are
     expressed; ``rows`` selects among the 6 rows.
     """
-    e, E = pose_error(p, R, target)
-    Jl = pin.Jlog3(E)
     A = np.empty((6, J.shape[1]))
-    A[:3] = J[:3]
-    A[3:] = Jl @ J[3:]
     v = np.empty(6)
-    v[:3] = twist[:3]
-    v[3:] = Jl @ (E.T @ twist[3:])
-    v += kp * e + ki * integral
+    e = PoseRows()(J, p, R, target, twist, kp, ki, integral, A, v).copy()
+    if rows.size == 6:
+        return A, v, e
     return A[rows], v[rows], e
+
+
+def pose_rows_into(
+    J: np.ndarray,
+    p: np.ndarray,
+    R: np.ndarray,
+    target: np.ndarray,
+    twist: np.ndarray,
+    kp: np.ndarray,
+    ki: np.ndarray,
+    integral: np.ndarray,
+    A: np.ndarray,
+    v: np.ndarray,
+) -> np.ndarray:
+    """:func:`pose_rows` for all 6 rows, written into ``A`` (6 x nu) and ``v`` (6,); returns
+    the error. ``p`` and ``R`` are only read (they may be views of the robot's data)."""
+    return PoseRows()(J, p, R, target, twist, kp, ki, integral, A, v).copy()
+
+
+class PoseRows:
+    """The 6 rows of a pose task with preallocated work arrays (one per task).
+
+    With ``K = diag(I, Jlog3(E))`` the rows are ``K J`` and the right-hand side is
+    ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
+    """
+
+    __slots__ = ("e", "ff", "gain", "K")
+
+    def __init__(self) -> None:
+        self.K = np.eye(6)
+        self.ff = np.empty(6)
+        self.e = np.empty(6)
+        self.gain = np.empty(6)
+
+    def __call__(
+        self,
+        J: np.ndarray,
+        p: np.ndarray,
+        R: np.ndarray,
+        target: np.ndarray,
+        twist: np.ndarray,
+        kp: np.ndarray,
+        ki: np.ndarray,
+        integral: np.ndarray,
+        A: np.ndarray,
+        v: np.ndarray,
+    ) -> np.ndarray:
+        """Write the rows into ``A`` and ``v``; return the error (a work array: copy it to
+        keep it)."""
+        E = target[:3, :3] @ R.T
+        K, ff, e = self.K, self.ff, self.e
+        K[3:, 3:] = pin.Jlog3(E)
+        np.matmul(K, J, out=A)
+        ff[:3] = twist[:3]
+        np.matmul(twist[3:], E, out=ff[3:])  # E^T w_d
+        np.matmul(K, ff, out=v)
+        np.subtract(target[:3, 3], p, out=e[:3])
+        e[3:] = pin.log3(E)
+        v += kp * e
+        if integral.any():
+            v += ki * integral
+        return e
 
 
 class FrameTask(Task):
@@ -146,6 +218,7 @@ class FrameTask(Task):
         self.target: np.ndarray | None = None
         self.target_twist = np.zeros(6)
         self.integral = np.zeros(6)
+        self._rows = PoseRows()
 
     @property
     def dim(self) -> int:
@@ -163,18 +236,28 @@ class FrameTask(Task):
         return self.target
 
     def compute(self, state: RobotState) -> TaskRows:
-        A, v, _ = pose_rows(
-            state.jacobian(self.frame),
-            state.position(self.frame),
-            state.rotation(self.frame),
-            self._target(state),
-            self.target_twist,
-            self.kp,
-            self.ki,
-            self.integral,
-            self.rows,
-        )
+        A = np.empty((self.rows.size, self.robot.nu))
+        v = np.empty(self.rows.size)
+        self.write_rows(state, A, v)
         return TaskRows(A, v, self._weights())
+
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        rows = self.rows
+        R, p = state.rotation_translation(self.frame)
+        target = self.target if self.target is not None else self._target(state)
+        if rows.size == 6:
+            self._rows(state.jacobian(self.frame), p, R, target, self.target_twist, self.kp,
+                       self.ki, self.integral, J, v)  # fmt: skip
+        else:
+            A6, v6 = np.empty((6, J.shape[1])), np.empty(6)
+            self._rows(state.jacobian(self.frame), p, R, target, self.target_twist, self.kp,
+                       self.ki, self.integral, A6, v6)  # fmt: skip
+            J[...] = A6[rows]
+            v[...] = v6[rows]
+        return self.weight
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        return (self.frame,)
 
     def error(self, state: RobotState) -> np.ndarray:
         """(dim,) error: position error (m) and/or orientation error (rad), world axes."""
@@ -183,7 +266,8 @@ class FrameTask(Task):
         return e[self.rows]
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        if not np.any(self.ki):
+        ki = self.ki
+        if not (ki.any() if isinstance(ki, np.ndarray) else np.any(ki)):
             return
         e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
                                    self._target(state))  # fmt: skip

@@ -43,8 +43,11 @@ class JointPositionLimits(Constraint):
     def bounds(self, state: RobotState, dt: float) -> Bounds:
         q = state.joint_positions()
         k = self.gain / dt
-        with np.errstate(invalid="ignore"):  # inf - inf does not occur: q is finite
-            return Bounds(k * (self._lower - q), k * (self._upper - q))
+        lower = self._lower - q  # inf - inf does not occur: q is finite
+        lower *= k
+        upper = self._upper - q
+        upper *= k
+        return Bounds(lower, upper)
 
 
 class VelocityLimits(Constraint):

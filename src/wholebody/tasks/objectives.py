@@ -7,9 +7,11 @@ weighted sum a stack level forms from its objectives (manipulability with a nega
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dtrtri
 
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
@@ -17,6 +19,8 @@ from wholebody.robot.hessian import JacobianDerivativeContraction
 from wholebody.tasks.base import Objective, ObjectiveValue
 
 __all__ = ["JointLimitAvoidance", "Manipulability"]
+
+_PIVOT_FLOOR = 1e-8  # Cholesky pivots^2 below this fraction of max diag(J J^T): LU decides
 
 
 class JointLimitAvoidance(Objective):
@@ -58,18 +62,32 @@ class JointLimitAvoidance(Objective):
         span = self._hi - self._lo
         self._c = span**2 / 4
         self._eps = 1e-6 * span
+        # Evaluated over all nu entries at once (no gather/scatter): the joints left out get
+        # the dummy range [-1, 1] and c = 0, so they contribute exact zeros.
+        nu = robot.nu
+        lo, hi, c = np.full(nu, -1.0), np.full(nu, 1.0), np.zeros(nu)
+        lo[idx], hi[idx], c[idx] = self._lo, self._hi, self._c
+        self._lo_all, self._hi_all, self._c_all, self._c2_all = lo, hi, c, 2 * c
+        eps = 1e-6 * (hi - lo)
+        self._qmin_all, self._qmax_all = lo + eps, hi - eps
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
-        q = np.clip(state.joint_positions()[self.indices], self._lo + self._eps,
-                    self._hi - self._eps)  # fmt: skip
-        a = self._hi - q
-        b = q - self._lo
+        q = np.maximum(state.joint_positions(), self._qmin_all)
+        np.minimum(q, self._qmax_all, out=q)
+        a = self._hi_all - q
+        b = np.subtract(q, self._lo_all, out=q)
         ab = a * b
-        grad = np.zeros(self.robot.nu)
-        grad[self.indices] = self._c * (b - a) / (ab * ab)
-        curv = np.zeros(self.robot.nu)
-        curv[self.indices] = 2 * self._c * (ab + (b - a) ** 2) / (ab * ab * ab)
-        return ObjectiveValue(float(np.sum(self._c / ab)), grad, curv)
+        d = np.subtract(b, a, out=a)
+        ab2 = ab * ab
+        grad = self._c_all * d
+        grad /= ab2
+        d *= d
+        d += ab
+        curv = self._c2_all * d
+        ab2 *= ab
+        curv /= ab2
+        value = np.divide(self._c_all, ab, out=ab).sum()
+        return ObjectiveValue(float(value), grad, curv)
 
 
 class Manipulability(Objective):
@@ -97,14 +115,29 @@ class Manipulability(Objective):
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         """The stacked 6F x nu Jacobian."""
-        return np.vstack([state.jacobian(f) for f in self.frames])
+        return state.jacobians(self.frames).reshape(6 * len(self.frames), -1).copy()
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        return tuple(self.frames)
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
-        J = self.jacobian(state)
+        J = state.jacobians(self.frames).reshape(6 * len(self.frames), -1)
         JJt = J @ J.T
-        sign, logdet = np.linalg.slogdet(JJt)
-        if sign <= 0 or logdet < -200:
-            return ObjectiveValue(0.0, np.zeros(self.robot.nu))
-        h2 = float(np.exp(0.5 * logdet))
-        P = np.linalg.solve(JJt, J)
-        return ObjectiveValue(h2, h2 * self._contract(state, P))
+        # Cholesky J J^T = L L^T: log det = 2 sum log L_ii and (J J^T)^-1 J = L^-T L^-1 J.
+        # Where the smallest pivot is not well above rounding, the LU route decides instead
+        # whether J J^T counts as singular (the same answer as before, at a higher cost).
+        L, info = dpotrf(JJt, lower=1, clean=1)
+        d = L.diagonal() if info == 0 else None
+        if d is not None and (d * d).min() > _PIVOT_FLOOR * JJt.diagonal().max():
+            logdet = 2.0 * float(np.log(d).sum())
+            if logdet < -200:
+                return ObjectiveValue(0.0, np.zeros(self.robot.nu))
+            Linv, _ = dtrtri(L, lower=1)
+            P = Linv.T @ (Linv @ J)
+        else:
+            sign, logdet = np.linalg.slogdet(JJt)
+            if sign <= 0 or logdet < -200:
+                return ObjectiveValue(0.0, np.zeros(self.robot.nu))
+            P = np.linalg.solve(JJt, J)
+        h2 = math.exp(0.5 * logdet)
+        return ObjectiveValue(h2, h2 * self._contract(state, P, J))

@@ -56,6 +56,7 @@ class PostureTask(Task):
             idx = np.array([robot.index(j) for j in joints], dtype=int)
             label = "posture"
         self.indices = idx
+        self._all = idx.size == robot.nu and bool(np.all(idx == np.arange(robot.nu)))
         self.name = name or label
         self._positional = robot.positional[idx]
         self.kp = np.broadcast_to(np.asarray(kp, float), idx.shape).copy()
@@ -86,6 +87,14 @@ class PostureTask(Task):
 
     def compute(self, state: RobotState) -> TaskRows:
         return TaskRows(self._J, self.kp * self.error(state), self._weights())
+
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        jp = state.joint_positions()
+        np.subtract(self.target, jp if self._all else jp[self.indices], out=v)
+        v *= self._positional  # e = 0 for wheels and planar-base actuators
+        v *= self.kp
+        J[...] = self._J
+        return self.weight
 
     def __repr__(self) -> str:
         return f"PostureTask({self.name!r}, joints={self.dim})"

@@ -21,6 +21,7 @@ from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 from wholebody.tasks.frame import (
     FrameTask,
+    PoseRows,
     check_pose,
     check_twist,
     integrate_error,
@@ -65,6 +66,7 @@ class RelativeFrameTask(Task):
         self.target: np.ndarray | None = None
         self.target_twist = np.zeros(6)
         self.integral = np.zeros(6)
+        self._rows = PoseRows()
 
     @property
     def dim(self) -> int:
@@ -76,18 +78,25 @@ class RelativeFrameTask(Task):
         self.target_twist = check_twist(twist, f"{self.name}: target twist")
 
     def relative_pose(self, state: RobotState) -> np.ndarray:
-        """The current pose of b in a (4x4)."""
-        Ta, Tb = state.pose(self.frame_a), state.pose(self.frame_b)
-        return np.linalg.solve(Ta, Tb)
+        """The current pose of b in a (4x4): ``[R_a^T R_b, R_a^T (p_b - p_a)]``."""
+        Ra, pa = state.rotation_translation(self.frame_a)
+        Rb, pb = state.rotation_translation(self.frame_b)
+        T = np.eye(4)
+        np.matmul(Ra.T, Rb, out=T[:3, :3])
+        np.matmul(Ra.T, pb - pa, out=T[:3, 3])
+        return T
 
     def relative_jacobian(self, state: RobotState) -> np.ndarray:
         """6 x nu Jacobian of b's twist relative to a, in a's axes."""
         Ja, Jb = state.jacobian(self.frame_a), state.jacobian(self.frame_b)
-        Ra = state.rotation(self.frame_a)
-        r = state.position(self.frame_b) - state.position(self.frame_a)
+        Ra, pa = state.rotation_translation(self.frame_a)
+        rx, ry, rz = (state.rotation_translation(self.frame_b)[1] - pa).tolist()
         J = Jb - Ja
-        J[:3] += np.cross(r, Ja[3:].T).T
-        return np.vstack([Ra.T @ J[:3], Ra.T @ J[3:]])
+        J[:3] += np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ Ja[3:]  # r x w_a
+        out = np.empty_like(J)
+        np.matmul(Ra.T, J[:3], out=out[:3])
+        np.matmul(Ra.T, J[3:], out=out[3:])
+        return out
 
     def _relative(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         T = self.relative_pose(state)
@@ -101,13 +110,30 @@ class RelativeFrameTask(Task):
                             self.kp, self.ki, self.integral, self.rows)  # fmt: skip
         return TaskRows(A, v, self._weights())
 
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        p, R, target = self._relative(state)
+        if self.rows.size == 6:
+            self._rows(self.relative_jacobian(state), p, R, target, self.target_twist,
+                       self.kp, self.ki, self.integral, J, v)  # fmt: skip
+        else:
+            A6, v6 = np.empty((6, J.shape[1])), np.empty(6)
+            self._rows(self.relative_jacobian(state), p, R, target, self.target_twist,
+                       self.kp, self.ki, self.integral, A6, v6)  # fmt: skip
+            J[...] = A6[self.rows]
+            v[...] = v6[self.rows]
+        return self.weight
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        return (self.frame_a, self.frame_b)
+
     def error(self, state: RobotState) -> np.ndarray:
         """(dim,) relative pose error in a's axes: position (m) and/or orientation (rad)."""
         e, _ = pose_error(*self._relative(state))
         return e[self.rows]
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        if np.any(self.ki):
+        ki = self.ki
+        if ki.any() if isinstance(ki, np.ndarray) else np.any(ki):
             e, _ = pose_error(*self._relative(state))
             integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 

@@ -1,0 +1,326 @@
+"""Running a scenario: phases of hand references on the paper's stack, one log.
+
+For every phase, in order:
+
+1. each hand gets a reference that starts where its previous reference ended (the first
+   phase starts at the hand's actual pose), so references never jump:
+   ``free`` (no task: the hand is left to the objectives), ``hold`` (stay), ``min_jerk``
+   (quintic to a goal), ``dmp`` (the scenario's DMP, learned
+   once from its demonstration, generalised to the goal, with volumetric obstacle
+   potentials for ``avoid``), ``follow`` (the primary hand's reference through the grasp
+   transform fixed at the phase start: the secondary of the paper's coordinated mode);
+   a goal orientation is the start orientation turned by ``rotate`` (world rotation vector);
+2. the stack is the paper's (:func:`wholebody.presets.paper_stack`) with the hands on top
+   and, for ``closed_chain`` phases, the relative pose of the secondary hand in the primary
+   at the same level (redundant with the hands' rows, which both backends tolerate);
+   backend ``pinv`` drops the objectives;
+3. a :class:`~wholebody.control.Controller` runs the phase from the current configuration.
+
+The logs are concatenated; a carried object follows its hand rigidly from the phase in which
+it is carried (its pose relative to the hand fixed at that phase's start).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from wholebody.control import Controller, RunLog, summary
+from wholebody.control.log import concatenate
+from wholebody.control.metrics import closed_chain_error, tracking
+from wholebody.errors import ConfigError
+from wholebody.humanlike.stiffness import StiffnessModel
+from wholebody.planning.trajectory import (
+    HoldTrajectory,
+    MinimumJerkTrajectory,
+    Trajectory,
+)
+from wholebody.presets import PaperWeights, default_stiffness, paper_stack
+from wholebody.robot import Robot, load_robot
+from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
+from wholebody.solvers import ProjectionSolver, Solver
+from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativeFrameTask
+
+__all__ = ["ScenarioRun", "make_solver", "run_scenario"]
+
+
+@dataclass
+class ScenarioRun:
+    """The outcome of :func:`run_scenario`."""
+
+    spec: ScenarioSpec
+    backend: str
+    log: RunLog
+    metrics: dict
+    object_poses: dict[str, np.ndarray] = field(default_factory=dict)  # (N, 4, 4) each
+    wall_time: float = 0.0
+
+
+def make_solver(backend: str) -> Solver:
+    """The solver of a backend name (``projection``, ``pinv``, ``hqp``)."""
+    if backend in ("projection", "pinv"):
+        return ProjectionSolver()
+    if backend == "hqp":
+        from wholebody.solvers.hqp import HierarchicalQPSolver
+
+        return HierarchicalQPSolver()
+    raise ConfigError(f"unknown backend {backend!r}: expected projection, pinv or hqp")
+
+
+def _robot(spec: ScenarioSpec) -> Robot:
+    candidate = spec.path.parent / spec.robot
+    return load_robot(candidate if candidate.exists() else spec.robot)
+
+
+def _stiffness(spec: ScenarioSpec, robot: Robot) -> float | StiffnessModel:
+    return default_stiffness(robot) if spec.stack.stiffness == "learned" else spec.stack.stiffness
+
+
+def _goal_pose(start: np.ndarray, goal: tuple[float, ...] | None, rotate) -> np.ndarray:
+    T = start.copy()
+    if goal is not None:
+        T[:3, 3] = goal
+    T[:3, :3] = pin.exp3(np.asarray(rotate, dtype=float)) @ start[:3, :3]
+    return T
+
+
+class _Planners:
+    """Builds each phase's references (the DMP is learned once)."""
+
+    def __init__(self, spec: ScenarioSpec) -> None:
+        self.spec = spec
+        self._dmp = None
+        self._demo: tuple[np.ndarray, np.ndarray] | None = None
+
+    def dmp(self, shape: str = "demo", chord: tuple[np.ndarray, np.ndarray] | None = None):
+        """The scenario's DMP (``shape="demo"``), or one fitted on ``chord = (start, goal)``
+        to the demonstration carried onto it (``"aligned"``) or to a minimum-jerk straight
+        line on the demonstration's time grid (``"straight"``)."""
+        from wholebody.planning.demonstration import align_to_chord
+        from wholebody.planning.dmp import DMP, DMPConfig
+        from wholebody.planning.trajectory import minimum_jerk_scaling
+
+        if self._demo is None:
+            with np.load(self.spec.planner.demo, allow_pickle=False) as z:
+                self._demo = (z["positions"], z["times"])
+        positions, times = self._demo
+        config = DMPConfig(n_basis=self.spec.planner.n_basis, stiffness=self.spec.planner.stiffness)
+        if shape == "aligned":
+            return DMP.fit(align_to_chord(positions, *chord), times, config=config)
+        if shape == "straight":
+            s, _, _ = minimum_jerk_scaling(times / times[-1])
+            start, goal = chord
+            return DMP.fit(start + np.outer(s, goal - start), times, config=config)
+        if self._dmp is None:
+            self._dmp = DMP.fit(positions, times, config=config)
+        return self._dmp
+
+    def obstacles(self, names: tuple[str, ...]):
+        from wholebody.planning import obstacles as ob
+
+        out = []
+        for name in names:
+            o = self.spec.objects[name]
+            if o.kind == "cylinder":
+                shape = ob.cylinder(o.position, o.radius, o.height, margin=o.margin)
+            elif o.kind == "sphere":
+                shape = ob.sphere(o.position, o.radius, margin=o.margin)
+            else:
+                shape = ob.box(o.position, o.size, margin=o.margin)
+            out.append(ob.DynamicPotential(shape))
+        return out
+
+    def phase(self, phase: PhaseSpec, starts: dict[str, np.ndarray]) -> dict[str, Trajectory]:
+        refs: dict[str, Trajectory] = {}
+        order = sorted(phase.hands, key=lambda h: phase.hands[h].planner == "follow")
+        for hand in order:
+            hp = phase.hands[hand]
+            T0 = starts[hand]
+            if hp.planner == "free":
+                continue
+            if hp.planner == "hold":
+                refs[hand] = HoldTrajectory(_goal_pose(T0, None, hp.rotate), phase.duration)
+            elif hp.planner == "min_jerk":
+                refs[hand] = MinimumJerkTrajectory(
+                    T0, _goal_pose(T0, hp.goal, hp.rotate), phase.duration
+                )
+            elif hp.planner == "dmp":
+                from wholebody.planning.dmp import DMPTrajectory
+
+                goal = _goal_pose(T0, hp.goal, hp.rotate)
+                refs[hand] = DMPTrajectory(
+                    self.dmp(hp.shape, (T0[:3, 3], goal[:3, 3])),
+                    T0,
+                    goal,
+                    phase.duration,
+                    obstacles=self.obstacles(hp.avoid),
+                )
+            else:  # follow the primary through the grasp transform fixed now
+                from wholebody.planning.dual_arm import CoordinatedTrajectory
+
+                P0 = starts[phase.primary]
+                refs[hand] = CoordinatedTrajectory(
+                    refs[phase.primary], np.eye(4), np.linalg.solve(T0, P0)
+                )
+        return refs
+
+
+def run_scenario(
+    spec: ScenarioSpec,
+    *,
+    backend: str | None = None,
+    progress: bool = False,
+    on_step: Callable[[int, float, np.ndarray], None] | None = None,
+    duration_scale: float = 1.0,
+) -> ScenarioRun:
+    """Run every phase of a scenario with a backend (default: the scenario's).
+
+    ``on_step(k, t, q)`` is called after every control step (live visualisation).
+    ``duration_scale`` shortens or stretches every phase (tests use it to run quickly).
+    """
+    backend = backend or spec.backend
+    robot = _robot(spec)
+    weights = PaperWeights(
+        energy=spec.stack.energy,
+        limits_arms=spec.stack.limits_arms,
+        limits_waist=spec.stack.limits_waist,
+        manipulability=spec.stack.manipulability,
+        gain=spec.stack.gain,
+        wheel_metric=spec.stack.wheel_metric,
+    )
+    stiffness = _stiffness(spec, robot)
+    for hand in spec.hands.values():
+        robot.frame(hand.frame)  # fail early on a bad frame name
+    tasks = {h: FrameTask(robot, s.frame, name=h, kp=s.kp, ki=s.ki) for h, s in spec.hands.items()}
+    monitors = [ArmPotentialEnergy(robot, arm, stiffness) for arm in robot.arms]
+    solver = make_solver(backend)
+    planners = _Planners(spec)
+    q = robot.neutral()
+    state = robot.update(q)
+    starts = {h: state.pose(t.frame) for h, t in tasks.items()}
+    logs, start_wall, t0 = [], time.perf_counter(), 0.0
+    total = round(spec.duration * duration_scale / spec.dt)
+    bar = _progress_bar(total, spec.name) if progress else None
+    carried_by: dict[str, tuple[str, float]] = {}  # object -> (hand, phase start time)
+    for phase in spec.phases:
+        duration = phase.duration * duration_scale
+        refs = planners.phase(_scaled(phase, duration), starts)
+        entries = [tasks[h] for h in refs]
+        if phase.closed_chain:
+            secondary = next(h for h in phase.hands if h != phase.primary)
+            chain = RelativeFrameTask(
+                robot,
+                tasks[phase.primary].frame,
+                tasks[secondary].frame,
+                name="closed_chain",
+                kp=tasks[phase.primary].kp[0],
+            )
+            chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
+            entries.append(chain)
+        stack = paper_stack(
+            robot, entries, objectives=backend != "pinv", weights=weights, stiffness=stiffness
+        )
+        controller = Controller(
+            robot,
+            stack,
+            solver,
+            dt=spec.dt,
+            references={tasks[h]: r for h, r in refs.items()},
+            monitors=monitors,
+        )
+        if bar is not None:
+            bar.set_postfix_str(phase.name)
+        done = sum(len(x) for x in logs)
+
+        def callback(k, t, qk, offset=t0, done=done):
+            if bar is not None:
+                bar.update(1)
+            if on_step is not None:
+                on_step(done + k, offset + t, qk)
+
+        log = controller.run(q, duration, callback=callback, meta={"phase": phase.name})
+        logs.append(log)
+        q = np.asarray(log.meta["final_q"])
+        state = robot.update(q)
+        starts = {
+            h: refs[h].end_pose if h in refs else state.pose(t.frame) for h, t in tasks.items()
+        }
+        for hand, hp in phase.hands.items():
+            if hp.carry is not None and hp.carry not in carried_by:
+                carried_by[hp.carry] = (hand, t0)
+        t0 += duration
+    if bar is not None:
+        bar.close()
+    phases = {}
+    t = 0.0
+    for p in spec.phases:
+        phases[p.name] = [t, t + p.duration * duration_scale]
+        t += p.duration * duration_scale
+    log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend})
+    poses = _object_poses(robot, log, spec.objects, carried_by, {h: tasks[h].frame for h in tasks})
+    metrics = _metrics(log, spec, duration_scale)
+    return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
+
+
+def _progress_bar(total: int, name: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="step", desc=name)
+
+
+def _scaled(phase: PhaseSpec, duration: float) -> PhaseSpec:
+    if duration == phase.duration:
+        return phase
+    return PhaseSpec(phase.name, duration, phase.hands, phase.closed_chain, phase.primary)
+
+
+def _object_poses(
+    robot: Robot,
+    log: RunLog,
+    objects: dict[str, ObjectSpec],
+    carried_by: dict[str, tuple[str, float]],
+    frames,
+) -> dict[str, np.ndarray]:
+    """(N, 4, 4) pose of every object: fixed until carried, then rigid with its hand."""
+    out = {}
+    for name, obj in objects.items():
+        T0 = np.eye(4)
+        T0[:3, 3] = obj.position
+        poses = np.repeat(T0[None], len(log), axis=0)
+        if name in carried_by:
+            hand, t_start = carried_by[name]
+            k0 = int(np.searchsorted(log.t, t_start - 1e-9))
+            hand_pose = robot.frame_pose(log.q[k0], frames[hand])
+            relative = np.linalg.solve(hand_pose, T0)
+            for k in range(k0, len(log)):
+                poses[k] = robot.frame_pose(log.q[k], frames[hand]) @ relative
+        out[name] = poses
+    return out
+
+
+def _metrics(log: RunLog, spec: ScenarioSpec, duration_scale: float) -> dict:
+    m = summary(log)
+    m["scenario"] = spec.name
+    m["backend"] = log.meta.get("backend")
+    m["phases"] = {}
+    chain_max = 0.0
+    for phase in spec.phases:
+        mask = log.phase_mask(phase.name)
+        entry: dict = {"mae_m": {}, "mse_m2": {}}
+        for hand, hp in phase.hands.items():
+            if hp.planner == "free":
+                continue
+            tr = tracking(log, hand, mask)
+            entry["mae_m"][hand] = tr.mae_m
+            entry["mse_m2"][hand] = tr.mse_m2
+        if phase.closed_chain:
+            entry["closed_chain_error_max_m"] = closed_chain_error(log, "closed_chain", mask)
+            chain_max = max(chain_max, entry["closed_chain_error_max_m"])
+        m["phases"][phase.name] = entry
+    m["closed_chain_error_max_m"] = chain_max
+    m["duration_scale"] = duration_scale
+    return m

@@ -1,0 +1,380 @@
+"""Scenario files: an experiment as data (TOML), checked key by key.
+
+A scenario names the robot, the backend, the control rate, the stack (the paper's preset and
+its weights), the hands (frame tasks and their gains), the planner (a DMP learned from a
+demonstration), the objects in the world (props and obstacles) and a list of phases, each
+with one planner per hand. Layout (every key is checked; unknown keys are errors)::
+
+    [scenario]
+    name = "coordinated_carry"         # required
+    title = "..."                      # optional, for plots and reports
+    paper = "Sec. 5.3, Figs. 15-17"    # optional, where the paper describes it
+    robot = "mobile_humanoid"          # bundled name or path (relative to this file)
+    backend = "projection"             # projection | pinv | hqp
+    rate_hz = 100.0
+
+    [stack]                            # the paper's H (see wholebody.presets)
+    energy = 0.5                       # w1 on each arm's f_p
+    limits_arms = 0.05                 # w2 on the arms' joints
+    limits_waist = 30.0                # w2 on the other joints
+    manipulability = 0.0               # w3
+    gain = 1.0                         # k
+    wheel_metric = 0.01                # velocity metric of the wheels
+    stiffness = "learned"              # "learned" (the robot's model) or a number (N m/rad)
+
+    [hands.right]                      # any number of hands
+    frame = "right_tool"
+    kp = 20.0                          # 1/s
+    ki = 5.0                           # 1/s^2
+
+    [planner]                          # DMP used by phases with planner = "dmp"
+    demo = "demos/reach_demo.npz"      # positions (N, 3) and times (N,), relative to this file
+    n_basis = 50
+    stiffness = 1050.0                 # K; damping D = 2 sqrt(K)
+
+    [[objects]]                        # drawn in MeshCat and in the plots
+    name = "shelf"
+    kind = "box"                       # box | cylinder | sphere
+    size = [0.4, 1.6, 0.03]            # box: edge lengths (m)
+    radius = 0.04                      # cylinder, sphere (m)
+    height = 0.2                       # cylinder (m, along z)
+    position = [1.72, 0.0, 0.42]       # centre (m, world)
+    obstacle = false                   # true: phases may avoid it
+    margin = 0.0                       # m added around it for avoidance
+    note = "..."                       # optional provenance / decisions
+
+    [[phases]]
+    name = "reach"
+    duration = 5.0                     # s
+    closed_chain = false               # hold the hands' relative pose (dual-arm carry)
+    primary = "right"                  # closed chain: the task is b = secondary in a = primary
+    [phases.hands.right]
+    planner = "dmp"                    # dmp | min_jerk | hold | follow | free
+    goal = [1.701, -0.45675, 0.46133]  # m, world (dmp, min_jerk)
+    rotate = [0.0, -1.5708, 0.0]       # rad, world rotation vector applied to the start pose
+    avoid = ["cylinder_1"]             # obstacles (dmp)
+    shape = "demo"                     # dmp: "demo" (goal-shift generalisation of the
+                                       # demonstration), "aligned" (the demonstration
+                                       # carried onto this motion's chord, then fitted) or
+                                       # "straight" (fitted to a minimum-jerk straight line)
+    carry = "panel"                    # an object moving rigidly with this hand in the phase
+    [phases.hands.left]
+    planner = "follow"                 # the primary's motion through the grasp transforms
+
+``free``: the hand has no task in the phase (the objectives keep the arm relaxed); its next
+reference starts where it actually is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from wholebody.errors import ConfigError
+from wholebody.tomlreader import TomlReader, load_toml
+
+__all__ = [
+    "BACKENDS",
+    "HandPhase",
+    "HandSpec",
+    "ObjectSpec",
+    "PhaseSpec",
+    "PlannerSpec",
+    "ScenarioSpec",
+    "StackSpec",
+    "load_scenario",
+]
+
+BACKENDS = ("projection", "pinv", "hqp")
+PLANNERS = ("dmp", "min_jerk", "hold", "follow", "free")
+KINDS = ("box", "cylinder", "sphere")
+
+
+@dataclass(frozen=True)
+class StackSpec:
+    energy: float = 0.5
+    limits_arms: float = 0.05
+    limits_waist: float = 30.0
+    manipulability: float = 0.0
+    gain: float = 1.0
+    wheel_metric: float = 0.01
+    stiffness: float | str = "learned"
+
+
+@dataclass(frozen=True)
+class HandSpec:
+    name: str
+    frame: str
+    kp: float = 20.0
+    ki: float = 5.0
+
+
+@dataclass(frozen=True)
+class PlannerSpec:
+    demo: Path | None = None
+    n_basis: int = 50
+    stiffness: float = 1050.0
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    name: str
+    kind: str
+    position: tuple[float, float, float]
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.0
+    height: float = 0.0
+    obstacle: bool = False
+    margin: float = 0.0
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class HandPhase:
+    planner: str
+    goal: tuple[float, float, float] | None = None
+    rotate: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    avoid: tuple[str, ...] = ()
+    carry: str | None = None
+    shape: str = "demo"
+
+
+@dataclass(frozen=True)
+class PhaseSpec:
+    name: str
+    duration: float
+    hands: dict[str, HandPhase]
+    closed_chain: bool = False
+    primary: str | None = None
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    path: Path
+    name: str
+    robot: str
+    backend: str
+    rate_hz: float
+    stack: StackSpec
+    hands: dict[str, HandSpec]
+    planner: PlannerSpec
+    objects: dict[str, ObjectSpec]
+    phases: tuple[PhaseSpec, ...]
+    title: str = ""
+    paper: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def duration(self) -> float:
+        return sum(p.duration for p in self.phases)
+
+    def phase_times(self) -> dict[str, tuple[float, float]]:
+        """Start and end time (s) of every phase."""
+        out, t = {}, 0.0
+        for p in self.phases:
+            out[p.name] = (t, t + p.duration)
+            t += p.duration
+        return out
+
+    def error(self, key: str, message: str) -> ConfigError:
+        return ConfigError(f"{self.path}: [{key}] {message}")
+
+
+def load_scenario(path: str | Path) -> ScenarioSpec:
+    """Read and check a scenario file (see the module docstring for the layout).
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key and what was expected.
+    """
+    path = Path(path)
+    r = TomlReader(path)
+    data = load_toml(path, "scenario")
+    r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases"))
+
+    head = r.table(data, "scenario", "", required=True)
+    r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz"))
+    name = r.string(head, "name", "scenario")
+    robot = r.string(head, "robot", "scenario", default="mobile_humanoid")
+    backend = r.string(head, "backend", "scenario", default="projection", choices=BACKENDS)
+    rate = r.number(head, "rate_hz", "scenario", default=100.0, positive=True)
+
+    st = r.table(data, "stack", "", required=False)
+    r.only(st, "stack", tuple(StackSpec.__dataclass_fields__))
+    stiffness: float | str = "learned"
+    if "stiffness" in st:
+        if st["stiffness"] == "learned":
+            stiffness = "learned"
+        else:
+            stiffness = r.number(st, "stiffness", "stack")
+            if stiffness < 0:
+                raise r.fail("stack.stiffness", 'expected "learned" or a number >= 0 N m/rad')
+    stack = StackSpec(
+        **{
+            k: r.number(st, k, "stack", default=getattr(StackSpec, k))
+            for k in ("energy", "limits_arms", "limits_waist", "manipulability", "gain")
+        },
+        wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
+        stiffness=stiffness,
+    )
+    if stack.gain < 0:
+        raise r.fail("stack.gain", f"expected a number >= 0, got {stack.gain}")
+
+    hands: dict[str, HandSpec] = {}
+    for hname, table in r.table(data, "hands", "", required=True).items():
+        where = f"hands.{hname}"
+        if not isinstance(table, dict):
+            raise r.fail(where, "expected a table")
+        r.only(table, where, ("frame", "kp", "ki"))
+        kp = r.number(table, "kp", where, default=20.0)
+        ki = r.number(table, "ki", where, default=5.0)
+        if kp < 0 or ki < 0:
+            raise r.fail(where, "kp and ki must be >= 0")
+        hands[hname] = HandSpec(hname, r.string(table, "frame", where), kp, ki)
+    if not hands:
+        raise r.fail("hands", "expected at least one hand")
+
+    pl = r.table(data, "planner", "", required=False)
+    r.only(pl, "planner", ("demo", "n_basis", "stiffness"))
+    demo = None
+    if "demo" in pl:
+        demo = path.parent / r.string(pl, "demo", "planner")
+        if not demo.is_file():
+            raise r.fail("planner.demo", f"file {demo} does not exist")
+    n_basis = r.number(pl, "n_basis", "planner", default=50, positive=True)
+    if n_basis != int(n_basis):
+        raise r.fail("planner.n_basis", f"expected an integer, got {n_basis}")
+    planner = PlannerSpec(
+        demo, int(n_basis), r.number(pl, "stiffness", "planner", default=1050.0, positive=True)
+    )
+
+    objects: dict[str, ObjectSpec] = {}
+    raw_objects = data.get("objects", [])
+    if not isinstance(raw_objects, list):
+        raise r.fail("objects", "expected an array of tables ([[objects]])")
+    for i, table in enumerate(raw_objects):
+        where = f"objects[{i}]"
+        if not isinstance(table, dict):
+            raise r.fail(where, "expected a table")
+        r.only(
+            table,
+            where,
+            ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note"),
+        )
+        oname = r.string(table, "name", where)
+        if oname in objects:
+            raise r.fail(f"{where}.name", f"object {oname!r} is defined twice")
+        kind = r.string(table, "kind", where, choices=KINDS)
+        obj = ObjectSpec(
+            name=oname,
+            kind=kind,
+            position=r.vector(table, "position", where, 3),  # type: ignore[arg-type]
+            size=r.vector(table, "size", where, 3) if kind == "box" else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+            radius=r.number(table, "radius", where, positive=True) if kind != "box" else 0.0,
+            height=r.number(table, "height", where, positive=True) if kind == "cylinder" else 0.0,
+            obstacle=r.boolean(table, "obstacle", where, default=False),
+            margin=r.number(table, "margin", where, default=0.0),
+            note=r.string(table, "note", where, default=""),
+        )
+        if kind == "box" and min(obj.size) <= 0:
+            raise r.fail(f"{where}.size", f"box edges must be > 0 m, got {list(obj.size)}")
+        if obj.margin < 0:
+            raise r.fail(f"{where}.margin", "expected a number >= 0 m")
+        objects[oname] = obj
+
+    raw_phases = data.get("phases")
+    if not isinstance(raw_phases, list) or not raw_phases:
+        raise r.fail("phases", "expected at least one [[phases]] table")
+    phases = []
+    seen: set[str] = set()
+    for i, table in enumerate(raw_phases):
+        phases.append(_phase(r, table, f"phases[{i}]", hands, objects, planner, seen))
+    return ScenarioSpec(
+        path=path,
+        name=name,
+        robot=robot,
+        backend=backend,
+        rate_hz=rate,
+        stack=stack,
+        hands=hands,
+        planner=planner,
+        objects=objects,
+        phases=tuple(phases),
+        title=r.string(head, "title", "scenario", ""),
+        paper=r.string(head, "paper", "scenario", ""),
+    )
+
+
+def _phase(
+    r: TomlReader,
+    table: Any,
+    where: str,
+    hands: dict[str, HandSpec],
+    objects: dict[str, ObjectSpec],
+    planner: PlannerSpec,
+    seen: set[str],
+) -> PhaseSpec:
+    if not isinstance(table, dict):
+        raise r.fail(where, "expected a table")
+    r.only(table, where, ("name", "duration", "closed_chain", "primary", "hands"))
+    name = r.string(table, "name", where)
+    if name in seen:
+        raise r.fail(f"{where}.name", f"phase {name!r} is defined twice")
+    seen.add(name)
+    duration = r.number(table, "duration", where, positive=True)
+    closed = r.boolean(table, "closed_chain", where, default=False)
+    primary = r.string(table, "primary", where, default="") or None
+    hp = r.table(table, "hands", where, required=True)
+    out: dict[str, HandPhase] = {}
+    for hname, spec in hp.items():
+        w = f"{where}.hands.{hname}"
+        if hname not in hands:
+            raise r.fail(w, f"unknown hand {hname!r}; the [hands] are {', '.join(hands)}")
+        if not isinstance(spec, dict):
+            raise r.fail(w, "expected a table")
+        r.only(spec, w, ("planner", "goal", "rotate", "avoid", "carry", "shape"))
+        kind = r.string(spec, "planner", w, choices=PLANNERS)
+        goal = r.vector(spec, "goal", w, 3) if kind in ("dmp", "min_jerk") else None
+        if kind not in ("dmp", "min_jerk") and "goal" in spec:
+            raise r.fail(f"{w}.goal", f"planner {kind!r} takes no goal")
+        if kind == "dmp" and planner.demo is None:
+            raise r.fail(f"{w}.planner", 'planner "dmp" needs [planner] demo = a demonstration')
+        avoid = r.names(spec, "avoid", w) if "avoid" in spec else ()
+        for a in avoid:
+            if a not in objects or not objects[a].obstacle:
+                raise r.fail(f"{w}.avoid", f"{a!r} is not an object with obstacle = true")
+        if avoid and kind != "dmp":
+            raise r.fail(f"{w}.avoid", "only the dmp planner avoids obstacles")
+        carry = r.string(spec, "carry", w, default="") or None
+        if carry is not None and carry not in objects:
+            raise r.fail(f"{w}.carry", f"unknown object {carry!r}")
+        shape = r.string(spec, "shape", w, default="demo", choices=("demo", "aligned", "straight"))
+        if shape != "demo" and kind != "dmp":
+            raise r.fail(f"{w}.shape", "only the dmp planner has a shape")
+        rotate = r.vector(spec, "rotate", w, 3, (0.0, 0.0, 0.0))
+        out[hname] = HandPhase(kind, goal, rotate, avoid, carry, shape)  # type: ignore[arg-type]
+    missing = [h for h in hands if h not in out]
+    if missing:
+        raise r.fail(f"{where}.hands", f"no planner for hand(s) {', '.join(missing)}")
+    follow = [h for h, s in out.items() if s.planner == "follow"]
+    if follow or closed:
+        if primary is None or primary not in hands:
+            raise r.fail(
+                f"{where}.primary",
+                'a phase with planner "follow" or closed_chain '
+                f"needs primary = one of {', '.join(hands)}",
+            )
+        if out[primary].planner in ("follow", "free"):
+            raise r.fail(
+                f"{where}.hands.{primary}",
+                "the primary hand needs a planner of its own (dmp, min_jerk or hold)",
+            )
+    if all(s.planner == "free" for s in out.values()):
+        raise r.fail(f"{where}.hands", 'at least one hand needs a task (not all "free")')
+    return PhaseSpec(name, duration, out, closed, primary)

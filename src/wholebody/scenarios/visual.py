@@ -1,0 +1,75 @@
+"""Scenarios in MeshCat: objects, a live view paced at the control rate, and the replay."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from wholebody.scenarios.runner import ScenarioRun
+from wholebody.scenarios.spec import ObjectSpec, ScenarioSpec
+from wholebody.viz.scene import Scene
+
+__all__ = ["LiveView", "draw_objects", "show_run"]
+
+HAND_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
+
+
+def _pose(obj: ObjectSpec) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = obj.position
+    return T
+
+
+def draw_objects(scene: Scene, spec: ScenarioSpec) -> None:
+    """Every object of the scenario: obstacles in red, the rest in wood or grey."""
+    for obj in spec.objects.values():
+        color = (
+            "#d62728"
+            if obj.obstacle
+            else ("#2ca02c" if obj.size[2] < 0.05 and obj.size[0] < 0.5 else "#b08d57")
+        )
+        if obj.kind == "box":
+            scene.box(obj.name, obj.size, _pose(obj), color=color)
+        elif obj.kind == "cylinder":
+            scene.cylinder(obj.name, obj.radius, obj.height, _pose(obj), color=color)
+        else:
+            scene.ellipsoid(obj.name, [obj.radius] * 3, _pose(obj), color=color)
+
+
+class LiveView:
+    """A control-loop callback drawing the robot at most ``fps`` times a second and pacing
+    the loop to real time (the control computation itself is much faster)."""
+
+    def __init__(self, scene: Scene, dt: float, fps: float = 30.0, realtime: bool = True):
+        self.scene, self.dt, self.realtime = scene, dt, realtime
+        self.every = max(1, round(1.0 / (fps * dt)))
+        self._start: float | None = None
+
+    def __call__(self, k: int, t: float, q: np.ndarray) -> None:
+        if self._start is None:
+            self._start = time.perf_counter() - t
+        if k % self.every:
+            return
+        self.scene.show(q)
+        if self.realtime:
+            lag = (self._start + t) - time.perf_counter()
+            if lag > 0:
+                time.sleep(lag)
+
+
+def show_run(scene: Scene, run: ScenarioRun, fps: float = 30.0) -> None:
+    """Draw the executed and reference hand paths and replay the run as an animation."""
+    log = run.log
+    for i, name in enumerate(log.frame_positions):
+        color = HAND_COLORS[i % len(HAND_COLORS)]
+        pos, ref = log.frame_positions[name], log.reference_positions[name]
+        pos, ref = pos[~np.isnan(pos).any(1)], ref[~np.isnan(ref).any(1)]
+        if len(pos):
+            scene.path(f"{name}_executed", pos, color=color)
+            scene.path(f"{name}_reference", ref, color="#7f7f7f")
+            scene.marker(f"{name}_goal", ref[-1], color=color)
+    carried = {
+        f"scene/props/{k}": v for k, v in run.object_poses.items() if not np.allclose(v[0], v[-1])
+    }
+    scene.animate(log.t, log.q, fps=fps, extra=carried)

@@ -1,0 +1,103 @@
+"""MeshCat: a localhost-only server, the robot drawn in a real browser, and the replay."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import wholebody
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from wholebody.viz.scene import Scene
+
+    s = Scene(wholebody.load_robot("mobile_humanoid"))
+    yield s
+    s.close()
+
+
+def listening_addresses(port: int) -> list[str]:
+    """Local IPv4/IPv6 addresses listening on ``port`` (Linux /proc)."""
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            lines = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            local, _, state = line.split()[1:4]
+            addr, p = local.split(":")
+            if int(p, 16) == port and state == "0A":  # LISTEN
+                out.append(addr)
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/net/tcp")
+def test_server_listens_on_localhost_only(scene):
+    for url in (scene.server.web_url, scene.server.zmq_url):
+        port = int(url.rsplit(":", 1)[1].split("/")[0])
+        addresses = listening_addresses(port)
+        assert addresses, f"nothing listens on {port}"
+        # 127.0.0.1 is 0100007F in /proc's little-endian hex; never 00000000 (all interfaces)
+        assert set(addresses) == {"0100007F"}, addresses
+
+
+@pytest.mark.skipif(
+    CHROMIUM is None,
+    reason="Debian's chromium is not installed (.ci/run "
+    "installs it); the browser rendering test needs it",
+)
+def test_robot_is_drawn_in_a_headless_browser(scene, tmp_path):
+    robot = scene.robot
+    scene.show(robot.home())
+    out = tmp_path / "shot.png"
+    cmd = [
+        CHROMIUM,
+        "--headless=new",
+        "--no-sandbox",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--screenshot={out}",
+        "--window-size=800,600",
+        "--virtual-time-budget=10000",
+        scene.url,
+    ]
+    subprocess.run(cmd, capture_output=True, timeout=180, check=False)
+    assert out.is_file(), "chromium wrote no screenshot"
+    import matplotlib.image
+
+    img = matplotlib.image.imread(out)[..., :3]
+    # the page background is a smooth grey gradient; the robot adds many distinct colours
+    # (shaded white links, grey joints, the dark chassis) in the middle of the image
+    middle = img[150:450, 250:550].reshape(-1, 3)
+    colours = np.unique((middle * 255).astype(int), axis=0)
+    dark = np.mean(middle.mean(axis=1) < 0.35)
+    assert len(colours) > 300, f"only {len(colours)} colours: blank canvas?"
+    assert dark > 0.002, "no dark pixels: the robot's chassis is not drawn"
+
+
+def test_replay_animation_and_props(scene):
+    robot = scene.robot
+    qs = np.array([robot.neutral(), robot.home(), robot.neutral()])
+    scene.marker("target", [1.7, -0.45, 0.46])
+    scene.path("reference", np.array([[0, 0, 0.4], [1.0, 0, 0.5], [1.7, -0.45, 0.46]]))
+    scene.cylinder("obstacle", 0.04, 0.2, np.eye(4))
+    scene.box("panel", (0.1, 0.3, 0.02), np.eye(4))
+    poses = np.repeat(np.eye(4)[None], 3, axis=0)
+    scene.animate(np.array([0.0, 0.5, 1.0]), qs, fps=10, extra={"scene/props/panel": poses})
+    time.sleep(0.1)
+    assert scene.server.process.poll() is None  # the server took it all and still runs

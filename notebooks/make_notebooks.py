@@ -20,9 +20,9 @@ QUICKSTART = [
         "closed-loop reach and plot it. Units are SI (m, rad, s); the world's z is up."
     ),
     new_code_cell(
-        "import numpy as np\n"
         "import matplotlib.pyplot as plt\n"
-        "import pinocchio as pin\n"
+        "import numpy as np\n"
+        "import pinocchio as pin\n\n"
         "import wholebody\n\n"
         "robot = wholebody.load_robot('mobile_humanoid')\n"
         "print(robot.summary())"
@@ -46,10 +46,15 @@ QUICKSTART = [
         "Joint position and velocity limits hold at every level."
     ),
     new_code_cell(
-        "from wholebody.tasks import FrameTask, ArmPotentialEnergy, JointLimitAvoidance\n"
-        "from wholebody.tasks import JointPositionLimits, VelocityLimits\n"
-        "from wholebody.solvers import Stack, Level, ProjectionSolver\n"
-        "from wholebody.presets import paper_metric\n\n"
+        "from wholebody.presets import paper_metric\n"
+        "from wholebody.solvers import Level, ProjectionSolver, Stack\n"
+        "from wholebody.tasks import (\n"
+        "    ArmPotentialEnergy,\n"
+        "    FrameTask,\n"
+        "    JointLimitAvoidance,\n"
+        "    JointPositionLimits,\n"
+        "    VelocityLimits,\n"
+        ")\n\n"
         "right = FrameTask(robot, 'right_tool', kp=20.0, ki=5.0)\n"
         "objectives = [\n"
         "    ArmPotentialEnergy(robot, 'left', stiffness=0.1, weight=0.5),\n"
@@ -69,7 +74,8 @@ QUICKSTART = [
         "start = robot.frame_pose(q, hand)\n"
         "goal = start.copy()\n"
         "goal[:3, 3] = [1.701, -0.45675, 0.46133]\n"
-        "goal[:3, :3] = pin.exp3(np.array([0.0, -np.pi / 2, 0.0])) @ start[:3, :3]  # point forward\n"
+        "point_forward = pin.exp3(np.array([0.0, -np.pi / 2, 0.0]))\n"
+        "goal[:3, :3] = point_forward @ start[:3, :3]\n"
         "monitors = [ArmPotentialEnergy(robot, a, 0.1) for a in ('left', 'right')]\n"
         "controller = Controller(robot, stack, ProjectionSolver(), dt=0.01,\n"
         "                        references={right: MinimumJerkTrajectory(start, goal, 5.0)},\n"
@@ -86,10 +92,12 @@ QUICKSTART = [
         "for i, axis in enumerate('xyz'):\n"
         "    axes[0].plot(log.t, p[:, i], label=f'{axis}')\n"
         "    axes[0].plot(log.t, r[:, i], 'k--', lw=0.8)\n"
-        "axes[0].set(xlabel='time (s)', ylabel='right hand (m)'); axes[0].legend()\n"
+        "axes[0].set(xlabel='time (s)', ylabel='right hand (m)')\n"
+        "axes[0].legend()\n"
         "axes[1].plot(log.t, log.arms['right'].gravity, label='gravity')\n"
         "axes[1].plot(log.t, log.arms['right'].spring, label='spring')\n"
-        "axes[1].set(xlabel='time (s)', ylabel='right arm energy (J)'); axes[1].legend()\n"
+        "axes[1].set(xlabel='time (s)', ylabel='right arm energy (J)')\n"
+        "axes[1].legend()\n"
         "fig.tight_layout()"
     ),
     new_markdown_cell(
@@ -108,9 +116,9 @@ COMPARE = [
         "a hard constraint at every level."
     ),
     new_code_cell(
-        "import numpy as np\n"
         "import matplotlib.pyplot as plt\n"
-        "import pinocchio as pin\n"
+        "import numpy as np\n"
+        "import pinocchio as pin\n\n"
         "import wholebody\n"
         "from wholebody.control import Controller, summary\n"
         "from wholebody.planning.trajectory import MinimumJerkTrajectory\n"
@@ -143,29 +151,34 @@ COMPARE = [
         "print(f\"{'backend':12s} {'step us':>8s} {'max MAE mm':>10s} {'waist rad':>9s} \"\n"
         "      f\"{'E right J':>9s} {'viol':>5s} {'fail':>5s}\")\n"
         "for r in rows:\n"
-        "    print(f'{r[0]:12s} {r[1]:8.0f} {r[2]:10.4f} {r[3]:9.3f} {r[4]:9.3f} {r[5]:5d} {r[6]:5d}')"
+        "    b, t, mae, waist, energy, viol, fail = r\n"
+        "    print(f'{b:12s} {t:8.0f} {mae:10.4f} {waist:9.3f} {energy:9.3f} {viol:5d} {fail:5d}')"
     ),
     new_code_cell(
         "fig, axes = plt.subplots(1, 3, figsize=(13, 3.3), sharey=True)\n"
         "names = robot.group('waist').joints\n"
-        "for ax, (b, log) in zip(axes, logs.items()):\n"
-        "    for j, name in zip(robot.group('waist').indices, names):\n"
+        "for ax, (b, log) in zip(axes, logs.items(), strict=True):\n"
+        "    for j, name in zip(robot.group('waist').indices, names, strict=True):\n"
         "        ax.plot(log.t, log.joint_positions[:, j], label=name)\n"
         "    ax.set(title=b, xlabel='time (s)')\n"
-        "axes[0].set_ylabel('waist joint (rad)'); axes[0].legend(fontsize=7)\n"
+        "axes[0].set_ylabel('waist joint (rad)')\n"
+        "axes[0].legend(fontsize=7)\n"
         "fig.tight_layout()"
     ),
     new_markdown_cell(
         "Less waist and a lower final arm energy with the objectives: the paper's \"more arm, "
-        "less waist\". The QP reaches the same motion with its bounds as hard constraints."
+        'less waist". The QP reaches the same motion with its bounds as hard constraints.'
     ),
 ]
 
 
 def write(name: str, cells: list) -> None:
     nb = new_notebook(cells=cells)
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3",
-                                 "language": "python"}
+    nb.metadata["kernelspec"] = {
+        "name": "python3",
+        "display_name": "Python 3",
+        "language": "python",
+    }
     nbformat.write(nb, HERE / name)
     print(f"wrote {HERE / name}")
 

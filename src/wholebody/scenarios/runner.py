@@ -210,6 +210,7 @@ def run_scenario(
         duration = phase.duration * duration_scale
         refs = planners.phase(_scaled(phase, duration), starts)
         entries = [tasks[h] for h in refs]
+        first: list[RelativeFrameTask] = []
         if phase.closed_chain:
             secondary = next(h for h in phase.hands if h != phase.primary)
             chain = RelativeFrameTask(
@@ -220,9 +221,14 @@ def run_scenario(
                 kp=tasks[phase.primary].kp[0],
             )
             chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
-            entries.append(chain)
+            first.append(chain)  # a level above the hands: the grasp is never traded
         stack = paper_stack(
-            robot, entries, objectives=backend != "pinv", weights=weights, stiffness=stiffness
+            robot,
+            entries,
+            objectives=backend != "pinv",
+            weights=weights,
+            stiffness=stiffness,
+            first=first,
         )
         controller = Controller(
             robot,

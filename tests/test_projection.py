@@ -210,3 +210,21 @@ def test_singular_configuration_gives_a_bounded_answer(humanoid):
     lo, hi = box(stack, state)
     assert np.all(np.isfinite(result.u)) and np.all(result.u >= lo - 1e-9)
     assert np.all(result.u <= hi + 1e-9)
+
+
+def test_level_with_more_rows_than_columns_is_plain_least_squares(humanoid, rng):
+    """Both hands and a posture task in one level: 35 rows, 23 columns, full column rank and
+    far from singular. The answer is the weighted least-squares solution, undamped (the
+    zero eigenvalues of the 35 x 35 Gram matrix must not count as directions)."""
+    L, R = hands(humanoid)
+    posture = PostureTask(humanoid, kp=1.0, weight=1e-3)
+    stack = Stack(humanoid, [Level([L, R, posture])], [])
+    for q in configurations(humanoid, rng, 5):
+        state = humanoid.update(q)
+        near_targets(humanoid, state, (L, R), rng)
+        problem = stack.evaluate(state, DT)
+        A, b = problem.levels[0].A, problem.levels[0].b
+        assert A.shape == (35, 23) and np.linalg.svd(A, compute_uv=False)[-1] > 0.03
+        expected = problem.to_u(np.linalg.lstsq(A, b, rcond=None)[0])
+        result = ProjectionSolver().solve(stack, state, DT)
+        np.testing.assert_allclose(result.u, expected, atol=1e-9 * (1 + np.abs(expected).max()))

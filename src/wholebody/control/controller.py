@@ -86,10 +86,15 @@ class Controller:
 
     def _set_targets(self, t: float) -> None:
         t_ff = t + 0.5 * self.dt if self.feedforward == "midpoint" else t
+        # One evaluation per reference: the pose at t and the twist at t_ff sampled together.
+        times = np.array([t, t_ff]) if t_ff != t else np.array([t])
+        k = times.size - 1
         for task, traj in self.references.items():
-            pose = traj.sample(t).pose
-            twist = traj.sample(t_ff).twist if t_ff != t else traj.sample(t).twist
-            task.set_target(pose, twist)
+            s = traj.sample_many(times)
+            pose = np.eye(4)
+            pose[:3, :3] = s.rotations[0]
+            pose[:3, 3] = s.positions[0]
+            task.set_target(pose, np.concatenate((s.linear_velocities[k], s.angular_velocities[k])))
 
     def run(
         self,

@@ -116,6 +116,7 @@ class JacobianDerivativeContraction:
         self._K[:n, :n] = same_t
         self._K[n : 2 * n, :n] = same_t
         self._K[2 * n :, n:] = other_t
+
         # Flat indices into [J.ravel(), P.ravel()] (J, P: 6F x nu) of component r of the
         # linear (part 0) or angular (part 1) rows of J (src 0) or P (src 1), per entry.
         def flat(src: int, part: int, r: np.ndarray) -> np.ndarray:
@@ -145,6 +146,6 @@ class JacobianDerivativeContraction:
         T = np.concatenate((J.ravel(), P.ravel()))[self._gather]
         c = T[0] * T[1]
         c -= T[2] * T[3]  # [v x a | w x b | a x w], 3 x 3n
-        R = c @ self._K  # [sum_M (v x a + w x b) | sum_(1-M) (a x w)], 3 x 2n
+        R = c.dot(self._K)  # [sum_M (v x a + w x b) | sum_(1-M) (a x w)], 3 x 2n
         R *= T[4, :, : self._two_n]  # times [w | v]
-        return R.ravel() @ self._scatter
+        return R.ravel().dot(self._scatter)

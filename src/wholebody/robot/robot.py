@@ -23,9 +23,10 @@ from __future__ import annotations
 import difflib
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import pinocchio as pin
@@ -40,6 +41,7 @@ LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 WORLD = pin.ReferenceFrame.WORLD
 WHEEL_PLACEMENT_TOLERANCE = 1e-3  # m, between robot.toml's base geometry and the URDF
 _FLOAT = np.dtype(float)
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -131,6 +133,7 @@ class Robot:
             raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
         self.data: pin.Data = self.model.createData()
         self._version = 0
+        self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(root_link)
         """The URDF's root link (the moving base of a mobile robot)."""
         self._build_actuation()
@@ -462,7 +465,7 @@ class Robot:
             q.__class__ is np.ndarray
             and q.dtype == _FLOAT
             and q.shape == self._q_shape
-            and math.isfinite(q @ q)
+            and math.isfinite(q.dot(q))
         ):
             q = self.check_configuration(q)
         pin.computeJointJacobians(self.model, self.data, q)
@@ -493,7 +496,7 @@ class Robot:
                 f"actuated velocity of robot {self.name!r} has shape "
                 f"{u.shape}; expected ({self.nu},)"
             )
-        return pin.integrate(self.model, q, self.actuation @ (u * dt))
+        return pin.integrate(self.model, q, self.actuation.dot(u * dt))
 
     # ------------------------------------------------------------------ presentation
     def summary(self) -> str:
@@ -535,7 +538,7 @@ class RobotState:
     evaluating them.
     """
 
-    __slots__ = ("_cache", "_version", "q", "robot")
+    __slots__ = ("_block", "_cache", "_order", "_rows", "_version", "q", "robot")
 
     def __init__(self, robot: Robot, q: np.ndarray, version: int) -> None:
         self.robot = robot
@@ -543,6 +546,9 @@ class RobotState:
         self.q.setflags(write=False)
         self._version = version
         self._cache: dict[object, np.ndarray] = {}
+        self._block: np.ndarray | None = None  # the (F, 6, nu) Jacobians of prefetch()
+        self._rows: dict[int, int] = {}  # frame index -> its first position in _block
+        self._order: list[int] = []  # the frame index at each position of _block
 
     def _data(self) -> pin.Data:
         if self._version != self.robot._version:
@@ -579,9 +585,12 @@ class RobotState:
         """6 x nu Jacobian (world-aligned axes at the frame origin, linear rows first)."""
         J = self._cache.get(frame.index)
         if J is None:
+            k = self._rows.get(frame.index)
+            if k is not None:  # in prefetch()'s block
+                return self._block[k]
             robot = self.robot
             Jm = pin.getFrameJacobian(robot.model, self._data(), frame.index, LWA)
-            J = Jm @ robot.actuation
+            J = Jm.dot(robot.actuation)
             J.setflags(write=False)
             self._cache[frame.index] = J
         return J
@@ -590,40 +599,67 @@ class RobotState:
         """Compute and cache the Jacobians of ``frames`` not cached yet, in one batch.
 
         The same numbers as :meth:`jacobian` frame by frame: Pinocchio's frame Jacobians
-        stacked into one (6F x nv) array and multiplied by the actuation matrix once.
+        stacked into one (6F x nv) array and multiplied by the actuation matrix once. On a
+        fresh state the batch is kept as one (F, 6, nu) block in the order of ``frames``
+        (repeats allowed), so that :meth:`jacobians` of a run of consecutive frames of it is
+        a view, not a copy.
         """
-        cache = self._cache
-        missing = [f.index for f in frames if f.index not in cache]
+        cache, rows = self._cache, self._rows
+        missing = [f.index for f in frames if f.index not in cache and f.index not in rows]
         if not missing:
             return
         robot = self.robot
         model, data = robot.model, self._data()
         if len(missing) == 1:
-            J = pin.getFrameJacobian(model, data, missing[0], LWA) @ robot.actuation
+            J = pin.getFrameJacobian(model, data, missing[0], LWA).dot(robot.actuation)
             J.setflags(write=False)
             cache[missing[0]] = J
             return
         get = pin.getFrameJacobian
         Jm = np.concatenate([get(model, data, i, LWA) for i in missing])
-        J = (Jm @ robot.actuation).reshape(len(missing), 6, robot.nu)
+        J = Jm.dot(robot.actuation).reshape(len(missing), 6, robot.nu)
         J.setflags(write=False)
+        if self._block is None:  # jacobian() reads the block (no per-frame cache entries)
+            key = tuple(missing)
+            rows = robot._layouts.get(key)
+            if rows is None:  # first position of each frame, per layout (few per robot)
+                rows = robot._layouts[key] = {i: k for k, i in reversed(list(enumerate(key)))}
+            self._block, self._order, self._rows = J, missing, rows
+            return
         for k, i in enumerate(missing):
             cache.setdefault(i, J[k])
 
     def jacobians(self, frames: Sequence[Frame]) -> np.ndarray:
         """(F, 6, nu) Jacobians of ``frames`` stacked (see :meth:`jacobian`), read-only.
 
-        Cached per tuple of frames; the frames not cached yet are computed in one batch.
+        A view of :meth:`prefetch`'s block when the frames are consecutive in it; otherwise
+        cached per tuple of frames, the frames not cached yet computed in one batch.
         """
+        block = self._run(frames)
+        if block is not None:
+            return block
         key = ("stack", *(f.index for f in frames))
         block = self._cache.get(key)
         if block is None:
             self.prefetch(frames)
-            cache = self._cache
-            block = np.stack([cache[f.index] for f in frames])
+            block = self._run(frames)  # a fresh state: prefetch() made them one block
+            if block is not None:
+                return block
+            block = np.stack([self.jacobian(f) for f in frames])
             block.setflags(write=False)
-            cache[key] = block
+            self._cache[key] = block
         return block
+
+    def _run(self, frames: Sequence[Frame]) -> np.ndarray | None:
+        """The frames' Jacobians as a view of prefetch()'s block if they are consecutive
+        in it, else None."""
+        if self._block is None or not frames:
+            return None
+        ids = [f.index for f in frames]
+        k0 = self._rows.get(ids[0], -1)
+        if k0 >= 0 and self._order[k0 : k0 + len(ids)] == ids:
+            return self._block[k0 : k0 + len(ids)]
+        return None
 
     def world_jacobian(self, frame: Frame) -> np.ndarray:
         """6 x nv model Jacobian in Pinocchio's ``WORLD`` convention (spatial velocity at
@@ -647,6 +683,15 @@ class RobotState:
         rx, ry, rz = self._data().oMf[body.frame.index].rotation @ body.com
         # v_com = v_o + w x r = v_o - [r]x w
         return J[:3] - np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ J[3:]
+
+    def memo(self, key: str, compute: Callable[[RobotState], T]) -> T:
+        """``compute(self)``, computed once per state and cached under ``key`` (for values
+        that several tasks derive from the same state; ``key`` must name what ``compute``
+        returns, and the result must not be modified)."""
+        value = self._cache.get(key)
+        if value is None:
+            value = self._cache[key] = compute(self)
+        return value
 
     def joint_positions(self) -> np.ndarray:
         """Scalar position per actuated velocity (see :meth:`Robot.joint_positions`)."""

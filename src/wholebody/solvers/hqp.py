@@ -160,6 +160,7 @@ from wholebody.solvers.base import Solver
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
+from wholebody.tasks.base import Task
 
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
 
@@ -340,7 +341,7 @@ class HierarchicalQPSolver(Solver):
         bt = self.bound_relaxation
         failures: list[str] = []
         self.levels = [LevelReport(lev.name) for lev in problem.levels]
-        if not (lb <= ub).all():  # NaN compares false; Stack.evaluate never crosses the box
+        if not _all(lb <= ub):  # NaN compares false; Stack.evaluate never crosses the box
             failures.append("the box is empty or not a number (NaN bounds): u = 0")
             return np.zeros(n), failures, 0.0
         x = np.minimum(np.maximum(0.0, lb), ub)  # the minimum-norm point of the box
@@ -365,17 +366,17 @@ class HierarchicalQPSolver(Solver):
                 continue
             A, b, C = lev.A, lev.b, lev.C
             m, p = A.shape[0], C.shape[0]
-            t = x if Z is None else Z.T @ x  # current point in the free coordinates
+            t = x if Z is None else Z.T.dot(x)  # current point in the free coordinates
             null: np.ndarray | None = None  # the level's own null space in the free coordinates
             smax = 0.0
             rank = 0
             if m:
-                c = b - A @ x
-                M = A if Z is None else A @ Z
+                c = b - A.dot(x)
+                M = A if Z is None else A.dot(Z)
                 sw = lev.identity_scale if lev.A.shape == (n, n) else 0.0
                 if sw > 0:  # rows sw * I: M = sw Z has r singular values sw
                     rank, smax = r, sw
-                    y = (c if Z is None else Z.T @ c) / sw
+                    y = (c if Z is None else Z.T.dot(c)) / sw
                 else:
                     try:
                         rank, y, null, smax = _cod(M, c, t, self.rank_tolerance)
@@ -387,9 +388,9 @@ class HierarchicalQPSolver(Solver):
                 c = M = None
                 y = -t
             report.rank = rank
-            xc = x + (y if Z is None else Z @ y)
+            xc = x + (y if Z is None else Z.dot(y))
             if _inside(xc, lo, hi, inherited) and (
-                p == 0 or _rows_inside(C @ xc, lev.lower, lev.upper, self.tolerance)
+                p == 0 or _rows_inside(C.dot(xc), lev.lower, lev.upper, self.tolerance)
             ):
                 x = xc
             else:
@@ -402,10 +403,10 @@ class HierarchicalQPSolver(Solver):
                     if xn is not None:
                         self._native_from = k
                         if m:
-                            report.limited = self._bound_limited(lev, A @ xn - b, A @ xc - b)
+                            report.limited = self._bound_limited(lev, A.dot(xn) - b, A.dot(xc) - b)
                         for lv, rep in zip(problem.levels[k:], self.levels[k:], strict=True):
                             if lv.C.shape[0]:
-                                Cx = lv.C @ xn
+                                Cx = lv.C.dot(xn)
                                 tol = self.tolerance
                                 viol = (Cx > lv.upper + tol) | (Cx < lv.lower - tol)
                                 rep.limited += [nm for nm, sl in lv.inequality_rows.items()
@@ -420,7 +421,7 @@ class HierarchicalQPSolver(Solver):
                                     f"({self.engine_name}); level left unsolved")  # fmt: skip
                     continue
                 if m:
-                    report.limited = self._bound_limited(lev, A @ xq - b, A @ xc - b)
+                    report.limited = self._bound_limited(lev, A.dot(xq) - b, A.dot(xc) - b)
                 x = xq
             # The level's optimal set: fix its rows (and the constraints the level's optimum
             # presses on), keep its inequality rows.
@@ -428,17 +429,17 @@ class HierarchicalQPSolver(Solver):
             if rank:
                 if null is None:  # the level used up every free direction
                     null = np.zeros((r, 0))
-                Z = null if Z is None else Z @ null
+                Z = null if Z is None else Z.dot(null)
             if report.qp and m and (Z is None or Z.shape[1] > 0):
                 # the Tikhonov term shifts the level's optimum by about d |y|: that much
                 # gradient is not the level's own
                 delta = self.regularization * (smax * smax if smax > 0 else 1.0)
                 pins = self._strongly_active(lev, x, Z_level, lo, hi, inherited, delta)
                 if pins is not None:
-                    Z = _null_space(pins @ Z if Z is not None else pins, Z, self.rank_tolerance)
+                    Z = _null_space(pins.dot(Z) if Z is not None else pins, Z, self.rank_tolerance)
             r = n if Z is None else Z.shape[1]
             if p:
-                Cx = C @ x
+                Cx = C.dot(x)
                 tol = self.tolerance
                 viol = (Cx > lev.upper + tol) | (Cx < lev.lower - tol)
                 if np.any(viol) and report.qp:
@@ -452,7 +453,7 @@ class HierarchicalQPSolver(Solver):
         if r and any(rep.qp for rep in self.levels):
             x = self._tie_break(x, Z, lo, hi, inherited, failures)
         xc = np.minimum(np.maximum(x, lb), ub)
-        clip = float(np.abs(xc - x).max()) if n else 0.0
+        clip = float(np.maximum.reduce(np.abs(xc - x))) if n else 0.0
         return xc, failures, clip
 
     def _level_qp(
@@ -483,8 +484,8 @@ class HierarchicalQPSolver(Solver):
         H = np.zeros((nv, nv))
         g = np.zeros(nv)
         if M is not None:
-            H[:r, :r] = M.T @ M
-            g[:r] = -(M.T @ c)
+            H[:r, :r] = M.T.dot(M)
+            g[:r] = -(M.T.dot(c))
         H[np.arange(r), np.arange(r)] += d
         if p:
             H[np.arange(r, nv), np.arange(r, nv)] = 1.0
@@ -502,13 +503,13 @@ class HierarchicalQPSolver(Solver):
             lows.append(lo - x)
             ups.append(hi - x)
         for G, glo, ghi in inherited:
-            Gx = G @ x
-            rows.append(_pad(G if Z is None else G @ Z, nv))
+            Gx = G.dot(x)
+            rows.append(_pad(G if Z is None else G.dot(Z), nv))
             lows.append(glo - Gx)
             ups.append(ghi - Gx)
         if p:
-            Cz = lev.C if Z is None else lev.C @ Z
-            Cx = lev.C @ x
+            Cz = lev.C if Z is None else lev.C.dot(Z)
+            Cx = lev.C.dot(x)
             own = np.zeros((p, nv))
             own[:, :r] = Cz
             own[np.arange(p), r + np.arange(p)] = -1.0
@@ -542,7 +543,7 @@ class HierarchicalQPSolver(Solver):
             # Tikhonov term; a level with directions of its own can trade them against the
             # bounds, so its face is re-solved exactly
             y = self._polish(x, y, Z, M, c, lo, hi, inherited)
-        return x + (y if Z is None else Z @ y)
+        return x + (y if Z is None else Z.dot(y))
 
     def _polish(
         self,
@@ -558,16 +559,16 @@ class HierarchicalQPSolver(Solver):
         """Remove the Tikhonov bias: on the face of the constraints active at the QP's answer,
         the level's least squares is solved exactly (``y + W (M W)^+ (c - M y)``, ``W`` the
         directions that keep the active constraints still); kept if it stays feasible."""
-        xq = x + (y if Z is None else Z @ y)
+        xq = x + (y if Z is None else Z.dot(y))
         act = 1e-8
         on = (xq <= lo + act) | (xq >= hi - act)
         grows = []
         for G, glo, ghi in inherited:
-            Gx = G @ xq
+            Gx = G.dot(xq)
             gon = (Gx <= glo + act) | (Gx >= ghi - act)
             if gon.any():
                 grows.append(G[gon])
-        res = c - M @ y
+        res = c - M.dot(y)
         W: np.ndarray | None = None
         free: np.ndarray | None = None
         if Z is None and not grows:  # only bounds of x: keep those entries, move the others
@@ -579,8 +580,8 @@ class HierarchicalQPSolver(Solver):
                 rows.insert(0, np.eye(x.shape[0])[on])
             if rows:
                 N = np.vstack(rows)
-                W = _null_space(N if Z is None else N @ Z, None, self.rank_tolerance)
-                MW = M @ W
+                W = _null_space(N if Z is None else N.dot(Z), None, self.rank_tolerance)
+                MW = M.dot(W)
             else:
                 MW = M
         if MW.shape[1] == 0:
@@ -593,11 +594,11 @@ class HierarchicalQPSolver(Solver):
         if free is not None:
             yp[free] += w
         else:
-            yp += w if W is None else W @ w
+            yp += w if W is None else W.dot(w)
         if not np.isfinite(yp).all():
             return y
-        rp = c - M @ yp
-        if rp @ rp > res @ res or not _inside(x + (yp if Z is None else Z @ yp), lo, hi,
+        rp = c - M.dot(yp)
+        if rp.dot(rp) > res.dot(res) or not _inside(x + (yp if Z is None else Z.dot(yp)), lo, hi,
                                                 inherited):  # fmt: skip
             return y
         return yp
@@ -637,14 +638,15 @@ class HierarchicalQPSolver(Solver):
             k += p
         # daqp normalises rows: a zero row (a zero weight, a zero Jacobian row) becomes an
         # inactive dummy row
-        zero = np.einsum("ij,ij->i", A, A) < 1e-24
-        if zero.any():
+        zero = np.add.reduce(A * A, axis=1) < 1e-24
+        if _any(zero):
             A[zero] = 0.0
             A[zero, 0] = 1.0
             bl[n:][zero] = -_DAQP_BIG
             bu[n:][zero] = _DAQP_BIG
-        np.clip(bl, -_DAQP_BIG, _DAQP_BIG, out=bl)
-        np.clip(bu, -_DAQP_BIG, _DAQP_BIG, out=bu)
+        for bound in (bl, bu):  # clip to +-_DAQP_BIG (np.clip without its Python wrapper)
+            np.maximum(bound, -_DAQP_BIG, out=bound)
+            np.minimum(bound, _DAQP_BIG, out=bound)
         model = self._native_model
         try:
             if model is None:
@@ -669,7 +671,7 @@ class HierarchicalQPSolver(Solver):
             x, _, flag, info = model.solve()
         except (RuntimeError, ValueError, TypeError) as exc:
             flag, x, info = -100, None, {"iterations": 0, "error": str(exc)}
-        ok = flag in (1, 2) and x is not None and np.all(np.isfinite(x))
+        ok = flag in (1, 2) and x is not None and _finite(np.asarray(x, dtype=float))
         status = QPStatus.SOLVED if ok else QPStatus.FAILED
         for rep in self.levels[first:]:
             rep.qp, rep.engine_status = True, status
@@ -695,8 +697,8 @@ class HierarchicalQPSolver(Solver):
         ``regularization`` and resolves the minimum norm only to about eps / regularization);
         here it is exact: ``min 1/2 ||x + Z y||^2``, a Hessian of I.
         """
-        t = x if Z is None else Z.T @ x
-        xc = x - (t if Z is None else Z @ t)
+        t = x if Z is None else Z.T.dot(x)
+        xc = x - (t if Z is None else Z.dot(t))
         if _inside(xc, lo, hi, inherited):
             return xc
         r = t.shape[0]
@@ -709,8 +711,8 @@ class HierarchicalQPSolver(Solver):
             lows.append(lo - x)
             ups.append(hi - x)
         for G, glo, ghi in inherited:
-            Gx = G @ x
-            rows.append(G if Z is None else G @ Z)
+            Gx = G.dot(x)
+            rows.append(G if Z is None else G.dot(Z))
             lows.append(glo - Gx)
             ups.append(ghi - Gx)
         Cm = np.vstack(rows) if rows else np.zeros((0, r))
@@ -721,7 +723,7 @@ class HierarchicalQPSolver(Solver):
             failures.append(f"minimum-norm tie-break: {sol.status.name.lower()} "
                             f"({self.engine_name}); kept the last level's answer")  # fmt: skip
             return x
-        return x + (sol.x if Z is None else Z @ sol.x)
+        return x + (sol.x if Z is None else Z.dot(sol.x))
 
     def _strongly_active(
         self,
@@ -745,8 +747,8 @@ class HierarchicalQPSolver(Solver):
         counted.
         """
         act = self.active_tolerance
-        g = lev.A.T @ (lev.A @ x - lev.b)
-        gy = g if Z is None else Z.T @ g
+        g = lev.A.T.dot(lev.A.dot(x) - lev.b)
+        gy = g if Z is None else Z.T.dot(g)
         gnorm = float(np.linalg.norm(gy))
         floor = max(1e-3 * self.tolerance * max(1.0, float(np.linalg.norm(lev.b))),
                     100.0 * delta * max(1.0, float(np.linalg.norm(x))))  # fmt: skip
@@ -763,7 +765,7 @@ class HierarchicalQPSolver(Solver):
             rows.append(E)
             signs.append(np.where(low[idx], 1.0, -1.0))
         for G, glo, ghi in inherited:
-            Gx = G @ x
+            Gx = G.dot(x)
             gl = Gx <= glo + act
             gu = Gx >= ghi - act
             if np.any(gl | gu):
@@ -773,7 +775,7 @@ class HierarchicalQPSolver(Solver):
             return None
         N = np.vstack(rows)
         sg = np.concatenate(signs)
-        Ny = (N if Z is None else N @ Z) * sg[:, None]
+        Ny = (N if Z is None else N.dot(Z)) * sg[:, None]
         # g = sum_i mu_i sg_i n_i with mu >= 0 for the active constraints that matter.
         mu = np.linalg.lstsq(Ny.T, gy, rcond=None)[0]
         pin = mu > max(1e-6 * gnorm, floor) / max(1.0, float(np.abs(Ny).max()))
@@ -786,7 +788,9 @@ class HierarchicalQPSolver(Solver):
             if name == _OBJECTIVES:
                 continue
             r, r0, bk = res[sl], res_free[sl], lev.b[sl]
-            if math.sqrt(r @ r) - math.sqrt(r0 @ r0) > self.tolerance * (1.0 + math.sqrt(bk @ bk)):
+            if math.sqrt(r.dot(r)) - math.sqrt(r0.dot(r0)) > self.tolerance * (
+                1.0 + math.sqrt(bk.dot(bk))
+            ):
                 out.append(name)
         return out
 
@@ -806,30 +810,30 @@ class HierarchicalQPSolver(Solver):
         weights = _task_weights(stack)
         tol = self.tolerance
         for k, lev in enumerate(problem.levels):
-            res = lev.A @ x - lev.b
-            level_res[k] = math.sqrt(res @ res)
+            res = lev.A.dot(x) - lev.b
+            level_res[k] = math.sqrt(res.dot(res))
             report = self.levels[k]
             report.residual = float(level_res[k])
+            b = lev.b
             for name, sl in lev.task_rows.items():
                 if name == _OBJECTIVES:
                     continue
                 r = res[sl]
-                bk = lev.b[sl]
-                if math.sqrt(r @ r) > tol * (1.0 + math.sqrt(bk @ bk)) or (
-                    report.failed and name in lev.task_rows
-                ):
+                bk = b[sl]
+                norm = math.sqrt(r.dot(r))
+                if norm > tol * (1.0 + math.sqrt(bk.dot(bk))) or report.failed:
                     infeasible.append((lev.name, name))
                 w = weights.get(name)
                 if w is None:
-                    task_res[name] = math.sqrt(r @ r)
+                    task_res[name] = norm
                 elif isinstance(w, float):
-                    task_res[name] = math.sqrt(r @ r) / math.sqrt(w) if w > 0 else 0.0
+                    task_res[name] = norm / math.sqrt(w) if w > 0 else 0.0
                 else:  # per-row weights; rows of weight 0 carry no information
                     r = r[w > 0] / np.sqrt(w[w > 0])
-                    task_res[name] = math.sqrt(r @ r)
+                    task_res[name] = math.sqrt(r.dot(r))
             infeasible += [(lev.name, t) for t in report.limited if t in lev.inequality_rows]
         act = self.active_tolerance
-        active = np.flatnonzero((x <= problem.lower + act) | (x >= problem.upper - act))
+        active = ((x <= problem.lower + act) | (x >= problem.upper - act)).nonzero()[0]
         top = problem.levels[0].name if problem.levels else ""
         if failures:
             status = SolverStatus.FAILED
@@ -856,7 +860,7 @@ class HierarchicalQPSolver(Solver):
             level_residuals=level_res,
             task_residuals=task_res,
             active_bounds=active,
-            scale=np.ones(len(problem.levels)),
+            scale=_ones(len(problem.levels)),
             infeasible=infeasible,
             message="; ".join(msg),
         )
@@ -866,9 +870,9 @@ class HierarchicalQPSolver(Solver):
 def _finite_level(lev: LevelProblem) -> bool:
     # One reduction per array: a sum is finite iff every entry is (barring overflow of
     # absurdly large rows, which are then reported as non-finite too).
-    if not np.isfinite(lev.A.sum() + lev.b.sum() + lev.C.sum()):
+    if not math.isfinite(_sum(lev.A, axis=None) + _sum(lev.b) + _sum(lev.C, axis=None)):
         return False
-    return not (lev.lower.shape[0] and (np.isnan(lev.lower).any() or np.isnan(lev.upper).any()))
+    return not (lev.lower.shape[0] and (_any(np.isnan(lev.lower)) or _any(np.isnan(lev.upper))))
 
 
 def _nonfinite_tasks(lev: LevelProblem) -> list[str]:
@@ -882,17 +886,44 @@ def _nonfinite_tasks(lev: LevelProblem) -> list[str]:
 
 def _inside(x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> bool:  # fmt: skip
-    if not ((x >= lo).all() and (x <= hi).all()):
+    if not (_all(x >= lo) and _all(x <= hi)):
         return False
     for G, glo, ghi in inherited:
-        Gx = G @ x
-        if not ((Gx >= glo).all() and (Gx <= ghi).all()):
+        Gx = G.dot(x)
+        if not (_all(Gx >= glo) and _all(Gx <= ghi)):
             return False
     return True
 
 
 def _rows_inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
-    return bool((v >= lo - tol).all() and (v <= hi + tol).all())
+    return _all(v >= lo - tol) and _all(v <= hi + tol)
+
+
+# ndarray.all()/.any()/.sum() go through Python wrappers; these are the C-level equivalents.
+_sum = np.add.reduce
+
+
+def _ones(n: int) -> np.ndarray:
+    """``np.ones(n)`` (a fresh array) without its Python wrapper."""
+    out = np.empty(n)
+    out.fill(1.0)
+    return out
+
+
+def _all(mask: np.ndarray) -> bool:
+    """``mask.all()``."""
+    return np.count_nonzero(mask) == mask.size
+
+
+def _any(mask: np.ndarray) -> bool:
+    """``mask.any()``."""
+    return np.count_nonzero(mask) > 0
+
+
+def _finite(x: np.ndarray) -> bool:
+    """``np.isfinite(x).all()``: ``x . x`` is finite iff every entry is, unless it
+    overflows (then the entry-wise test decides)."""
+    return math.isfinite(x.dot(x)) or _all(np.isfinite(x))
 
 
 _geqp3, _orgqr, _gels, _trtrs = (getattr(_lapack, f) for f in ("dgeqp3", "dorgqr", "dgels",
@@ -937,13 +968,13 @@ def _cod(
             z = z[:rank]
         if info != 0:
             raise np.linalg.LinAlgError(f"triangular solve info {info}")
-        y = Q[:, :rank] @ z
+        y = Q[:, :rank].dot(z)
     else:
         y = np.zeros(r)
     if rank == r:
         return rank, y, None, smax
     Q2 = Q[:, rank:]
-    y -= Q2 @ (Q2.T @ t)
+    y -= Q2.dot(Q2.T.dot(t))
     return rank, y, Q2, smax
 
 
@@ -965,7 +996,7 @@ def _null_space(Nz: np.ndarray, Z: np.ndarray | None, rank_tolerance: float) -> 
     _, S, Vt = np.linalg.svd(Nz, full_matrices=True)
     rank = int(np.count_nonzero(rank_tolerance * S[0] < S)) if S.size and S[0] > 0 else 0
     V2 = Vt[rank:].T
-    return V2 if Z is None else Z @ V2
+    return V2 if Z is None else Z.dot(V2)
 
 
 def _pad(G: np.ndarray, nv: int) -> np.ndarray:
@@ -982,7 +1013,13 @@ def _task_weights(stack: Stack | None) -> dict[str, float | np.ndarray]:
         return {}
     out: dict[str, float | np.ndarray] = {}
     for level in stack.levels:
-        for t in level.tasks:
-            w = np.asarray(t.weight, dtype=float)
+        for t in level.entries:
+            if not isinstance(t, Task):
+                continue
+            w = t.weight
+            if w.__class__ is float or w.__class__ is int:
+                out[t.name] = float(w)
+                continue
+            w = np.asarray(w, dtype=float)
             out[t.name] = float(w) if w.ndim == 0 else np.broadcast_to(w, (t.dim,))
     return out

@@ -40,12 +40,16 @@ update, no factorisation::
 With ``B = A F`` (``F`` idempotent, so ``B B^T = A F A^T``), the level's move along the free
 directions is ``B^T G^-1 r``; while no joint of the first level is saturated, ``F`` is a 0/1
 diagonal and ``B`` is ``A`` with columns zeroed. A level made only of objectives (rows ``s I``)
-needs no factorisation at all: its move is ``F (b/s - base)``. The best task scaling factor ``s*`` seen so far is kept;
-when the level runs out of free directions (``rank(A_k Z_free) <`` what the level needs),
-its velocity is scaled by ``s*`` (status ``SCALED``). Saturated joints stay fixed for the
-lower levels. As a last guard, a candidate that is still outside the box is moved along the
-segment from the (feasible) solution of the higher levels, so the box always holds and the
-result is never NaN.
+needs no factorisation at all: its move is ``F (b/s - base)``. The best task scaling factor
+``s*`` seen so far is kept; when the level runs out of free directions
+(``rank(A_k Z_free) <`` what the level needs), its velocity is scaled by ``s*`` (status
+``SCALED``). Saturated joints stay fixed for the lower levels. As a last guard, a candidate
+that is still outside the box is moved along the segment from the (feasible) solution of the
+higher levels, so the box always holds and the result is never NaN.
+
+Cost: every factorisation of an SNS iteration is also its rank test (the rank the level needs
+is that of the first iteration), a snapshot of the free directions is a reference (they are
+never modified in place) and the scaling factor is one pass over the stacked bounds.
 """
 
 from __future__ import annotations
@@ -66,6 +70,9 @@ from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 __all__ = ["ProjectionSolver"]
 
 _INSIDE_TOL = 1e-10
+_EPS = float(np.finfo(float).eps)
+_WIDEN = np.array([[-_INSIDE_TOL], [_INSIDE_TOL]])
+_count = np.count_nonzero  # C-level, unlike ndarray.all()/.any() (Python wrappers)
 _FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
 
 
@@ -81,7 +88,7 @@ class _Level:
     free: np.ndarray | None = None  # when P is None
 
     def projector(self) -> np.ndarray:
-        return np.diag(self.free.astype(float)) if self.P is None else self.P
+        return _diag(self.free) if self.P is None else self.P
 
 
 @dataclass
@@ -92,9 +99,35 @@ class _Box:
     hi: np.ndarray
     lo_tol: np.ndarray
     hi_tol: np.ndarray
+    lo_hi: np.ndarray  # [lo; hi] (2, n)
+    _no_limit: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, lo: np.ndarray, hi: np.ndarray) -> _Box:
+        """The box ``[lo, hi]``; the inside test widens it by ``_INSIDE_TOL (1 + |bound|)``."""
+        lo_hi = np.array([lo, hi])
+        wide = np.abs(lo_hi)
+        wide += 1.0
+        wide *= _WIDEN  # -TOL (1 + |lo|), +TOL (1 + |hi|)
+        wide += lo_hi
+        return cls(lo, hi, wide[0], wide[1], lo_hi)
+
+    @property
+    def hi_lo(self) -> np.ndarray:
+        """``[hi; lo]`` (2, n), for :func:`_scaling`."""
+        return self.lo_hi[::-1]
+
+    @property
+    def no_limit(self) -> np.ndarray:
+        """``[inf; -inf]`` (2, n)."""
+        if self._no_limit is None:
+            self._no_limit = np.full((2, self.lo.size), np.inf)
+            self._no_limit[1] = -np.inf
+        return self._no_limit
 
     def inside(self, u: np.ndarray) -> bool:
-        return bool((u >= self.lo_tol).all()) and bool((u <= self.hi_tol).all())
+        n = u.size
+        return _count(u >= self.lo_tol) == n and _count(u <= self.hi_tol) == n
 
 
 class _Gram:
@@ -108,11 +141,11 @@ class _Gram:
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         """``B^T G^-1 r`` (r: (m,) or (m, k))."""
-        return self.W.T @ (self.Linv @ r)
+        return self.W.T.dot(self.Linv.dot(r))
 
     def used(self) -> np.ndarray:
         """``B^T G^-1 B``: the projector onto the directions the level uses."""
-        return self.W.T @ self.W
+        return self.W.T.dot(self.W)
 
 
 class ProjectionSolver(Solver):
@@ -161,7 +194,7 @@ class ProjectionSolver(Solver):
         m = B.shape[0]
         if m == 0 or m > B.shape[1]:
             return None
-        G = B @ B.T
+        G = B.dot(B.T)
         L, info = dpotrf(G, lower=1, clean=1)
         if info != 0:
             return None
@@ -172,12 +205,12 @@ class ProjectionSolver(Solver):
         eps = self.singular_threshold
         # lambda_min(G) >= 1 / trace(G^-1) >= eps^2; and every eigenvalue is kept as a rank
         # (old rule: lambda > (rank_tolerance * max(1, s_max))^2, s_max^2 <= trace(G)).
-        if float(flat @ flat) * eps * eps > 1.0:
+        if float(flat.dot(flat)) * eps * eps > 1.0:
             return None
         top = float(G.trace())
         if eps * eps <= (self.rank_tolerance**2) * max(1.0, top):
             return None
-        return _Gram(B, Linv, Linv @ B)
+        return _Gram(B, Linv, Linv.dot(B))
 
     def _solve_ls(self, M: np.ndarray, r: np.ndarray,
                   damped: bool = True) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
@@ -200,10 +233,17 @@ class ProjectionSolver(Solver):
 
     def _gram_step(self, M: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``M^+_damped r`` and the exact projector ``M^+ M`` (from the eigen-decomposition
-        of ``M M^T``)."""
+        of ``M M^T``).
+
+        An eigenvalue of ``M M^T`` counts as zero below the rank tolerance or below the
+        eigen-solver's round-off, ``10 m eps_mach lambda_max``, whichever is larger: a level
+        with more rows than columns (``m > n``) has ``m - n`` exact zeros that come out as
+        +-1e-16, and counting them as directions would damp the whole level."""
         lam, U = np.linalg.eigh(M @ M.T)
-        top = lam[-1] if lam.size else 0.0
-        keep = lam > (self.rank_tolerance * max(1.0, np.sqrt(max(top, 0.0)))) ** 2
+        top = max(float(lam[-1]), 0.0) if lam.size else 0.0
+        floor = max((self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2,
+                    10.0 * lam.size * _EPS * top)  # fmt: skip
+        keep = lam > floor
         lam_r, U_r = lam[keep], U[:, keep]
         smin = np.sqrt(lam_r[0]) if lam_r.size else 0.0
         eps = self.singular_threshold
@@ -221,11 +261,15 @@ class ProjectionSolver(Solver):
             if prev.P is None:
                 u = u0 + (b / lp.identity_scale - u0) * prev.free
             else:
-                u = u0 + prev.P @ (b / lp.identity_scale - u0)
+                u = u0 + prev.P.dot(b / lp.identity_scale - u0)
             nxt = _Level(u, None, 1.0, prev.saturated, np.zeros(u0.size, dtype=bool))
         else:
-            B = (A if prev.free.all() else A * prev.free) if prev.P is None else A @ prev.P
-            r = b - A @ u0
+            B = (
+                (A if _count(prev.free) == prev.free.size else A * prev.free)
+                if prev.P is None
+                else A.dot(prev.P)
+            )
+            r = b - A.dot(u0)
             gram = self._certified(B)
             if gram is not None:
                 u = u0 + gram.solve(r)
@@ -244,45 +288,49 @@ class ProjectionSolver(Solver):
 
     # ------------------------------------------------------------------ SNS
     def _saturate(self, A: np.ndarray, b: np.ndarray, prev: _Level, box: _Box) -> _Level:
-        """Saturation in the Null Space for one level of tasks (see the module docstring)."""
+        """Saturation in the Null Space for one level of tasks (see the module docstring).
+
+        The rank the level needs is its rank on the free directions before any saturation:
+        that of the first iteration's factorisation (certified Cholesky, or SVD).
+        """
         lo, hi = box.lo, box.hi
         u0, sat = prev.u, prev.saturated
         free = _Free(prev, u0)
-        needed = self._rank(A, free)
-        level_sat = np.zeros(u0.size, dtype=bool)
-        best: tuple[float, np.ndarray, object] | None = None
+        needed = -1
+        skip = sat.copy()  # saturated so far: at this level or above
+        best: tuple[float, np.ndarray, np.ndarray, _Free, object] | None = None
+        R = np.empty((A.shape[0], 2))  # the task, and the compensation of base
+        R[:, 0] = b
+        Rc = R[:, 1]
         for _ in range(u0.size + 1):
             base = free.base
-            R = np.stack((b, -(A @ base)), axis=1)  # the task, and the compensation of base
+            Rc[:] = -A.dot(base)
             gram = self._certified(free.restrict(A))
             if gram is not None:
                 Y = gram.solve(R)
-                a, rest, rank, null = Y[:, 0], base + Y[:, 1], gram.B.shape[0], gram
+                a, rest, rank, null = Y[:, 0], base + Y[:, 1], A.shape[0], gram
             else:  # near a singularity or out of directions: the SVD decides
                 Zf = free.basis()
-                Yz, Nf, rank = self._solve_ls(A @ Zf, R)
-                a, rest, null = Zf @ Yz[:, 0], base + Zf @ Yz[:, 1], Zf @ Nf
-            s_max, critical = _scaling(a, rest, lo, hi, level_sat | sat)
+                Yz, Nf, rank = self._solve_ls(A.dot(Zf), R)
+                a, rest, null = Zf.dot(Yz[:, 0]), base + Zf.dot(Yz[:, 1]), Zf.dot(Nf)
+            if needed < 0:
+                needed = rank
+            s_max, critical = _scaling(a, rest, box, skip)
             if best is None or s_max > best[0]:
-                best = (s_max, rest + s_max * a, (free.copy(), null))
+                best = (s_max, rest, a, free, null)
             cand = rest + a
             if box.inside(cand):
-                return _Level(cand, _null_projector(free, null), 1.0, sat | level_sat)
+                return _Level(cand, _null_projector(free, null), 1.0, skip)
             if rank < needed or critical < 0:
                 break  # out of free directions: scale the level by the best factor found
-            level_sat[critical] = True
-            free.fix(critical, hi[critical] if cand[critical] > hi[critical] else lo[critical])
-        s, u, (free_b, null_b) = best
+            skip[critical] = True
+            bound = hi[critical] if cand[critical] > hi[critical] else lo[critical]
+            free = free.fixed(critical, bound)
+        s, rest, a, free_b, null_b = best
+        u = rest + s * a
         if not box.inside(u):  # last guard: a feasible point on the segment from u0
             u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
-        return _Level(u, _null_projector(free_b, null_b), s, sat | level_sat)
-
-    def _rank(self, A: np.ndarray, free: _Free) -> int:
-        """Rank of the level's rows on the free directions."""
-        if self._certified(free.restrict(A)) is not None:
-            return A.shape[0]
-        Z = free.basis()
-        return self._solve_ls(A @ Z, np.zeros(A.shape[0]))[2]
+        return _Level(u, _null_projector(free_b, null_b), s, skip)
 
     def _saturate_identity(self, lp: LevelProblem, prev: _Level, box: _Box) -> _Level:
         """SNS for a level of objectives only (rows ``s I``): with ``F`` the free directions,
@@ -296,28 +344,31 @@ class ProjectionSolver(Solver):
         lam2 = 0.0 if s >= eps else (1.0 - (s / eps) ** 2) * self.damping**2
         c = s / (s * s + lam2) if s > self.rank_tolerance * max(1.0, s) else 0.0
         needed = free.rank() if c else 0
-        level_sat = np.zeros(u0.size, dtype=bool)
-        best: tuple[float, np.ndarray, np.ndarray | None] | None = None
+        skip = sat.copy()  # saturated so far: at this level or above
+        best: tuple[float, np.ndarray, np.ndarray, np.ndarray | None] | None = None
         for _ in range(u0.size + 1):
             base = free.base
             rank = free.rank() if c else 0
             a = c * free.apply(b)
             rest = base - (c * s) * free.apply(base)
-            s_max, critical = _scaling(a, rest, lo, hi, level_sat | sat)
+            s_max, critical = _scaling(a, rest, box, skip)
             null = None if rank else free.matrix()  # what the level leaves free
             if best is None or s_max > best[0]:
-                best = (s_max, rest + s_max * a, null)
+                best = (s_max, rest, a, null)
             cand = rest + a
             if box.inside(cand):
-                return _Level(cand, null, 1.0, sat | level_sat, _none(u0.size, null))
+                return _Level(cand, null, 1.0, skip, _none(u0.size, null))
             if rank < needed or critical < 0:
                 break
-            level_sat[critical] = True
-            free.fix(critical, hi[critical] if cand[critical] > hi[critical] else lo[critical])
-        s_b, u, null = best
+            skip[critical] = True
+            free = free.fixed(
+                critical, hi[critical] if cand[critical] > hi[critical] else lo[critical]
+            )
+        s_b, rest, a, null = best
+        u = rest + s_b * a
         if not box.inside(u):
             u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
-        return _Level(u, null, s_b, sat | level_sat, _none(u0.size, null))
+        return _Level(u, null, s_b, skip, _none(u0.size, null))
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
@@ -333,16 +384,17 @@ class ProjectionSolver(Solver):
         nu = lo.size
         u_start = np.minimum(np.maximum(0.0, lo), hi)  # 0 unless the box excludes it
         pinned = lo == hi if self.saturate else np.zeros(nu, dtype=bool)
-        box = _Box(lo, hi, lo - _INSIDE_TOL * (1 + np.abs(lo)), hi + _INSIDE_TOL * (1 + np.abs(hi)))
+        box = _Box.of(lo, hi)
         state_k = _Level(u_start, None, 1.0, pinned, ~pinned)
         levels = problem.levels
-        scales = np.ones(len(levels))
+        scales = np.empty(len(levels))
+        scales.fill(1.0)
         for i, lp in enumerate(levels):
             state_k = self._level(lp, state_k, box, i + 1 < len(levels))
             scales[i] = state_k.scale
         u_s = state_k.u
         message = ""
-        if not math.isfinite(u_s @ u_s) and not np.all(np.isfinite(u_s)):
+        if not math.isfinite(u_s.dot(u_s)) and not np.all(np.isfinite(u_s)):
             u_s, message = u_start, "non-finite solution replaced by the box's closest point to 0"
         return self._result(problem, u_s, scales, time.perf_counter() - start, message)
 
@@ -357,15 +409,15 @@ class ProjectionSolver(Solver):
         for i, lp in enumerate(levels):
             if not lp.A.shape[0]:
                 continue
-            r = lp.A @ u_s - lp.b
-            level_res[i] = math.sqrt(r @ r)
+            r = lp.A.dot(u_s) - lp.b
+            level_res[i] = math.sqrt(r.dot(r))
             b = lp.b
             for name, sl in lp.task_rows.items():
                 rs = r[sl]
-                res = task_res[name] = math.sqrt(rs @ rs)
+                res = task_res[name] = math.sqrt(rs.dot(rs))
                 if name != "objectives":
                     bs = b[sl]
-                    if res > tol * (1.0 + math.sqrt(bs @ bs)):
+                    if res > tol * (1.0 + math.sqrt(bs.dot(bs))):
                         infeasible.append((lp.name, name))
         span = np.abs(lo)
         span += np.abs(hi)
@@ -376,9 +428,9 @@ class ProjectionSolver(Solver):
         top = levels[0].name if levels else ""
         if scales[0] >= 1.0 and any(level == top for level, _ in infeasible):
             status = SolverStatus.INFEASIBLE
-        elif (scales < 1.0).any():
+        elif _count(scales < 1.0):
             status = SolverStatus.SCALED
-        elif at.any():
+        elif _count(at):
             status = SolverStatus.BOUNDS_ACTIVE
         else:
             status = SolverStatus.OK
@@ -387,7 +439,7 @@ class ProjectionSolver(Solver):
             status=status,
             level_residuals=level_res,
             task_residuals=task_res,
-            active_bounds=np.flatnonzero(at),
+            active_bounds=at.nonzero()[0],
             scale=scales,
             infeasible=infeasible,
             solve_time=elapsed,
@@ -398,39 +450,33 @@ class ProjectionSolver(Solver):
 class _Free:
     """The free directions of a level under SNS and the point ``base`` that puts the joints
     saturated so far on their bounds: a 0/1 mask while the directions are coordinate axes,
-    else an orthogonal projector ``F`` (see the module docstring)."""
+    else an orthogonal projector ``F`` (see the module docstring). Never modified once
+    made (:meth:`fixed` returns a new one), so a snapshot is a reference."""
 
     __slots__ = ("F", "base", "mask")
 
     def __init__(self, prev: _Level, u0: np.ndarray) -> None:
-        self.base = u0.copy()
-        self.mask = None if prev.P is not None else prev.free.copy()
+        self.base = u0
+        self.mask = None if prev.P is not None else prev.free
         self.F = prev.P
-
-    def copy(self) -> _Free:
-        other = _Free.__new__(_Free)
-        other.base = self.base
-        other.mask = None if self.mask is None else self.mask.copy()
-        other.F = self.F
-        return other
 
     def restrict(self, A: np.ndarray) -> np.ndarray:
         """``B = A F``."""
         if self.mask is None:
-            return A @ self.F
-        return A if self.mask.all() else A * self.mask
+            return A.dot(self.F)
+        return A if _count(self.mask) == self.mask.size else A * self.mask
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``F x``."""
-        return self.F @ x if self.mask is None else x * self.mask
+        return self.F.dot(x) if self.mask is None else x * self.mask
 
     def matrix(self) -> np.ndarray:
-        return np.diag(self.mask.astype(float)) if self.mask is not None else self.F
+        return _diag(self.mask) if self.mask is not None else self.F
 
     def rank(self) -> int:
         if self.mask is not None:
             return int(np.count_nonzero(self.mask))
-        return int(round(float(self.F.trace())))
+        return round(float(self.F.trace()))
 
     def basis(self) -> np.ndarray:
         """An orthonormal basis of the free directions (n x r)."""
@@ -441,25 +487,33 @@ class _Free:
         Z[self.F.diagonal() <= _FIXED] = 0.0  # |Z[j]|^2 = F_jj: exact zeros, not rounding
         return Z
 
-    def fix(self, j: int, value: float) -> None:
-        """Saturate joint j at ``value``: move ``base`` along the free directions (minimum
-        norm) to put it there and remove the directions that move it."""
+    def fixed(self, j: int, value: float) -> _Free:
+        """The free directions once joint j is saturated at ``value`` (a new object; this
+        one is left as it is): ``base`` moves along the free directions (minimum norm) to
+        put the joint there and the directions that move it are removed."""
+        other = _Free.__new__(_Free)
         if self.mask is not None:
-            if self.mask[j]:
-                self.base = self.base.copy()
-                self.base[j] = value
-                self.mask[j] = False
-            return
+            other.F = None
+            if not self.mask[j]:
+                other.base, other.mask = self.base, self.mask
+                return other
+            other.base = self.base.copy()
+            other.base[j] = value
+            other.mask = self.mask.copy()
+            other.mask[j] = False
+            return other
         F = self.F
         fj = F[:, j]
         fjj = float(fj[j])
         if fjj <= _FIXED:  # |row j of an orthonormal basis| <= 1e-9: the joint cannot move
-            return
-        self.base = self.base + fj * ((value - self.base[j]) / fjj)
-        self.base[j] = value
-        self.F = F - np.outer(fj, fj / fjj)
-        self.F[j] = 0.0  # exactly: joint j no longer moves
-        self.F[:, j] = 0.0
+            return self
+        other.mask = None
+        other.base = self.base + fj * ((value - self.base[j]) / fjj)
+        other.base[j] = value
+        other.F = F - np.outer(fj, fj / fjj)
+        other.F[j] = 0.0  # exactly: joint j no longer moves
+        other.F[:, j] = 0.0
+        return other
 
 
 def _null_projector(free: _Free, null: object) -> np.ndarray:
@@ -470,30 +524,52 @@ def _null_projector(free: _Free, null: object) -> np.ndarray:
     return null @ null.T
 
 
+_EYES: dict[int, np.ndarray] = {}
+
+
+def _diag(mask: np.ndarray) -> np.ndarray:
+    """``diag(mask)`` as floats (a fresh array): the identity times the 0/1 mask, column by
+    column (exact: every entry is 1 * m_j or 0 * m_j)."""
+    n = mask.size
+    eye = _EYES.get(n)
+    if eye is None:
+        eye = _EYES[n] = np.eye(n)
+        eye.setflags(write=False)
+    return eye * mask
+
+
 def _none(n: int, null: np.ndarray | None) -> np.ndarray | None:
     """The ``free`` mask of a :class:`_Level` whose projector is ``null`` (None: zero)."""
     return np.zeros(n, dtype=bool) if null is None else None
 
 
-def _scaling(a: np.ndarray, rest: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-             skip: np.ndarray) -> tuple[float, int]:  # fmt: skip
+def _scaling(a: np.ndarray, rest: np.ndarray, box: _Box, skip: np.ndarray) -> tuple[float, int]:
     """Largest ``s`` in [0, 1] with ``rest + s a`` in the box (SNS task scaling factor), and the
-    joint that limits it (-1 if none). Joints in ``skip`` are already saturated."""
+    joint that limits it (-1 if none). Joints in ``skip`` are already saturated.
+
+    Per moving joint j (``a_j != 0``, not in ``skip``), ``rest_j + s a_j`` leaves the box at
+    ``up_j = (bound_j - rest_j) / a_j`` with the bound it moves towards (hi if ``a_j > 0``) and
+    enters it at ``down_j`` (the other bound); both rows are computed in one pass over the
+    stacked bounds ``[hi; lo]`` / ``[lo; hi]``.
+    """
     n = a.size
     if n == 0:
         return 1.0, -1
     pos = a > 0
-    act = pos | (a < 0)
+    act = a < 0
+    act |= pos
     act &= ~skip
-    up = np.full(n, np.inf)
-    down = np.full(n, -np.inf)
-    np.divide(np.where(pos, hi, lo) - rest, a, out=up, where=act)
-    np.divide(np.where(pos, lo, hi) - rest, a, out=down, where=act)
+    num = box.lo_hi.copy()  # [bound towards; bound away], (2, n)
+    np.copyto(num, box.hi_lo, where=pos)
+    num -= rest
+    t = box.no_limit.copy()  # [inf; -inf]: joints that do not move never limit s
+    np.divide(num, a, out=t, where=act)
+    up, down = t
     critical = int(up.argmin())
     s_max = float(up[critical])
     if not s_max < np.inf:
         critical = -1
-    if s_max < float(down.max()) or s_max < 0:  # rest itself is outside the box
+    if s_max < float(np.maximum.reduce(down)) or s_max < 0:  # rest itself is outside the box
         return 0.0, critical
     return min(s_max, 1.0), critical
 

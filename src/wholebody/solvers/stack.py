@@ -22,13 +22,16 @@ rows already in those coordinates (:class:`StackProblem`) and ``u = D u~`` with
 ``D = W^(-1/2)``.
 
 Evaluation cost: the stack computes the Jacobians of every frame its entries declare
-(``jacobian_frames()``) in one batch, lets each task write its rows straight into the level's
-buffer (:meth:`~wholebody.tasks.Task.write_rows`) and scales them in one product with a cached
-factor ``sqrt(w_i) D_j``, rebuilt only when a weight or the metric changes.
+(``jacobian_frames()``) in one batch, laid out so that each entry's frames are consecutive (an
+entry's stacked Jacobians are then a view of the batch), lets each task write its rows
+straight into the level's buffer (:meth:`~wholebody.tasks.Task.write_rows`) and scales them in
+one product with a cached factor ``sqrt(w_i) D_j``, rebuilt only when a weight or the metric
+changes.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -164,7 +167,9 @@ class Stack:
         nu = self.robot.nu
         m = np.array(value, dtype=float)
         if m.shape != (nu,) or not np.all(np.isfinite(m)) or np.any(m <= 0):
-            raise DimensionError(f"stack metric must be {nu} finite positive weights, got {value!r}")
+            raise DimensionError(
+                f"stack metric must be {nu} finite positive weights, got {value!r}"
+            )
         scale = 1.0 / np.sqrt(m)
         m.setflags(write=False)
         scale.setflags(write=False)
@@ -206,7 +211,7 @@ class Stack:
         nu = self.robot.nu
         self._buffers: list[LevelProblem] = []
         self._plans: list[_LevelPlan] = []
-        frames: dict[int, Frame] = {}
+        frames: list[Frame] = []  # each entry's frames as one run (see _add_run)
         for level in self.levels:
             tasks, inequalities, objectives = level.tasks, level.inequalities, level.objectives
             rows, k = {}, 0
@@ -225,9 +230,8 @@ class Stack:
             self._buffers.append(buf)
             self._plans.append(_LevelPlan(level, buf, tasks, inequalities, objectives))
             for e in level.entries:
-                for f in e.jacobian_frames():
-                    frames.setdefault(f.index, f)
-        self._frames = tuple(frames.values())
+                _add_run(frames, tuple(e.jacobian_frames()))
+        self._frames = tuple(frames)
         self._all_tasks = [t for plan in self._plans for t in plan.tasks]
         self._lower = np.empty(nu)
         self._upper = np.empty(nu)
@@ -278,20 +282,22 @@ class Stack:
                 for o in plan.objectives:
                     val = o.evaluate(state)
                     values[o.name] = val
-                    grad += o.weight * val.gradient
-                    if val.curvature is not None and o.weight > 0:
-                        curv = o.weight * val.curvature + (0.0 if curv is None else curv)
-                sw = float(np.sqrt(level.objective_weight))
+                    w = o.weight
+                    grad += w * val.gradient
+                    if val.curvature is not None and w > 0:
+                        curv = w * val.curvature if curv is None else w * val.curvature + curv
+                sw = math.sqrt(level.objective_weight)
                 if sw != plan.objective_scale:
                     np.fill_diagonal(plan.objective_A, sw)
                     plan.objective_scale = sw
                 if not plan.tasks:
                     buf.identity_scale = sw
                 # u0 = -k W^-1 grad / (1 + k dt W^-1 curv); rows in u~: D^-1 u0 = -k D grad / ...
-                step = -level.gain * sw * D * grad
+                step = np.multiply(-level.gain * sw * D, grad, out=plan.objective_b)
                 if curv is not None:
-                    step /= 1.0 + level.gain * dt * self._scale_sq * curv
-                plan.objective_b[:] = step
+                    curv *= level.gain * dt * self._scale_sq
+                    curv += 1.0
+                    step /= curv
             for t in plan.inequalities:
                 r = t.compute(state, dt)
                 sl = buf.inequality_rows[t.name]
@@ -299,17 +305,22 @@ class Stack:
                 buf.lower[sl] = r.lower
                 buf.upper[sl] = r.upper
         lower, upper = self._lower, self._upper
-        lower.fill(-np.inf)
-        upper.fill(np.inf)
-        for c in self.constraints:
+        for k, c in enumerate(self.constraints):
             b = c.bounds(state, dt)
-            np.maximum(lower, b.lower, out=lower)
-            np.minimum(upper, b.upper, out=upper)
+            if k == 0:  # max(-inf, l) = l, min(inf, u) = u
+                lower[:] = b.lower
+                upper[:] = b.upper
+            else:
+                np.maximum(lower, b.lower, out=lower)
+                np.minimum(upper, b.upper, out=upper)
+        if not self.constraints:
+            lower.fill(-np.inf)
+            upper.fill(np.inf)
         # Where position recovery and velocity limits disagree (a state outside its limits
         # asks for more than the joint's speed), the velocity limit wins: move back at full
         # speed rather than declare the box empty.
         crossed = lower > upper
-        if crossed.any():
+        if np.count_nonzero(crossed):
             mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
             lower[crossed] = mid
             upper[crossed] = mid
@@ -330,6 +341,20 @@ class Stack:
         return f"Stack({'; '.join(parts)}; constraints: {[c.name for c in self.constraints]})"
 
 
+def _add_run(layout: list[Frame], frames: tuple[Frame, ...]) -> None:
+    """Lay out the frames to prefetch so that an entry's frames are consecutive (then
+    :meth:`RobotState.jacobians` of them is a view of the batch): append ``frames`` unless
+    they already form a run of ``layout`` (a single frame: unless it is in ``layout``)."""
+    n = len(frames)
+    if n == 0:
+        return
+    ids = [f.index for f in frames]
+    have = [f.index for f in layout]
+    if any(have[k : k + n] == ids for k in range(len(have) - n + 1)):
+        return
+    layout.extend(frames)
+
+
 class _LevelPlan:
     """A level's fixed layout and cached row scaling (internal to :class:`Stack`).
 
@@ -338,8 +363,14 @@ class _LevelPlan:
     built from) and entirely when the metric changes.
     """
 
-    def __init__(self, level: Level, buf: LevelProblem, tasks: list[Task],
-                 inequalities: list[InequalityTask], objectives: list[Objective]) -> None:  # fmt: skip
+    def __init__(
+        self,
+        level: Level,
+        buf: LevelProblem,
+        tasks: list[Task],
+        inequalities: list[InequalityTask],
+        objectives: list[Objective],
+    ) -> None:
         self.level, self.buffer, self.entries = level, buf, level.entries
         self.tasks, self.inequalities, self.objectives = tasks, inequalities, objectives
         nt = sum(t.dim for t in tasks)

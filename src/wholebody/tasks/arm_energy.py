@@ -116,6 +116,9 @@ class ArmPotentialEnergy(Objective):
         self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
                         arm.forearm.frame)  # fmt: skip
         self._frames_base = (*self._frames, robot.base_frame)
+        # (body, mass, offset of its rows in C, centre of mass as floats) per arm body
+        self._bodies = tuple((body, body.mass, o, tuple(body.com.tolist()))
+                             for body, o in ((arm.upper_arm, 18), (arm.forearm, 24)))  # fmt: skip
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
         """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
@@ -134,9 +137,9 @@ class ArmPotentialEnergy(Objective):
         # Gravity: only the z rows of the centre-of-mass Jacobians are needed,
         # v_com,z = v_o,z + w_x r_y - w_y r_x with r the body-frame-to-com offset.
         gravity = 0.0
-        for body, m, o in ((arm.upper_arm, m1, 18), (arm.forearm, m2, 24)):
+        for body, m, o, (c0, c1, c2) in self._bodies:
             R, p = state.rotation_translation(body.frame)
-            (r0, r1, r2), (c0, c1, c2) = R.tolist(), body.com.tolist()
+            r0, r1, r2 = R.tolist()
             rx = r0[0] * c0 + r0[1] * c1 + r0[2] * c2
             ry = r1[0] * c0 + r1[1] * c1 + r1[2] * c2
             rz = r2[0] * c0 + r2[1] * c1 + r2[2] * c2
@@ -164,7 +167,7 @@ class ArmPotentialEnergy(Objective):
         else:
             Rb = state.rotation(self.robot.base_frame)
             r = np.array([W[0] - S[0], W[1] - S[1], W[2] - S[2]])
-            k, dk_dp = stiffness.evaluate(self._mirror * (Rb.T @ r))
+            k, dk_dp = stiffness.evaluate(self._mirror * Rb.T.dot(r))
             if self._constant:
                 dk_dp = None
         spring = 0.5 * k * rest * rest * w
@@ -180,7 +183,7 @@ class ArmPotentialEnergy(Objective):
         if dk_dp is not None:
             # dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang): with q = (c dk_dp Mirror) R_b^T,
             # q.dp = q.J_W - q.J_S + (q x (W - S)).J_b,ang
-            q0, q1, q2 = ((0.5 * rest * rest * w) * (dk_dp * self._mirror) @ Rb.T).tolist()
+            q0, q1, q2 = ((0.5 * rest * rest * w) * (dk_dp * self._mirror)).dot(Rb.T).tolist()
             d0, d1, d2 = r.tolist()
             for i, qi in enumerate((q0, q1, q2)):
                 C[12 + i] += qi
@@ -189,10 +192,10 @@ class ArmPotentialEnergy(Objective):
             C[34] += q2 * d0 - q0 * d2
             C[35] += q0 * d1 - q1 * d0
             J = state.jacobians(self._frames_base)
-            grad = np.array(C) @ J.reshape(36, -1)
+            grad = np.array(C).dot(J.reshape(36, -1))
         else:
             J = state.jacobians(self._frames)
-            grad = np.array(C[:30]) @ J.reshape(30, -1)
+            grad = np.array(C[:30]).dot(J.reshape(30, -1))
         return ArmEnergyValue(value=gravity + spring, gradient=grad, gravity=gravity,
                               spring=spring, arm_angle=alpha, stiffness=k,
                               rho=math.sqrt(rho2))  # fmt: skip

@@ -25,6 +25,7 @@ integral may only shrink (conditional integration).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -36,28 +37,37 @@ from wholebody.tasks.base import Task, TaskRows
 
 __all__ = [
     "FrameTask",
+    "PoseRows",
     "check_pose",
     "check_twist",
     "integrate_error",
     "pose_error",
-    "PoseRows",
     "pose_rows",
     "pose_rows_into",
 ]
 
 
-_EYE3 = np.eye(3)
-
-
 def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
     """A 4x4 homogeneous transform with an orthonormal rotation, or DimensionError."""
     T = np.array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
-    if T.shape != (4, 4) or not np.isfinite(T).all():
+    if T.shape != (4, 4):
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    R = T[:3, :3]
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R.tolist()
+    (a0, a1, a2, p0), (b0, b1, b2, p1), (c0, c1, c2, p2), last = T.tolist()
+    # A NaN or inf anywhere makes the sum non-finite (an overflow of it: the exact test).
+    total = a0 + a1 + a2 + p0 + b0 + b1 + b2 + p1 + c0 + c1 + c2 + p2 + sum(last)
+    if not math.isfinite(total) and not np.isfinite(T).all():
+        raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
     det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
-    if det < 0 or np.abs(R.T @ R - _EYE3).max() > 1e-6:
+    # R^T R - I, entry by entry (its six distinct entries)
+    gram = (
+        a0 * a0 + b0 * b0 + c0 * c0 - 1.0,
+        a1 * a1 + b1 * b1 + c1 * c1 - 1.0,
+        a2 * a2 + b2 * b2 + c2 * c2 - 1.0,
+        a0 * a1 + b0 * b1 + c0 * c1,
+        a0 * a2 + b0 * b2 + c0 * c2,
+        a1 * a2 + b1 * b2 + c1 * c2,
+    )
+    if det < 0 or max(map(abs, gram)) > 1e-6:
         raise DimensionError(f"{what}: the rotation part is not a rotation matrix")
     return T
 
@@ -67,7 +77,7 @@ def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
     if twist is None:
         return np.zeros(6)
     t = np.array(twist, dtype=float)
-    if t.shape != (6,) or not np.isfinite(t).all():
+    if t.shape != (6,) or (not math.isfinite(t @ t) and not np.isfinite(t).all()):
         raise DimensionError(f"{what}: expected a finite twist of shape (6,), got {t.shape}")
     return t
 
@@ -133,7 +143,7 @@ class PoseRows:
     ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
     """
 
-    __slots__ = ("e", "ff", "gain", "K")
+    __slots__ = ("K", "e", "ff", "gain")
 
     def __init__(self) -> None:
         self.K = np.eye(6)
@@ -156,17 +166,17 @@ class PoseRows:
     ) -> np.ndarray:
         """Write the rows into ``A`` and ``v``; return the error (a work array: copy it to
         keep it)."""
-        E = target[:3, :3] @ R.T
+        E = target[:3, :3].dot(R.T)
         K, ff, e = self.K, self.ff, self.e
         K[3:, 3:] = pin.Jlog3(E)
-        np.matmul(K, J, out=A)
+        np.dot(K, J, out=A)
         ff[:3] = twist[:3]
-        np.matmul(twist[3:], E, out=ff[3:])  # E^T w_d
-        np.matmul(K, ff, out=v)
+        np.dot(twist[3:], E, out=ff[3:])  # E^T w_d
+        np.dot(K, ff, out=v)
         np.subtract(target[:3, 3], p, out=e[:3])
         e[3:] = pin.log3(E)
         v += kp * e
-        if integral.any():
+        if np.count_nonzero(integral):  # integral.any(), without its Python wrapper
             v += ki * integral
         return e
 
@@ -267,7 +277,7 @@ class FrameTask(Task):
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         ki = self.ki
-        if not (ki.any() if isinstance(ki, np.ndarray) else np.any(ki)):
+        if not (np.count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
             return
         e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
                                    self._target(state))  # fmt: skip

@@ -20,6 +20,7 @@ from wholebody.tasks.base import Objective, ObjectiveValue
 
 __all__ = ["JointLimitAvoidance", "Manipulability"]
 
+_sum = np.add.reduce  # ndarray.sum() without its Python wrapper
 _PIVOT_FLOOR = 1e-8  # Cholesky pivots^2 below this fraction of max diag(J J^T): LU decides
 
 
@@ -62,16 +63,22 @@ class JointLimitAvoidance(Objective):
         span = self._hi - self._lo
         self._c = span**2 / 4
         self._eps = 1e-6 * span
-        # Evaluated over all nu entries at once (no gather/scatter): the joints left out get
-        # the dummy range [-1, 1] and c = 0, so they contribute exact zeros.
+        # Evaluated over all nu entries at once (no gather/scatter): every joint with finite
+        # limits over its range, the others over the dummy range [-1, 1]; the joints left out
+        # get c = 0, so they contribute exact zeros. The ranges are the same for every
+        # instance on this robot, so the terms that do not involve c are computed once per
+        # state and shared (see _terms).
         nu = robot.nu
         lo, hi, c = np.full(nu, -1.0), np.full(nu, 1.0), np.zeros(nu)
-        lo[idx], hi[idx], c[idx] = self._lo, self._hi, self._c
+        lo[limited], hi[limited] = lower[limited], upper[limited]
+        c[idx] = self._c
         self._lo_all, self._hi_all, self._c_all, self._c2_all = lo, hi, c, 2 * c
         eps = 1e-6 * (hi - lo)
         self._qmin_all, self._qmax_all = lo + eps, hi - eps
 
-    def evaluate(self, state: RobotState) -> ObjectiveValue:
+    def _terms(self, state: RobotState) -> tuple[np.ndarray, ...]:
+        """``(b - a, a b, (a b)^2, (a b)^3, a b + (b - a)^2)`` per actuated velocity, with
+        ``a = qmax - q``, ``b = q - qmin`` (q clamped ``range * 1e-6`` inside the limits)."""
         q = np.maximum(state.joint_positions(), self._qmin_all)
         np.minimum(q, self._qmax_all, out=q)
         a = self._hi_all - q
@@ -79,15 +86,22 @@ class JointLimitAvoidance(Objective):
         ab = a * b
         d = np.subtract(b, a, out=a)
         ab2 = ab * ab
+        ab3 = ab2 * ab
+        e = d * d
+        e += ab
+        return d, ab, ab2, ab3, e
+
+    def evaluate(self, state: RobotState) -> ObjectiveValue:
+        d, ab, ab2, ab3, e = state.memo(_TERMS_KEY, self._terms)
         grad = self._c_all * d
         grad /= ab2
-        d *= d
-        d += ab
-        curv = self._c2_all * d
-        ab2 *= ab
-        curv /= ab2
-        value = np.divide(self._c_all, ab, out=ab).sum()
+        curv = self._c2_all * e
+        curv /= ab3
+        value = _sum(self._c_all / ab)
         return ObjectiveValue(float(value), grad, curv)
+
+
+_TERMS_KEY = "joint_limit_avoidance_terms"
 
 
 class Manipulability(Objective):
@@ -122,18 +136,20 @@ class Manipulability(Objective):
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
         J = state.jacobians(self.frames).reshape(6 * len(self.frames), -1)
-        JJt = J @ J.T
+        JJt = J.dot(J.T)
         # Cholesky J J^T = L L^T: log det = 2 sum log L_ii and (J J^T)^-1 J = L^-T L^-1 J.
         # Where the smallest pivot is not well above rounding, the LU route decides instead
         # whether J J^T counts as singular (the same answer as before, at a higher cost).
         L, info = dpotrf(JJt, lower=1, clean=1)
         d = L.diagonal() if info == 0 else None
-        if d is not None and (d * d).min() > _PIVOT_FLOOR * JJt.diagonal().max():
-            logdet = 2.0 * float(np.log(d).sum())
+        if d is not None and min(x * x for x in d.tolist()) > _PIVOT_FLOOR * max(
+            JJt.diagonal().tolist()
+        ):
+            logdet = 2.0 * float(_sum(np.log(d)))
             if logdet < -200:
                 return ObjectiveValue(0.0, np.zeros(self.robot.nu))
             Linv, _ = dtrtri(L, lower=1)
-            P = Linv.T @ (Linv @ J)
+            P = Linv.T.dot(Linv.dot(J))
         else:
             sign, logdet = np.linalg.slogdet(JJt)
             if sign <= 0 or logdet < -200:

@@ -82,8 +82,8 @@ class RelativeFrameTask(Task):
         Ra, pa = state.rotation_translation(self.frame_a)
         Rb, pb = state.rotation_translation(self.frame_b)
         T = np.eye(4)
-        np.matmul(Ra.T, Rb, out=T[:3, :3])
-        np.matmul(Ra.T, pb - pa, out=T[:3, 3])
+        T[:3, :3] = Ra.T.dot(Rb)
+        T[:3, 3] = Ra.T.dot(pb - pa)
         return T
 
     def relative_jacobian(self, state: RobotState) -> np.ndarray:
@@ -92,10 +92,10 @@ class RelativeFrameTask(Task):
         Ra, pa = state.rotation_translation(self.frame_a)
         rx, ry, rz = (state.rotation_translation(self.frame_b)[1] - pa).tolist()
         J = Jb - Ja
-        J[:3] += np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ Ja[3:]  # r x w_a
+        J[:3] += np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]).dot(Ja[3:])  # r x w_a
         out = np.empty_like(J)
-        np.matmul(Ra.T, J[:3], out=out[:3])
-        np.matmul(Ra.T, J[3:], out=out[3:])
+        np.dot(Ra.T, J[:3], out=out[:3])
+        np.dot(Ra.T, J[3:], out=out[3:])
         return out
 
     def _relative(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -133,7 +133,7 @@ class RelativeFrameTask(Task):
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         ki = self.ki
-        if ki.any() if isinstance(ki, np.ndarray) else np.any(ki):
+        if np.count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki):
             e, _ = pose_error(*self._relative(state))
             integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 

@@ -247,3 +247,20 @@ def test_dmp_trajectory(dmp: DMP) -> None:
     )
     w = np.array([log_so3(a @ b.T) for a, b in zip(p.rotations, m.rotations, strict=True)])
     assert np.allclose(s.angular_velocities, w / (2 * h), atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("n", "window", "polyorder"), [(160, 21, 3), (50, 7, 2), (200, 25, 5), (9, 9, 3), (30, 5, 1)]
+)
+def test_savitzky_golay_equals_scipy(n, window, polyorder):
+    """The fit's own Savitzky-Golay derivatives equal scipy's ``mode="interp"`` filter."""
+    from scipy.signal import savgol_filter
+
+    from wholebody.planning.dmp import savitzky_golay
+
+    X = np.random.default_rng(n).normal(size=(n, 3)).cumsum(axis=0)
+    h = 0.013
+    ours = savitzky_golay(X, window, polyorder, h)
+    for k, mine in enumerate(ours):
+        ref = savgol_filter(X, window, polyorder, deriv=k, delta=h, axis=0, mode="interp")
+        np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-10 * max(1.0, np.abs(ref).max()))

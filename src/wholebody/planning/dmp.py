@@ -67,10 +67,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.signal import lfilter, savgol_filter
+from scipy.signal import lfilter
 
 from wholebody.errors import DimensionError
 from wholebody.planning._checks import as_array, as_pose, as_positive, as_vector
@@ -337,10 +338,8 @@ class DMP:
                 f"DMP.fit: window ({window}) must exceed polyorder ({polyorder}) and fit in "
                 f"{N} samples"
             )
-        xs = savgol_filter(X, window, polyorder, deriv=0, axis=0, mode="interp")
+        xs, xd, xdd = savitzky_golay(X, window, polyorder, h)
         x0, g = xs[0].copy(), xs[-1].copy()
-        xd = savgol_filter(X, window, polyorder, deriv=1, delta=h, axis=0, mode="interp")
-        xdd = savgol_filter(X, window, polyorder, deriv=2, delta=h, axis=0, mode="interp")
         K, D = cfg.K, cfg.D
         tau = T
         tk = np.linspace(0.0, T, N)
@@ -932,3 +931,49 @@ class DMPTrajectory(Trajectory):
             linear_accelerations=acc / h**2,
             angular_accelerations=(ddsig / T**2)[:, None] * axis,
         )
+
+
+@lru_cache(maxsize=32)
+def _savgol_matrices(window: int, polyorder: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Savitzky-Golay operators for an odd ``window`` of ``2m + 1`` samples (unit spacing).
+
+    ``C = V^+`` maps a window's samples to the least-squares polynomial's coefficients in the
+    offset ``x = i - m`` (``V[i, j] = x_i^j``); ``centre[k]`` (3, w) gives the value and the
+    first two derivatives at ``x = 0`` (rows ``k! C[k]``), and ``edge[k]`` (3, w, w) the same at
+    every offset of the window, for the first and last ``m`` samples (scipy's ``mode="interp"``).
+    """
+    m = window // 2
+    x = np.arange(window, dtype=float) - m
+    V = x[:, None] ** np.arange(polyorder + 1)
+    C = np.linalg.pinv(V)  # (p + 1, w)
+    centre = np.zeros((3, window))
+    edge = np.zeros((3, window, window))
+    powers = np.arange(polyorder + 1)
+    for k in range(3):
+        if k <= polyorder:
+            centre[k] = math.factorial(k) * C[k]
+        # d^k/dx^k x^j = j!/(j-k)! x^(j-k)
+        coef = np.array([math.perm(j, k) if j >= k else 0.0 for j in powers])
+        E = coef * x[:, None] ** np.maximum(powers - k, 0)  # (w, p + 1)
+        edge[k] = E @ C
+    return C, centre, edge
+
+
+def savitzky_golay(
+    X: np.ndarray, window: int, polyorder: int, h: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smoothed positions, velocities and accelerations of ``X`` (N, d) sampled every ``h``
+    seconds: the Savitzky-Golay filter (local least-squares polynomial of degree
+    ``polyorder`` over ``window`` samples, odd, ``<= N``), the first and last ``window // 2``
+    samples from the polynomial fitted to the first and last window (scipy's
+    ``savgol_filter(..., mode="interp")``, which this equals to round-off, without its
+    per-call overhead)."""
+    N = X.shape[0]
+    m = window // 2
+    _, centre, edge = _savgol_matrices(window, polyorder)
+    windows = np.lib.stride_tricks.sliding_window_view(X, window, axis=0)  # (N-w+1, d, w)
+    out = np.empty((3, N, X.shape[1]))
+    out[:, m : N - m] = np.einsum("kw,ndw->knd", centre, windows)
+    out[:, :m] = np.einsum("kiw,wd->kid", edge[:, :m], X[:window])
+    out[:, N - m :] = np.einsum("kiw,wd->kid", edge[:, m + 1 :], X[N - window :])
+    return out[0], out[1] / h, out[2] / (h * h)

@@ -10,6 +10,8 @@ from test_tasks import configurations
 from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
 from wholebody.tasks import (
     ArmPotentialEnergy,
+    Bounds,
+    Constraint,
     FrameTask,
     JointLimitAvoidance,
     JointPositionLimits,
@@ -228,3 +230,44 @@ def test_level_with_more_rows_than_columns_is_plain_least_squares(humanoid, rng)
         expected = problem.to_u(np.linalg.lstsq(A, b, rcond=None)[0])
         result = ProjectionSolver().solve(stack, state, DT)
         np.testing.assert_allclose(result.u, expected, atol=1e-9 * (1 + np.abs(expected).max()))
+
+
+class _Box(Constraint):
+    """A fixed velocity box (test helper)."""
+
+    name = "box"
+
+    def __init__(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        self.lower, self.upper = lower, upper
+
+    def bounds(self, state, dt):
+        return Bounds(self.lower, self.upper)
+
+
+def test_no_saturation_when_the_whole_stack_fits_the_box(humanoid, rng):
+    """A bound that the first level's own solution crosses but the full stack's solution
+    respects changes nothing: the answer is the unsaturated one (saturating the first level
+    would give up a direction the second level needs, and made the carry chatter)."""
+    nu = humanoid.nu
+    L, R = hands(humanoid)
+    posture = PostureTask(humanoid, kp=5.0)
+    found = 0
+    for q in configurations(humanoid, rng, 20):
+        state = humanoid.update(q)
+        near_targets(humanoid, state, (L, R), rng)
+        posture.set_target(humanoid.joint_positions(humanoid.random_configuration(rng, margin=0.2)))
+        inf = np.full(nu, np.inf)
+        first = ProjectionSolver().solve(Stack(humanoid, [[L, R]], [_Box(-inf, inf)]), state, DT).u
+        stack = Stack(humanoid, [[L, R], [posture]], [_Box(-inf, inf)])
+        whole = ProjectionSolver().solve(stack, state, DT).u
+        j = int(np.argmax(whole - first))
+        if whole[j] - first[j] < 1e-2:
+            continue
+        lower = -inf.copy()
+        lower[j] = 0.5 * (first[j] + whole[j])  # crossed by the first level, not by the sum
+        boxed = Stack(humanoid, [[L, R], [posture]], [_Box(lower, inf)])
+        result = ProjectionSolver().solve(boxed, state, DT)
+        np.testing.assert_allclose(result.u, whole, atol=1e-9)
+        assert result.status == SolverStatus.OK
+        found += 1
+    assert found >= 5

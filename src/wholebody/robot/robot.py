@@ -214,6 +214,13 @@ class Robot:
         self._cont = np.flatnonzero(kinds == 1)
         self._cont_q = qidx[self._cont]
         self._virtual = np.flatnonzero(kinds == 2)
+        # joint_positions()'s gathers: slices where the indices are runs (cheaper than fancy
+        # indexing), the same entries
+        self._scalar_ix = _as_slice(self._scalar)
+        self._scalar_qix = _as_slice(self._scalar_q)
+        self._cont_ix = _as_slice(self._cont)
+        self._cont_cos = _as_slice(self._cont_q)
+        self._cont_sin = _as_slice(self._cont_q + 1)
         self._joint_ids = joint_ids
         self._u_index = {n: k for k, n in enumerate(names)}
 
@@ -432,8 +439,8 @@ class Robot:
         """One scalar position per entry of ``u`` (rad or m): joint angles, wheel angles in
         (-pi, pi], and for a directly actuated planar base its pose (x, y, yaw)."""
         out = np.empty(self.nu)
-        out[self._scalar] = q[self._scalar_q]
-        out[self._cont] = np.arctan2(q[self._cont_q + 1], q[self._cont_q])
+        out[self._scalar_ix] = q[self._scalar_qix]
+        out[self._cont_ix] = np.arctan2(q[self._cont_sin], q[self._cont_cos])
         if self._virtual.size:
             out[self._virtual] = self.base_pose(q)
         return out
@@ -704,6 +711,17 @@ class RobotState:
 
 
 # ---------------------------------------------------------------------- helpers
+def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
+    """``idx`` as an equivalent slice when it is an arithmetic run (step >= 1), else itself."""
+    k = idx.tolist()
+    if not k:
+        return slice(0, 0)
+    step = k[1] - k[0] if len(k) > 1 else 1
+    if step >= 1 and k == list(range(k[0], k[-1] + 1, step)):
+        return slice(k[0], k[-1] + 1, step)
+    return idx
+
+
 def _suggest(name: object, candidates) -> str:
     close = difflib.get_close_matches(str(name), [str(c) for c in candidates], n=3)
     return f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""

@@ -156,6 +156,7 @@ from scipy.linalg import lapack as _lapack
 
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
+from wholebody.solvers._numeric import count_nonzero as _count_nonzero
 from wholebody.solvers.base import Solver
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
@@ -167,7 +168,7 @@ __all__ = ["HierarchicalQPSolver", "LevelReport"]
 _OBJECTIVES = "objectives"
 
 
-@dataclass
+@dataclass(slots=True)
 class LevelReport:
     """What happened at one level of the last solve (for logs, tests and benchmarks).
 
@@ -351,6 +352,8 @@ class HierarchicalQPSolver(Solver):
         r = n
         inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         native_tried = False
+        any_qp = False
+        last = len(problem.levels) - 1
         self._notes: list[str] = []
         self._native_from: int | None = None
         for k, lev in enumerate(problem.levels):
@@ -371,7 +374,8 @@ class HierarchicalQPSolver(Solver):
             smax = 0.0
             rank = 0
             if m:
-                c = b - A.dot(x)
+                # (x = 0, the usual start: c = b; c is only read)
+                c = b - A.dot(x) if Z is not None or _count_nonzero(x) else b
                 M = A if Z is None else A.dot(Z)
                 sw = lev.identity_scale if lev.A.shape == (n, n) else 0.0
                 if sw > 0:  # rows sw * I: M = sw Z has r singular values sw
@@ -394,7 +398,9 @@ class HierarchicalQPSolver(Solver):
             ):
                 x = xc
             else:
-                report.qp = True
+                report.qp = any_qp = True
+                if smax is None:  # certified full rank: |R_00| only now needed
+                    smax = _pivot_norm(M)
                 if self.method == "native" and not native_tried:
                     native_tried = True
                     xn = None
@@ -433,6 +439,8 @@ class HierarchicalQPSolver(Solver):
             if report.qp and m and (Z is None or Z.shape[1] > 0):
                 # the Tikhonov term shifts the level's optimum by about d |y|: that much
                 # gradient is not the level's own
+                if smax is None:
+                    smax = _pivot_norm(M)
                 delta = self.regularization * (smax * smax if smax > 0 else 1.0)
                 pins = self._strongly_active(lev, x, Z_level, lo, hi, inherited, delta)
                 if pins is not None:
@@ -448,12 +456,14 @@ class HierarchicalQPSolver(Solver):
                 glo = np.minimum(np.where(viol, Cx, lev.lower), Cx) - bt
                 ghi = np.maximum(np.where(viol, Cx, lev.upper), Cx) + bt
                 inherited.append((C.copy(), glo, ghi))
-            np.minimum(lo, x, out=lo)
-            np.maximum(hi, x, out=hi)
-        if r and any(rep.qp for rep in self.levels):
+            if k != last or any_qp:  # else nothing reads lo and hi again
+                np.minimum(lo, x, out=lo)
+                np.maximum(hi, x, out=hi)
+        if r and any_qp:
             x = self._tie_break(x, Z, lo, hi, inherited, failures)
         xc = np.minimum(np.maximum(x, lb), ub)
-        clip = float(np.maximum.reduce(np.abs(xc - x))) if n else 0.0
+        d = xc - x
+        clip = float(np.maximum.reduce(np.abs(d))) if d.dot(d) != 0.0 else 0.0
         return xc, failures, clip
 
     def _level_qp(
@@ -811,9 +821,8 @@ class HierarchicalQPSolver(Solver):
         tol = self.tolerance
         for k, lev in enumerate(problem.levels):
             res = lev.A.dot(x) - lev.b
-            level_res[k] = math.sqrt(res.dot(res))
             report = self.levels[k]
-            report.residual = float(level_res[k])
+            report.residual = level_res[k] = math.sqrt(res.dot(res))
             b = lev.b
             for name, sl in lev.task_rows.items():
                 if name == _OBJECTIVES:
@@ -831,13 +840,14 @@ class HierarchicalQPSolver(Solver):
                 else:  # per-row weights; rows of weight 0 carry no information
                     r = r[w > 0] / np.sqrt(w[w > 0])
                     task_res[name] = math.sqrt(r.dot(r))
-            infeasible += [(lev.name, t) for t in report.limited if t in lev.inequality_rows]
+            if report.limited:
+                infeasible += [(lev.name, t) for t in report.limited if t in lev.inequality_rows]
         act = self.active_tolerance
         active = ((x <= problem.lower + act) | (x >= problem.upper - act)).nonzero()[0]
         top = problem.levels[0].name if problem.levels else ""
         if failures:
             status = SolverStatus.FAILED
-        elif any(rep.limited for rep in self.levels) or any(lv == top for lv, _ in infeasible):
+        elif any([rep.limited for rep in self.levels]) or top in [lv for lv, _ in infeasible]:
             status = SolverStatus.INFEASIBLE
         elif active.size:
             status = SolverStatus.BOUNDS_ACTIVE
@@ -870,9 +880,14 @@ class HierarchicalQPSolver(Solver):
 def _finite_level(lev: LevelProblem) -> bool:
     # One reduction per array: a sum is finite iff every entry is (barring overflow of
     # absurdly large rows, which are then reported as non-finite too).
-    if not math.isfinite(_sum(lev.A, axis=None) + _sum(lev.b) + _sum(lev.C, axis=None)):
+    C = lev.C
+    if not math.isfinite(_sum(lev.A) + _sum(lev.b)):
         return False
-    return not (lev.lower.shape[0] and (_any(np.isnan(lev.lower)) or _any(np.isnan(lev.upper))))
+    if not C.shape[0]:
+        return True
+    if not math.isfinite(_sum(C)):
+        return False
+    return not (_any(np.isnan(lev.lower)) or _any(np.isnan(lev.upper)))
 
 
 def _nonfinite_tasks(lev: LevelProblem) -> list[str]:
@@ -900,7 +915,20 @@ def _rows_inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> b
 
 
 # ndarray.all()/.any()/.sum() go through Python wrappers; these are the C-level equivalents.
-_sum = np.add.reduce
+
+_ONES: dict[int, np.ndarray] = {}
+
+
+def _sum(a: np.ndarray) -> float:
+    """Sum of all entries of ``a``, as a dot product with ones (a BLAS call: cheaper than
+    ``np.add.reduce``; a NaN or inf entry makes it non-finite all the same)."""
+    f = a.ravel()
+    n = f.shape[0]
+    ones = _ONES.get(n)
+    if ones is None:
+        ones = _ONES[n] = np.ones(n)
+        ones.setflags(write=False)
+    return float(f.dot(ones))
 
 
 def _ones(n: int) -> np.ndarray:
@@ -912,12 +940,12 @@ def _ones(n: int) -> np.ndarray:
 
 def _all(mask: np.ndarray) -> bool:
     """``mask.all()``."""
-    return np.count_nonzero(mask) == mask.size
+    return _count_nonzero(mask) == mask.size
 
 
 def _any(mask: np.ndarray) -> bool:
     """``mask.any()``."""
-    return np.count_nonzero(mask) > 0
+    return _count_nonzero(mask) > 0
 
 
 def _finite(x: np.ndarray) -> bool:
@@ -932,7 +960,7 @@ _geqp3, _orgqr, _gels, _trtrs = (getattr(_lapack, f) for f in ("dgeqp3", "dorgqr
 
 def _cod(
     M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float
-) -> tuple[int, np.ndarray, np.ndarray | None, float]:
+) -> tuple[int, np.ndarray, np.ndarray | None, float | None]:
     """Minimum-norm least squares with a rank threshold, by a complete orthogonal
     decomposition (LAPACK ``dgeqp3`` + ``dorgqr``, about 3x faster than an SVD here).
 
@@ -940,26 +968,50 @@ def _cod(
     ``|R_ii| > rtol |R_00|``; ``Q_1`` spans ``M``'s row space and ``Q_2`` its null space. Returns
     ``(rank, y, Q_2 or None when rank = r, |R_00|)`` with ``y = Q_1 a - Q_2 Q_2^T t``, ``a`` the
     least-squares solution of ``R_1^T a = P^T c``: ``M y`` is the best fit of ``c``, and among
-    the ``y`` that achieve it, ``t + y`` has the smallest norm.
+    the ``y`` that achieve it, ``t + y`` has the smallest norm. When ``M`` has full column
+    rank (``rank = r < m``), ``y`` is its unique least-squares solution, solved by ``dgels``
+    on ``M`` itself (no ``Q`` needed).
+
+    A tall ``M`` (``m > r``) that is certified to have full column rank under the rule (see
+    :func:`_full_column_rank`) skips the pivoted QR: then ``|R_00|`` is returned as None (the
+    caller computes it with :func:`_pivot_norm` when it needs it).
     """
     m, r = M.shape
+    if m > r > 0:
+        lqr, z, info = _gels(M, c)
+        if info == 0 and _full_column_rank(M, lqr, rtol):
+            return r, z[:r], None, None
     k = min(m, r)
     qr, jpvt, tau, _, info = _geqp3(M.T, lwork=8 * (m + 1))
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqp3 info {info}")
-    d = np.abs(qr.diagonal()[:k]) if k else np.zeros(0)
-    smax = float(d[0]) if k else 0.0
-    rank = int(np.count_nonzero(d > rtol * smax)) if smax > 0 else 0
+    if k:
+        diag = qr.diagonal()[:k].tolist()
+        smax = abs(diag[0])
+        if smax > 0:
+            thr = rtol * smax
+            rank = 0
+            for v in diag:  # |R_ii| is non-increasing, but count every one like the rule
+                if abs(v) > thr:
+                    rank += 1
+        else:
+            rank = 0
+    else:
+        smax, rank = 0.0, 0
+    if rank == r and r < m:  # full column rank, more rows: the unique least-squares solution
+        _, z, info = _gels(M, c)
+        if info == 0:  # else (an exactly singular unpivoted R): the general path below
+            return rank, z[:r], None, smax
     if k < r:
         a = np.zeros((r, r), order="F")
         a[:, :k] = qr[:, :k]
+        Q, _, info = _orgqr(a, tau[:k], lwork=8 * r, overwrite_a=1)  # a is ours
     else:
-        a = qr[:, :r]
-    Q, _, info = _orgqr(a, tau[:k], lwork=8 * r)
+        Q, _, info = _orgqr(qr[:, :r], tau[:k], lwork=8 * r)
     if info != 0:
         raise np.linalg.LinAlgError(f"dorgqr info {info}")
     if rank:
-        cp = c[jpvt - 1]
+        cp = c.take(jpvt - 1)
         if rank == m:  # R_11^T a = P^T c, triangular
             z, info = _trtrs(qr[:rank, :rank], cp, lower=0, trans=1)
         else:  # (m x rank) lower-trapezoidal least squares
@@ -974,8 +1026,44 @@ def _cod(
     if rank == r:
         return rank, y, None, smax
     Q2 = Q[:, rank:]
-    y -= Q2.dot(Q2.T.dot(t))
+    if _count_nonzero(t):  # (t = 0: nothing to remove, often at the first level)
+        y -= Q2.dot(Q2.T.dot(t))
     return rank, y, Q2, smax
+
+
+_trtri = _lapack.dtrtri
+_CERTIFY_MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
+
+
+def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float) -> bool:
+    """Whether the rank rule of :func:`_cod` (``|R_ii| > rtol |R_00|`` in the pivoted QR of
+    ``M^T``) is certain to find full column rank, from the unpivoted QR ``M = Q R`` in ``lqr``
+    (``dgels``'s output) of a tall ``M`` (m x r, m > r).
+
+    In the pivoted QR of ``M^T`` (columns: the m rows of M), ``|R_ii|`` is the largest column
+    norm of the trailing block, whose 2-norm is at least ``sigma_r(M)`` (a rank-i matrix is at
+    least that far from ``M^T``), so ``|R_ii| >= sigma_r / sqrt(m)``; ``|R_00|`` is a column
+    norm, at most ``||M||_F``; and ``sigma_r(M) = sigma_min(R) >= 1 / ||R^-1||_F``. Hence full
+    rank when ``||R^-1||_F ||M||_F sqrt(m) rtol < 1``, here with a margin of 1e3.
+    """
+    r = M.shape[1]
+    Rinv, info = _trtri(lqr[:r, :r], lower=0)
+    if info != 0:
+        return False
+    fi = Rinv.ravel(order="K")
+    fm = M.ravel(order="K")
+    margin = _CERTIFY_MARGIN * rtol
+    return bool(fi.dot(fi) * fm.dot(fm) * (M.shape[0] * margin * margin) < 1.0)
+
+
+def _pivot_norm(M: np.ndarray) -> float:
+    """``|R_00|`` of the pivoted QR of ``M^T`` (what :func:`_cod` returns as its last value)."""
+    if not min(M.shape):
+        return 0.0
+    qr, _, _, _, info = _geqp3(M.T, lwork=8 * (M.shape[0] + 1))
+    if info != 0:
+        return 0.0
+    return abs(float(qr[0, 0]))
 
 
 _DAQP_BIG = 1e20  # an infinite bound for daqp

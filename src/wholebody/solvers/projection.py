@@ -26,7 +26,9 @@ damping of Chiaverini / Maciejewski, ``lambda^2 = (1 - (s_min/eps)^2) lambda_max
 smallest singular value ``s_min < eps`` (else no damping), so away from singularities the
 solution is the exact pseudo-inverse.
 
-Bounds: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE T-RO 2015), written
+Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
+inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
+T-RO 2015), from the start, written
 with orthogonal projectors. At each level, if ``u`` leaves the box, the most critical joint
 (the one that limits the task scaling factor most) is saturated at its bound: its value is
 fixed, the change is absorbed by the level's free null-space directions, and the level is
@@ -63,6 +65,7 @@ from scipy.linalg.lapack import dpotrf, dtrtri
 
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
+from wholebody.solvers._numeric import count_nonzero as _count
 from wholebody.solvers.base import Solver
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
@@ -72,7 +75,6 @@ __all__ = ["ProjectionSolver"]
 _INSIDE_TOL = 1e-10
 _EPS = float(np.finfo(float).eps)
 _WIDEN = np.array([[-_INSIDE_TOL], [_INSIDE_TOL]])
-_count = np.count_nonzero  # C-level, unlike ndarray.all()/.any() (Python wrappers)
 _FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
 
 
@@ -252,7 +254,8 @@ class ProjectionSolver(Solver):
         y = MtU @ ((U_r.T @ r) / (lam_r + mu))
         return y, (MtU / lam_r) @ MtU.T
 
-    def _level(self, lp: LevelProblem, prev: _Level, box: _Box, need_next: bool) -> _Level:
+    def _level(self, lp: LevelProblem, prev: _Level, box: _Box, need_next: bool,
+               saturate: bool) -> _Level:  # fmt: skip
         A, b = lp.A, lp.b
         u0 = prev.u
         if A.shape[0] == 0:
@@ -280,7 +283,7 @@ class ProjectionSolver(Solver):
                 y, used = self._gram_step(B, r)
                 u, Pn = u0 + y, prev.projector() - used
             nxt = _Level(u, Pn, 1.0, prev.saturated)
-        if not self.saturate or box.inside(u):
+        if not saturate or box.inside(u):
             return nxt
         if lp.identity_scale > 0:
             return self._saturate_identity(lp, prev, box)
@@ -383,15 +386,25 @@ class ProjectionSolver(Solver):
                 )
         nu = lo.size
         u_start = np.minimum(np.maximum(0.0, lo), hi)  # 0 unless the box excludes it
-        pinned = lo == hi if self.saturate else np.zeros(nu, dtype=bool)
         box = _Box.of(lo, hi)
-        state_k = _Level(u_start, None, 1.0, pinned, ~pinned)
         levels = problem.levels
         scales = np.empty(len(levels))
         scales.fill(1.0)
+        # The unsaturated solution of the whole stack first: when it is inside the box it is
+        # the answer (every level met as without bounds). Only otherwise does SNS run, from
+        # the start: saturating a level whose own candidate leaves the box, while the lower
+        # levels would have brought the sum back inside, would trade a higher level's
+        # freedom for nothing and makes the motion chatter between the two solutions.
+        free = np.zeros(nu, dtype=bool)
+        state_k = _Level(u_start, None, 1.0, free, ~free)
         for i, lp in enumerate(levels):
-            state_k = self._level(lp, state_k, box, i + 1 < len(levels))
-            scales[i] = state_k.scale
+            state_k = self._level(lp, state_k, box, i + 1 < len(levels), False)
+        if self.saturate and not box.inside(state_k.u):
+            pinned = lo == hi
+            state_k = _Level(u_start, None, 1.0, pinned, ~pinned)
+            for i, lp in enumerate(levels):
+                state_k = self._level(lp, state_k, box, i + 1 < len(levels), True)
+                scales[i] = state_k.scale
         u_s = state_k.u
         message = ""
         if not math.isfinite(u_s.dot(u_s)) and not np.all(np.isfinite(u_s)):
@@ -419,12 +432,13 @@ class ProjectionSolver(Solver):
                     bs = b[sl]
                     if res > tol * (1.0 + math.sqrt(bs.dot(bs))):
                         infeasible.append((lp.name, name))
-        span = np.abs(lo)
-        span += np.abs(hi)
-        np.maximum(span, 1.0, out=span)
-        span *= 1e-9
-        at = (u_s - lo <= span) | (hi - u_s <= span)
-        at &= np.isfinite(lo) | np.isfinite(hi)
+        # on a bound: within 1e-9 of it, relative to its size (an infinite side never is)
+        near_lo = np.abs(lo)
+        np.maximum(near_lo, 1.0, out=near_lo)
+        near_hi = np.abs(hi)
+        np.maximum(near_hi, 1.0, out=near_hi)
+        at = (u_s - lo <= 1e-9 * near_lo) & np.isfinite(lo)
+        at |= (hi - u_s <= 1e-9 * near_hi) & np.isfinite(hi)
         top = levels[0].name if levels else ""
         if scales[0] >= 1.0 and any(level == top for level, _ in infeasible):
             status = SolverStatus.INFEASIBLE

@@ -39,6 +39,7 @@ import numpy as np
 
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
+from wholebody.solvers._numeric import count_nonzero as _count_nonzero
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
 __all__ = ["Level", "LevelProblem", "Stack", "StackProblem"]
@@ -320,7 +321,7 @@ class Stack:
         # asks for more than the joint's speed), the velocity limit wins: move back at full
         # speed rather than declare the box empty.
         crossed = lower > upper
-        if np.count_nonzero(crossed):
+        if _count_nonzero(crossed):
             mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
             lower[crossed] = mid
             upper[crossed] = mid

@@ -35,6 +35,11 @@ from wholebody.errors import DimensionError
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
+try:  # np.count_nonzero without its Python wrapper (much cheaper on small arrays)
+    from numpy._core.multiarray import count_nonzero as _count_nonzero
+except ImportError:  # pragma: no cover - numpy < 2
+    _count_nonzero = np.count_nonzero
+
 __all__ = [
     "FrameTask",
     "PoseRows",
@@ -143,13 +148,19 @@ class PoseRows:
     ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
     """
 
-    __slots__ = ("K", "e", "ff", "gain")
+    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "e", "ff", "gain")
 
     def __init__(self) -> None:
         self.K = np.eye(6)
         self.ff = np.empty(6)
         self.e = np.empty(6)
         self.gain = np.empty(6)
+        # views made once: K's Jlog3 block, the error's parts, the last target's parts
+        self._Ko = self.K[3:, 3:]
+        self._ep = self.e[:3]
+        self._eo = self.e[3:]
+        self._target: np.ndarray | None = None
+        self._Rd = self._pd = None
 
     def __call__(
         self,
@@ -166,17 +177,22 @@ class PoseRows:
     ) -> np.ndarray:
         """Write the rows into ``A`` and ``v``; return the error (a work array: copy it to
         keep it)."""
-        E = target[:3, :3].dot(R.T)
+        if target is not self._target:
+            self._target, self._Rd, self._pd = target, target[:3, :3], target[:3, 3]
+        E = self._Rd.dot(R.T)
         K, ff, e = self.K, self.ff, self.e
-        K[3:, 3:] = pin.Jlog3(E)
+        self._Ko[...] = pin.Jlog3(E)
         np.dot(K, J, out=A)
-        ff[:3] = twist[:3]
-        np.dot(twist[3:], E, out=ff[3:])  # E^T w_d
-        np.dot(K, ff, out=v)
-        np.subtract(target[:3, 3], p, out=e[:3])
-        e[3:] = pin.log3(E)
-        v += kp * e
-        if np.count_nonzero(integral):  # integral.any(), without its Python wrapper
+        np.subtract(self._pd, p, out=self._ep)
+        self._eo[...] = pin.log3(E)
+        if _count_nonzero(twist):
+            ff[:3] = twist[:3]
+            np.dot(twist[3:], E, out=ff[3:])  # E^T w_d
+            np.dot(K, ff, out=v)
+            v += kp * e
+        else:  # no feed-forward: K 0 = 0
+            np.multiply(kp, e, out=v)
+        if _count_nonzero(integral):  # integral.any(), without its Python wrapper
             v += ki * integral
         return e
 
@@ -277,7 +293,7 @@ class FrameTask(Task):
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         ki = self.ki
-        if not (np.count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
+        if not (_count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
             return
         e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
                                    self._target(state))  # fmt: skip

@@ -934,29 +934,28 @@ class DMPTrajectory(Trajectory):
 
 
 @lru_cache(maxsize=32)
-def _savgol_matrices(window: int, polyorder: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Savitzky-Golay operators for an odd ``window`` of ``2m + 1`` samples (unit spacing).
-
-    ``C = V^+`` maps a window's samples to the least-squares polynomial's coefficients in the
-    offset ``x = i - m`` (``V[i, j] = x_i^j``); ``centre[k]`` (3, w) gives the value and the
-    first two derivatives at ``x = 0`` (rows ``k! C[k]``), and ``edge[k]`` (3, w, w) the same at
-    every offset of the window, for the first and last ``m`` samples (scipy's ``mode="interp"``).
-    """
+def _savgol_operator(n: int, window: int, polyorder: int) -> np.ndarray:
+    """The Savitzky-Golay filter of an ``n``-sample signal as one (3n, n) matrix (unit
+    spacing): rows ``k n .. (k + 1) n`` give the value (k = 0) and the first and second
+    derivatives of the local least-squares polynomial of degree ``polyorder`` over an odd
+    ``window = 2m + 1``. ``C = V^+`` maps a window's samples to the polynomial's coefficients
+    in the offset ``x = i - m`` (``V[i, j] = x_i^j``); interior samples use the centre of
+    their own window, the first and last ``m`` samples the polynomial fitted to the first and
+    last window (scipy's ``mode="interp"``)."""
     m = window // 2
     x = np.arange(window, dtype=float) - m
-    V = x[:, None] ** np.arange(polyorder + 1)
-    C = np.linalg.pinv(V)  # (p + 1, w)
-    centre = np.zeros((3, window))
-    edge = np.zeros((3, window, window))
     powers = np.arange(polyorder + 1)
+    C = np.linalg.pinv(x[:, None] ** powers)  # (p + 1, w)
+    S = np.zeros((3, n, n))
     for k in range(3):
-        if k <= polyorder:
-            centre[k] = math.factorial(k) * C[k]
-        # d^k/dx^k x^j = j!/(j-k)! x^(j-k)
+        # d^k/dx^k x^j = j!/(j-k)! x^(j-k), at every offset of the window: (w, p + 1)
         coef = np.array([math.perm(j, k) if j >= k else 0.0 for j in powers])
-        E = coef * x[:, None] ** np.maximum(powers - k, 0)  # (w, p + 1)
-        edge[k] = E @ C
-    return C, centre, edge
+        E = (coef * x[:, None] ** np.maximum(powers - k, 0)).dot(C)  # (w, w)
+        for i in range(m, n - m):
+            S[k, i, i - m : i + m + 1] = E[m]
+        S[k, :m, :window] = E[:m]
+        S[k, n - m :, n - window :] = E[m + 1 :]
+    return S.reshape(3 * n, n)
 
 
 def savitzky_golay(
@@ -965,15 +964,9 @@ def savitzky_golay(
     """Smoothed positions, velocities and accelerations of ``X`` (N, d) sampled every ``h``
     seconds: the Savitzky-Golay filter (local least-squares polynomial of degree
     ``polyorder`` over ``window`` samples, odd, ``<= N``), the first and last ``window // 2``
-    samples from the polynomial fitted to the first and last window (scipy's
-    ``savgol_filter(..., mode="interp")``, which this equals to round-off, without its
-    per-call overhead)."""
+    samples from the polynomial fitted to the first and last window. It equals scipy's
+    ``savgol_filter(..., mode="interp")`` to round-off, as one cached matrix product instead
+    of scipy's per-call overhead."""
     N = X.shape[0]
-    m = window // 2
-    _, centre, edge = _savgol_matrices(window, polyorder)
-    windows = np.lib.stride_tricks.sliding_window_view(X, window, axis=0)  # (N-w+1, d, w)
-    out = np.empty((3, N, X.shape[1]))
-    out[:, m : N - m] = np.einsum("kw,ndw->knd", centre, windows)
-    out[:, :m] = np.einsum("kiw,wd->kid", edge[:, :m], X[:window])
-    out[:, N - m :] = np.einsum("kiw,wd->kid", edge[:, m + 1 :], X[N - window :])
+    out = _savgol_operator(N, window, polyorder).dot(X).reshape(3, N, X.shape[1])
     return out[0], out[1] / h, out[2] / (h * h)

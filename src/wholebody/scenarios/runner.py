@@ -39,7 +39,7 @@ from wholebody.planning.trajectory import (
     MinimumJerkTrajectory,
     Trajectory,
 )
-from wholebody.presets import PaperWeights, default_stiffness, paper_stack
+from wholebody.presets import default_stiffness, paper_stack
 from wholebody.robot import Robot, load_robot
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
@@ -184,14 +184,7 @@ def run_scenario(
     """
     backend = backend or spec.backend
     robot = _robot(spec)
-    weights = PaperWeights(
-        energy=spec.stack.energy,
-        limits_arms=spec.stack.limits_arms,
-        limits_waist=spec.stack.limits_waist,
-        manipulability=spec.stack.manipulability,
-        gain=spec.stack.gain,
-        wheel_metric=spec.stack.wheel_metric,
-    )
+    weights = spec.stack
     stiffness = _stiffness(spec, robot)
     for hand in spec.hands.values():
         robot.frame(hand.frame)  # fail early on a bad frame name

@@ -72,6 +72,7 @@ from pathlib import Path
 from typing import Any
 
 from wholebody.errors import ConfigError
+from wholebody.presets import PaperWeights
 from wholebody.tomlreader import TomlReader, load_toml
 
 __all__ = [
@@ -92,13 +93,10 @@ KINDS = ("box", "cylinder", "sphere")
 
 
 @dataclass(frozen=True)
-class StackSpec:
-    energy: float = 0.5
-    limits_arms: float = 0.05
-    limits_waist: float = 30.0
-    manipulability: float = 0.0
-    gain: float = 1.0
-    wheel_metric: float = 0.01
+class StackSpec(PaperWeights):
+    """The paper's weights (:class:`~wholebody.presets.PaperWeights`) and the spring's
+    stiffness: a constant (N m/rad) or ``"learned"`` (the robot's stiffness network)."""
+
     stiffness: float | str = "learned"
 
 

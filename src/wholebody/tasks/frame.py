@@ -48,7 +48,6 @@ __all__ = [
     "integrate_error",
     "pose_error",
     "pose_rows",
-    "pose_rows_into",
 ]
 
 
@@ -122,23 +121,6 @@ def pose_rows(
     if rows.size == 6:
         return A, v, e
     return A[rows], v[rows], e
-
-
-def pose_rows_into(
-    J: np.ndarray,
-    p: np.ndarray,
-    R: np.ndarray,
-    target: np.ndarray,
-    twist: np.ndarray,
-    kp: np.ndarray,
-    ki: np.ndarray,
-    integral: np.ndarray,
-    A: np.ndarray,
-    v: np.ndarray,
-) -> np.ndarray:
-    """:func:`pose_rows` for all 6 rows, written into ``A`` (6 x nu) and ``v`` (6,); returns
-    the error. ``p`` and ``R`` are only read (they may be views of the robot's data)."""
-    return PoseRows()(J, p, R, target, twist, kp, ki, integral, A, v).copy()
 
 
 class PoseRows:

@@ -154,9 +154,9 @@ from typing import Any
 import numpy as np
 from scipy.linalg import lapack as _lapack
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
-from wholebody.solvers._numeric import count_nonzero as _count_nonzero
 from wholebody.solvers.base import Solver
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
@@ -977,10 +977,13 @@ def _cod(
     caller computes it with :func:`_pivot_norm` when it needs it).
     """
     m, r = M.shape
+    tall: np.ndarray | None = None  # M's least-squares solution when M is tall (m > r)
     if m > r > 0:
         lqr, z, info = _gels(M, c)
-        if info == 0 and _full_column_rank(M, lqr, rtol):
-            return r, z[:r], None, None
+        if info == 0:
+            tall = z[:r]
+            if _full_column_rank(M, lqr, rtol):
+                return r, tall, None, None
     k = min(m, r)
     qr, jpvt, tau, _, info = _geqp3(M.T, lwork=8 * (m + 1))
     if info != 0:
@@ -998,10 +1001,8 @@ def _cod(
             rank = 0
     else:
         smax, rank = 0.0, 0
-    if rank == r and r < m:  # full column rank, more rows: the unique least-squares solution
-        _, z, info = _gels(M, c)
-        if info == 0:  # else (an exactly singular unpivoted R): the general path below
-            return rank, z[:r], None, smax
+    if rank == r and tall is not None:  # full column rank, more rows: the unique solution
+        return rank, tall, None, smax  # (no dgels answer: an exactly singular R, path below)
     if k < r:
         a = np.zeros((r, r), order="F")
         a[:, :k] = qr[:, :k]

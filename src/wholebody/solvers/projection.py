@@ -63,9 +63,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dtrtri
 
+from wholebody._numeric import count_nonzero as _count
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
-from wholebody.solvers._numeric import count_nonzero as _count
 from wholebody.solvers.base import Solver
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem

@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
-from wholebody.solvers._numeric import count_nonzero as _count_nonzero
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
 __all__ = ["Level", "LevelProblem", "Stack", "StackProblem"]

@@ -31,14 +31,10 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
-
-try:  # np.count_nonzero without its Python wrapper (much cheaper on small arrays)
-    from numpy._core.multiarray import count_nonzero as _count_nonzero
-except ImportError:  # pragma: no cover - numpy < 2
-    _count_nonzero = np.count_nonzero
 
 __all__ = [
     "FrameTask",
@@ -130,13 +126,12 @@ class PoseRows:
     ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
     """
 
-    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "e", "ff", "gain")
+    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "e", "ff")
 
     def __init__(self) -> None:
         self.K = np.eye(6)
         self.ff = np.empty(6)
         self.e = np.empty(6)
-        self.gain = np.empty(6)
         # views made once: K's Jlog3 block, the error's parts, the last target's parts
         self._Ko = self.K[3:, 3:]
         self._ep = self.e[:3]
@@ -177,6 +172,30 @@ class PoseRows:
         if _count_nonzero(integral):  # integral.any(), without its Python wrapper
             v += ki * integral
         return e
+
+    def write(
+        self,
+        rows: np.ndarray,
+        J: np.ndarray,
+        p: np.ndarray,
+        R: np.ndarray,
+        target: np.ndarray,
+        twist: np.ndarray,
+        kp: np.ndarray,
+        ki: np.ndarray,
+        integral: np.ndarray,
+        A: np.ndarray,
+        v: np.ndarray,
+    ) -> None:
+        """:meth:`__call__` keeping only the rows ``rows`` (indices among the 6), written into
+        ``A`` (len(rows) x nu) and ``v``: straight into them when all 6 are kept."""
+        if rows.size == 6:
+            self(J, p, R, target, twist, kp, ki, integral, A, v)
+            return
+        A6, v6 = np.empty((6, A.shape[1])), np.empty(6)
+        self(J, p, R, target, twist, kp, ki, integral, A6, v6)
+        A[...] = A6[rows]
+        v[...] = v6[rows]
 
 
 class FrameTask(Task):
@@ -250,18 +269,10 @@ class FrameTask(Task):
         return TaskRows(A, v, self._weights())
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
-        rows = self.rows
         R, p = state.rotation_translation(self.frame)
         target = self.target if self.target is not None else self._target(state)
-        if rows.size == 6:
-            self._rows(state.jacobian(self.frame), p, R, target, self.target_twist, self.kp,
-                       self.ki, self.integral, J, v)  # fmt: skip
-        else:
-            A6, v6 = np.empty((6, J.shape[1])), np.empty(6)
-            self._rows(state.jacobian(self.frame), p, R, target, self.target_twist, self.kp,
-                       self.ki, self.integral, A6, v6)  # fmt: skip
-            J[...] = A6[rows]
-            v[...] = v6[rows]
+        self._rows.write(self.rows, state.jacobian(self.frame), p, R, target, self.target_twist,
+                         self.kp, self.ki, self.integral, J, v)  # fmt: skip
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:

@@ -112,15 +112,8 @@ class RelativeFrameTask(Task):
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         p, R, target = self._relative(state)
-        if self.rows.size == 6:
-            self._rows(self.relative_jacobian(state), p, R, target, self.target_twist,
-                       self.kp, self.ki, self.integral, J, v)  # fmt: skip
-        else:
-            A6, v6 = np.empty((6, J.shape[1])), np.empty(6)
-            self._rows(self.relative_jacobian(state), p, R, target, self.target_twist,
-                       self.kp, self.ki, self.integral, A6, v6)  # fmt: skip
-            J[...] = A6[self.rows]
-            v[...] = v6[self.rows]
+        self._rows.write(self.rows, self.relative_jacobian(state), p, R, target,
+                         self.target_twist, self.kp, self.ki, self.integral, J, v)  # fmt: skip
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -132,8 +125,7 @@ class RelativeFrameTask(Task):
         return e[self.rows]
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        ki = self.ki
-        if np.count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki):
+        if np.any(self.ki):
             e, _ = pose_error(*self._relative(state))
             integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 

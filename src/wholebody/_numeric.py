@@ -1,4 +1,4 @@
-"""Small-array helpers for the solvers' hot paths.
+"""Small-array helpers for the control loop's hot paths (tasks and solvers).
 
 On arrays of a few dozen entries numpy's Python-level wrappers (``ndarray.all()``,
 ``np.count_nonzero``) cost more than the work; ``count_nonzero`` here is numpy's C function

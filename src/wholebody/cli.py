@@ -48,10 +48,11 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     spec = load_scenario(path)
     scene = live = None
     if viz:
-        from wholebody.scenarios.visual import LiveView, draw_objects
+        from wholebody.scenarios.runner import scenario_robot
+        from wholebody.scenarios.visual import LiveView, draw_objects, show_run
         from wholebody.viz.scene import Scene
 
-        scene = Scene(load_robot_for(spec))
+        scene = Scene(scenario_robot(spec))
         print(f"MeshCat (localhost only): {scene.url}")
         draw_objects(scene, spec)
         scene.show(scene.robot.neutral())
@@ -73,20 +74,12 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     for name, f in files.items():
         print(f"  {name:17s} {f}")
     if scene is not None:
-        from wholebody.scenarios.visual import show_run
-
         show_run(scene, run)
         print(f"replay: the run is loaded as an animation at {scene.url}")
         if hold:
             input("press Enter to close the viewer ")
         scene.close()
     return 0
-
-
-def load_robot_for(spec):
-    from wholebody.scenarios.runner import _robot
-
-    return _robot(spec)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -124,6 +117,8 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from wholebody.scenarios.spec import BACKENDS
+
     parser = argparse.ArgumentParser(
         prog="wholebody",
         description="Whole-body control of highly redundant mobile humanoids.",
@@ -137,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scenario")
     run.add_argument(
         "--backend",
-        choices=("projection", "pinv", "hqp"),
+        choices=BACKENDS,
         default=None,
         help="override the scenario's backend",
     )
@@ -154,7 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--backends",
         nargs="+",
         default=["pinv", "projection", "hqp"],
-        choices=("projection", "pinv", "hqp"),
+        choices=BACKENDS,
     )
     compare.set_defaults(func=_compare)
     demo = sub.add_parser(

@@ -15,7 +15,12 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["TomlReader", "load_toml"]
+__all__ = ["TomlReader", "config_error", "load_toml"]
+
+
+def config_error(path: Path, key: str, message: str) -> ConfigError:
+    """The error for ``key`` of the file at ``path``: ``"<path>: [<key>] <message>"``."""
+    return ConfigError(f"{path}: [{key}] {message}")
 
 
 def load_toml(path: Path, what: str) -> dict[str, Any]:
@@ -37,7 +42,7 @@ class TomlReader:
         self.path = path
 
     def fail(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.path}: [{key}] {message}")
+        return config_error(self.path, key, message)
 
     def table(self, data: Mapping[str, Any], key: str, where: str, required: bool) -> dict:
         full = f"{where}.{key}" if where else key

@@ -42,7 +42,7 @@ from typing import Any, Literal
 
 from wholebody.errors import ConfigError
 from wholebody.tomlreader import TomlReader as _Reader
-from wholebody.tomlreader import load_toml
+from wholebody.tomlreader import config_error, load_toml
 
 __all__ = ["ArmConfig", "BaseConfig", "RobotConfig", "read_robot_config"]
 
@@ -96,7 +96,7 @@ class RobotConfig:
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
-        return ConfigError(f"{self.path}: [{key}] {message}")
+        return config_error(self.path, key, message)
 
 
 def read_robot_config(path: str | Path) -> RobotConfig:

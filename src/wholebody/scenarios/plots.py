@@ -1,4 +1,5 @@
-"""The paper's figures from a run log (PNG, headless).
+"""The paper's figures from a run log (PNG, headless: figures are drawn without pyplot, so
+importing this module changes no matplotlib state).
 
 * :func:`hand_paths`: executed hand paths in 3-D with their references, the obstacles,
   the props and a carried object at a few instants (Figs. 9, 10, 15);
@@ -13,11 +14,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Rectangle
 
 from wholebody.control.log import RunLog
 from wholebody.control.metrics import ARM_ANGLE_MIN_RHO
@@ -87,7 +86,7 @@ def hand_paths(
     """Executed (solid) and reference (dashed) hand paths in 3-D. ``carried`` maps an object
     name to its (N, 4, 4) poses: drawn at five instants. ``limits`` zooms the axes."""
     obstacles = [o for o in objects.values() if o.obstacle]
-    fig = plt.figure(figsize=(13 if obstacles else 7.5, 6.5))
+    fig = Figure(figsize=(13 if obstacles else 7.5, 6.5))
     ax = fig.add_subplot(1, 2 if obstacles else 1, 1, projection="3d")
     for name, pos in log.frame_positions.items():
         color = COLORS.get(name)
@@ -120,7 +119,6 @@ def hand_paths(
         _obstacle_detail(fig.add_subplot(1, 2, 2), log, obstacles)
     fig.tight_layout()
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 
@@ -152,14 +150,12 @@ def _obstacle_detail(ax, log: RunLog, obstacles: list[ObjectSpec]) -> None:
         c = np.asarray(o.position)
         if o.kind == "box":
             w, d = o.size[0] / 2, o.size[1] / 2
-            ax.add_patch(
-                plt.Rectangle((c[0] - w, c[1] - d), 2 * w, 2 * d, color="#d62728", alpha=0.5)
-            )
+            ax.add_patch(Rectangle((c[0] - w, c[1] - d), 2 * w, 2 * d, color="#d62728", alpha=0.5))
         else:
-            ax.add_patch(plt.Circle(c[:2], o.radius, color="#d62728", alpha=0.5))
+            ax.add_patch(Circle(c[:2], o.radius, color="#d62728", alpha=0.5))
             if o.margin:
                 ax.add_patch(
-                    plt.Circle(c[:2], o.radius + o.margin, color="#d62728", fill=False, ls=":")
+                    Circle(c[:2], o.radius + o.margin, color="#d62728", fill=False, ls=":")
                 )
         ax.text(c[0], c[1], o.name, fontsize=7, ha="center")
     ax.set_xlim(lo[0], hi[0])
@@ -177,7 +173,8 @@ def joint_velocities(log: RunLog, out: Path, title: str = "") -> Path:
     groups = [
         g for g in ("left_arm", "right_arm", "waist", "wheels") if g in log.meta.get("groups", {})
     ] or list(log.meta.get("groups", {}))
-    fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.2 * len(groups)), sharex=True)
+    fig = Figure(figsize=(8, 2.2 * len(groups)))
+    axes = fig.subplots(len(groups), 1, sharex=True)
     axes = np.atleast_1d(axes)
     names = log.meta.get("actuated_joints", [])
     for ax, g in zip(axes, groups, strict=True):
@@ -194,7 +191,6 @@ def joint_velocities(log: RunLog, out: Path, title: str = "") -> Path:
     fig.suptitle(title or "joint velocities")
     fig.tight_layout()
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out
 
 
@@ -202,7 +198,8 @@ def arm_energy(log: RunLog, out: Path, title: str = "") -> Path:
     """Per arm: gravity, spring and total energy (J) over time; arm angle (rad) over time,
     where defined; spring energy against the arm angle."""
     arms = list(log.arms)
-    fig, axes = plt.subplots(len(arms), 3, figsize=(13, 3.2 * len(arms)), squeeze=False)
+    fig = Figure(figsize=(13, 3.2 * len(arms)))
+    axes = fig.subplots(len(arms), 3, squeeze=False)
     for row, arm in zip(axes, arms, strict=True):
         tr = log.arms[arm]
         row[0].plot(log.t, tr.gravity, label="gravity $f_g$")
@@ -224,5 +221,4 @@ def arm_energy(log: RunLog, out: Path, title: str = "") -> Path:
     fig.suptitle(title or "arm potential energy")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out

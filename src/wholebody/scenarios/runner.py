@@ -12,8 +12,8 @@ For every phase, in order:
    a goal orientation is the start orientation turned by ``rotate`` (world rotation vector);
 2. the stack is the paper's (:func:`wholebody.presets.paper_stack`) with the hands on top
    and, for ``closed_chain`` phases, the relative pose of the secondary hand in the primary
-   at the same level (redundant with the hands' rows, which both backends tolerate);
-   backend ``pinv`` drops the objectives;
+   in a level above them (the grasp is met exactly, the hands' redundant rows in the least
+   squares below); backend ``pinv`` drops the objectives;
 3. a :class:`~wholebody.control.Controller` runs the phase from the current configuration.
 
 The logs are concatenated; a carried object follows its hand rigidly from the phase in which
@@ -34,18 +34,24 @@ from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
 from wholebody.errors import ConfigError
 from wholebody.humanlike.stiffness import StiffnessModel
+from wholebody.planning import obstacles as ob
+from wholebody.planning.demonstration import align_to_chord
+from wholebody.planning.dmp import DMP, DMPConfig, DMPTrajectory
+from wholebody.planning.dual_arm import CoordinatedTrajectory
 from wholebody.planning.trajectory import (
     HoldTrajectory,
     MinimumJerkTrajectory,
     Trajectory,
+    minimum_jerk_scaling,
 )
 from wholebody.presets import default_stiffness, paper_stack
 from wholebody.robot import Robot, load_robot
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
+from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativeFrameTask
 
-__all__ = ["ScenarioRun", "make_solver", "run_scenario"]
+__all__ = ["ScenarioRun", "make_solver", "run_scenario", "scenario_robot"]
 
 
 @dataclass
@@ -65,13 +71,12 @@ def make_solver(backend: str) -> Solver:
     if backend in ("projection", "pinv"):
         return ProjectionSolver()
     if backend == "hqp":
-        from wholebody.solvers.hqp import HierarchicalQPSolver
-
         return HierarchicalQPSolver()
     raise ConfigError(f"unknown backend {backend!r}: expected projection, pinv or hqp")
 
 
-def _robot(spec: ScenarioSpec) -> Robot:
+def scenario_robot(spec: ScenarioSpec) -> Robot:
+    """The scenario's robot: a directory beside the scenario file, else a bundled name."""
     candidate = spec.path.parent / spec.robot
     return load_robot(candidate if candidate.exists() else spec.robot)
 
@@ -100,10 +105,6 @@ class _Planners:
         """The scenario's DMP (``shape="demo"``), or one fitted on ``chord = (start, goal)``
         to the demonstration carried onto it (``"aligned"``) or to a minimum-jerk straight
         line on the demonstration's time grid (``"straight"``)."""
-        from wholebody.planning.demonstration import align_to_chord
-        from wholebody.planning.dmp import DMP, DMPConfig
-        from wholebody.planning.trajectory import minimum_jerk_scaling
-
         if self._demo is None:
             with np.load(self.spec.planner.demo, allow_pickle=False) as z:
                 self._demo = (z["positions"], z["times"])
@@ -120,8 +121,6 @@ class _Planners:
         return self._dmp
 
     def obstacles(self, names: tuple[str, ...]):
-        from wholebody.planning import obstacles as ob
-
         out = []
         for name in names:
             o = self.spec.objects[name]
@@ -149,8 +148,6 @@ class _Planners:
                     T0, _goal_pose(T0, hp.goal, hp.rotate), phase.duration
                 )
             elif hp.planner == "dmp":
-                from wholebody.planning.dmp import DMPTrajectory
-
                 goal = _goal_pose(T0, hp.goal, hp.rotate)
                 refs[hand] = DMPTrajectory(
                     self.dmp(hp.shape, (T0[:3, 3], goal[:3, 3])),
@@ -160,8 +157,6 @@ class _Planners:
                     obstacles=self.obstacles(hp.avoid),
                 )
             else:  # follow the primary through the grasp transform fixed now
-                from wholebody.planning.dual_arm import CoordinatedTrajectory
-
                 P0 = starts[phase.primary]
                 refs[hand] = CoordinatedTrajectory(
                     refs[phase.primary], np.eye(4), np.linalg.solve(T0, P0)
@@ -183,7 +178,7 @@ def run_scenario(
     ``duration_scale`` shortens or stretches every phase (tests use it to run quickly).
     """
     backend = backend or spec.backend
-    robot = _robot(spec)
+    robot = scenario_robot(spec)
     weights = spec.stack
     stiffness = _stiffness(spec, robot)
     for hand in spec.hands.values():
@@ -199,8 +194,10 @@ def run_scenario(
     total = round(spec.duration * duration_scale / spec.dt)
     bar = _progress_bar(total, spec.name) if progress else None
     carried_by: dict[str, tuple[str, float]] = {}  # object -> (hand, phase start time)
+    phases: dict[str, list[float]] = {}  # name -> [start, end] (s)
     for phase in spec.phases:
         duration = phase.duration * duration_scale
+        phases[phase.name] = [t0, t0 + duration]
         refs = planners.phase(_scaled(phase, duration), starts)
         entries = [tasks[h] for h in refs]
         first: list[RelativeFrameTask] = []
@@ -254,11 +251,6 @@ def run_scenario(
         t0 += duration
     if bar is not None:
         bar.close()
-    phases = {}
-    t = 0.0
-    for p in spec.phases:
-        phases[p.name] = [t, t + p.duration * duration_scale]
-        t += p.duration * duration_scale
     log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend})
     poses = _object_poses(robot, log, spec.objects, carried_by, {h: tasks[h].frame for h in tasks})
     metrics = _metrics(log, spec, duration_scale)

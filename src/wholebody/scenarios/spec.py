@@ -73,7 +73,7 @@ from typing import Any
 
 from wholebody.errors import ConfigError
 from wholebody.presets import PaperWeights
-from wholebody.tomlreader import TomlReader, load_toml
+from wholebody.tomlreader import TomlReader, config_error, load_toml
 
 __all__ = [
     "BACKENDS",
@@ -171,16 +171,8 @@ class ScenarioSpec:
     def duration(self) -> float:
         return sum(p.duration for p in self.phases)
 
-    def phase_times(self) -> dict[str, tuple[float, float]]:
-        """Start and end time (s) of every phase."""
-        out, t = {}, 0.0
-        for p in self.phases:
-            out[p.name] = (t, t + p.duration)
-            t += p.duration
-        return out
-
     def error(self, key: str, message: str) -> ConfigError:
-        return ConfigError(f"{self.path}: [{key}] {message}")
+        return config_error(self.path, key, message)
 
 
 def load_scenario(path: str | Path) -> ScenarioSpec:

@@ -10,7 +10,6 @@ from the control loop) and replayed afterwards as a MeshCat animation
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import meshcat
 import meshcat.animation
@@ -35,12 +34,6 @@ def rgb(color: str | int | Sequence[float]) -> int:
         return color
     r, g, b = (round(255 * c) for c in color[:3])
     return (r << 16) | (g << 8) | b
-
-
-@dataclass(frozen=True)
-class _Node:
-    path: str
-    frame: int  # robot geometry: index into the visual model
 
 
 class Scene:
@@ -150,7 +143,7 @@ class Scene:
         node = self.viewer["scene/props"][name]
         node.set_object(
             mg.Box(list(size)),
-            mg.MeshLambertMaterial(color=rgb(color), opacity=opacity, transparent=opacity < 1),
+            _material(color, opacity),
         )
         node.set_transform(np.asarray(pose, dtype=float))
 
@@ -167,7 +160,7 @@ class Scene:
         node = self.viewer["scene/props"][name]
         node.set_object(
             mg.Cylinder(height, radius),
-            mg.MeshLambertMaterial(color=rgb(color), opacity=opacity, transparent=opacity < 1),
+            _material(color, opacity),
         )
         node.set_transform(np.asarray(pose, dtype=float) @ _Y_TO_Z)
 
@@ -183,7 +176,7 @@ class Scene:
         node = self.viewer["scene/props"][name]
         node.set_object(
             mg.Ellipsoid(list(radii)),
-            mg.MeshLambertMaterial(color=rgb(color), opacity=opacity, transparent=opacity < 1),
+            _material(color, opacity),
         )
         node.set_transform(np.asarray(pose, dtype=float))
 
@@ -199,6 +192,11 @@ class Scene:
         """Stop the server this scene started (if any)."""
         if self.server is not None:
             self.server.stop()
+
+
+def _material(color: str | int, opacity: float) -> mg.MeshLambertMaterial:
+    """A shaded material of ``color``, transparent below ``opacity`` 1."""
+    return mg.MeshLambertMaterial(color=rgb(color), opacity=opacity, transparent=opacity < 1)
 
 
 def _translation(p: Sequence[float]) -> np.ndarray:

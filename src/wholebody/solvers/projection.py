@@ -28,8 +28,7 @@ solution is the exact pseudo-inverse.
 
 Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
 inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
-T-RO 2015), from the start, written
-with orthogonal projectors. At each level, if ``u`` leaves the box, the most critical joint
+T-RO 2015), from the start, written with orthogonal projectors. At each level, if ``u`` leaves the box, the most critical joint
 (the one that limits the task scaling factor most) is saturated at its bound: its value is
 fixed, the change is absorbed by the level's free null-space directions, and the level is
 re-solved on the remaining free directions. The free directions are those of the projector

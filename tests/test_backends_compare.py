@@ -19,7 +19,13 @@ import pytest
 from wholebody.presets import PaperWeights, paper_stack
 from wholebody.solvers import ProjectionSolver, SolverStatus, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.tasks import FrameTask, JointPositionLimits, VelocityLimits
+from wholebody.tasks import (
+    FrameTask,
+    JointLimitAvoidance,
+    JointPositionLimits,
+    PostureTask,
+    VelocityLimits,
+)
 
 DT = 0.01
 
@@ -93,6 +99,27 @@ def test_with_bounds_active_the_qp_keeps_the_box_and_the_task(humanoid, rng):
             textbook_outside += 1
     assert short_but_exact >= 3 and better >= 10 and textbook_outside >= 20, (
         short_but_exact, better, textbook_outside)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "solver", [ProjectionSolver(), HierarchicalQPSolver()], ids=["projection", "hqp"]
+)
+def test_both_backends_report_unweighted_task_residuals(humanoid, rng, solver):
+    """``task_residuals`` is ``||J u - v||`` of each task's own rows whatever its weight
+    (scalar, per row, with a zero row), for both backends; the objectives are not a task."""
+    L = FrameTask(humanoid, "left_tool", kp=10.0, weight=4.0)
+    R = FrameTask(humanoid, "right_tool", kp=10.0, weight=[1.0, 2.0, 0.5, 0.0, 3.0, 0.25])
+    posture = PostureTask(humanoid, kp=0.5, weight=0.01)
+    stack = Stack(humanoid, [[L, R, posture], [JointLimitAvoidance(humanoid)]],
+                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
+    near_targets(state, (L, R), rng, reach=0.05)
+    result = solver.solve(stack, state, DT)
+    assert set(result.task_residuals) == {L.name, R.name, posture.name}
+    for task, keep in ((L, slice(None)), (R, [0, 1, 2, 4, 5]), (posture, slice(None))):
+        rows = task.compute(state)
+        r = (rows.J @ result.u - rows.v)[keep]  # a row of weight 0 carries no information
+        assert result.task_residuals[task.name] == pytest.approx(np.linalg.norm(r), rel=1e-9)
 
 
 def random_targets(robot, rng, count):

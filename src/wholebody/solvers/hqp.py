@@ -160,12 +160,9 @@ from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
-from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
-from wholebody.tasks.base import Task
+from wholebody.solvers.stack import OBJECTIVES, LevelProblem, Stack, StackProblem
 
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
-
-_OBJECTIVES = "objectives"
 
 
 @dataclass(slots=True)
@@ -318,20 +315,16 @@ class HierarchicalQPSolver(Solver):
         """
         t0 = time.perf_counter()
         problem = stack.evaluate(state, dt)
-        result = self.solve_problem(problem, stack)
+        result = self.solve_problem(problem)
         result.solve_time = time.perf_counter() - t0
         return result
 
-    def solve_problem(self, problem: StackProblem, stack: Stack | None = None) -> SolverResult:
-        """Solve an evaluated stack (rows in scaled coordinates).
-
-        ``stack`` is used only for the task weights, to report unweighted task residuals
-        ``||J u - v||``; without it the weighted residuals are reported.
-        """
+    def solve_problem(self, problem: StackProblem) -> SolverResult:
+        """Solve an evaluated stack (rows in scaled coordinates)."""
         t0 = time.perf_counter()
         x, failures, clip = self._cascade(problem)
         u = problem.to_u(x)
-        result = self._result(problem, stack, x, u, failures, clip)
+        result = self._result(problem, x, u, failures, clip)
         self.qp_time = result.solve_time = time.perf_counter() - t0
         return result
 
@@ -795,7 +788,7 @@ class HierarchicalQPSolver(Solver):
         """Tasks whose residual the hard constraints raised above the box-free optimum."""
         out = []
         for name, sl in lev.task_rows.items():
-            if name == _OBJECTIVES:
+            if name == OBJECTIVES:
                 continue
             r, r0, bk = res[sl], res_free[sl], lev.b[sl]
             if math.sqrt(r.dot(r)) - math.sqrt(r0.dot(r0)) > self.tolerance * (
@@ -808,38 +801,16 @@ class HierarchicalQPSolver(Solver):
     def _result(
         self,
         problem: StackProblem,
-        stack: Stack | None,
         x: np.ndarray,
         u: np.ndarray,
         failures: list[str],
         clip: float,
     ) -> SolverResult:
-        level_res = np.empty(len(problem.levels))
-        task_res: dict[str, float] = {}
-        infeasible: list[tuple[str, str]] = []
-        weights = _task_weights(stack)
-        tol = self.tolerance
+        failed = [k for k, rep in enumerate(self.levels) if rep.failed]
+        level_res, task_res, infeasible = problem.residuals(x, self.tolerance, failed)
         for k, lev in enumerate(problem.levels):
-            res = lev.A.dot(x) - lev.b
             report = self.levels[k]
-            report.residual = level_res[k] = math.sqrt(res.dot(res))
-            b = lev.b
-            for name, sl in lev.task_rows.items():
-                if name == _OBJECTIVES:
-                    continue
-                r = res[sl]
-                bk = b[sl]
-                norm = math.sqrt(r.dot(r))
-                if norm > tol * (1.0 + math.sqrt(bk.dot(bk))) or report.failed:
-                    infeasible.append((lev.name, name))
-                w = weights.get(name)
-                if w is None:
-                    task_res[name] = norm
-                elif isinstance(w, float):
-                    task_res[name] = norm / math.sqrt(w) if w > 0 else 0.0
-                else:  # per-row weights; rows of weight 0 carry no information
-                    r = r[w > 0] / np.sqrt(w[w > 0])
-                    task_res[name] = math.sqrt(r.dot(r))
+            report.residual = float(level_res[k])
             if report.limited:
                 infeasible += [(lev.name, t) for t in report.limited if t in lev.inequality_rows]
         act = self.active_tolerance
@@ -1093,22 +1064,4 @@ def _pad(G: np.ndarray, nv: int) -> np.ndarray:
         return G
     out = np.zeros((G.shape[0], nv))
     out[:, : G.shape[1]] = G
-    return out
-
-
-def _task_weights(stack: Stack | None) -> dict[str, float | np.ndarray]:
-    """Each task's weight: a float, or an array of per-row weights."""
-    if stack is None:
-        return {}
-    out: dict[str, float | np.ndarray] = {}
-    for level in stack.levels:
-        for t in level.entries:
-            if not isinstance(t, Task):
-                continue
-            w = t.weight
-            if w.__class__ is float or w.__class__ is int:
-                out[t.name] = float(w)
-                continue
-            w = np.asarray(w, dtype=float)
-            out[t.name] = float(w) if w.ndim == 0 else np.broadcast_to(w, (t.dim,))
     return out

@@ -28,12 +28,12 @@ solution is the exact pseudo-inverse.
 
 Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
 inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
-T-RO 2015), from the start, written with orthogonal projectors. At each level, if ``u`` leaves the box, the most critical joint
-(the one that limits the task scaling factor most) is saturated at its bound: its value is
-fixed, the change is absorbed by the level's free null-space directions, and the level is
-re-solved on the remaining free directions. The free directions are those of the projector
-``F`` (initially the ``P`` of the higher levels); saturating joint j at value f is a rank-one
-update, no factorisation::
+T-RO 2015), from the start, written with orthogonal projectors. At each level, if ``u``
+leaves the box, the most critical joint (the one that limits the task scaling factor most)
+is saturated at its bound: its value is fixed, the change is absorbed by the level's free
+null-space directions, and the level is re-solved on the remaining free directions. The free
+directions are those of the projector ``F`` (initially the ``P`` of the higher levels);
+saturating joint j at value f is a rank-one update, no factorisation::
 
     base <- base + F e_j (f - base_j) / F_jj,      F <- F - F e_j e_j^T F / F_jj
 
@@ -414,23 +414,7 @@ class ProjectionSolver(Solver):
                 message: str) -> SolverResult:  # fmt: skip
         lo, hi = problem.lower, problem.upper
         levels = problem.levels
-        level_res = np.zeros(len(levels))
-        task_res: dict[str, float] = {}
-        infeasible: list[tuple[str, str]] = []
-        tol = self.tolerance
-        for i, lp in enumerate(levels):
-            if not lp.A.shape[0]:
-                continue
-            r = lp.A.dot(u_s) - lp.b
-            level_res[i] = math.sqrt(r.dot(r))
-            b = lp.b
-            for name, sl in lp.task_rows.items():
-                rs = r[sl]
-                res = task_res[name] = math.sqrt(rs.dot(rs))
-                if name != "objectives":
-                    bs = b[sl]
-                    if res > tol * (1.0 + math.sqrt(bs.dot(bs))):
-                        infeasible.append((lp.name, name))
+        level_res, task_res, infeasible = problem.residuals(u_s, self.tolerance)
         # on a bound: within 1e-9 of it, relative to its size (an infinite side never is)
         near_lo = np.abs(lo)
         np.maximum(near_lo, 1.0, out=near_lo)

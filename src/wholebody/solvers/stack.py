@@ -42,9 +42,12 @@ from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
-__all__ = ["Level", "LevelProblem", "Stack", "StackProblem"]
+__all__ = ["OBJECTIVES", "Level", "LevelProblem", "Stack", "StackProblem"]
 
 Entry = Task | InequalityTask | Objective
+
+OBJECTIVES = "objectives"
+"""The name of a level's objective rows in :attr:`LevelProblem.task_rows`."""
 
 
 @dataclass
@@ -102,10 +105,47 @@ class LevelProblem:
     identity_scale: float = 0.0
     """When the level holds only objectives, its rows are ``identity_scale * I`` (solvers
     may use that shortcut); 0 otherwise."""
+    unweight: np.ndarray | None = None
+    """Per row of ``A``, ``1 / sqrt(w)`` of its task's weight (0 where ``w = 0``), to report
+    unweighted task residuals; None: the rows are not weighted."""
+    _names: list[str] = field(init=False, repr=False)
+    _starts: np.ndarray = field(init=False, repr=False)
+    _rows: int = field(init=False, repr=False)
+    _work: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # The tasks' rows tile the top of A (the objectives' rows, if any, come last).
+        rows = sorted((sl.start, sl.stop, nm) for nm, sl in self.task_rows.items()
+                      if nm != OBJECTIVES and sl.stop > sl.start)  # fmt: skip
+        self._names = [nm for _, _, nm in rows]
+        self._starts = np.array([start for start, _, _ in rows], dtype=np.intp)
+        self._rows = rows[-1][1] if rows else 0
+        ends = [0, *(stop for _, stop, _ in rows)][: len(rows)]
+        if any(start != end for (start, _, _), end in zip(rows, ends, strict=True)):
+            raise WholebodyError(f"{self.name}: the tasks' rows must tile the top of A")
+        self._work = np.empty((3, self._rows))
 
     @property
     def has_equalities(self) -> bool:
         return self.A.shape[0] > 0
+
+    def task_residuals(self, r: np.ndarray) -> list[tuple[str, float, float, float]]:
+        """``(task, ||r_t||, ||r_t|| unweighted, ||b_t||)`` of each equality task (the
+        objectives' rows left out) for the residual ``r = A u~ - b`` of this level."""
+        names, n, work = self._names, self._rows, self._work
+        if not names:
+            return []
+        work[0] = r[:n]
+        if self.unweight is None:
+            work[1] = r[:n]
+        else:
+            np.multiply(r[:n], self.unweight[:n], out=work[1])
+        work[2] = self.b[:n]
+        work *= work
+        weighted, plain, b = np.add.reduceat(work, self._starts, axis=1).tolist()
+        sqrt = math.sqrt
+        return [(name, sqrt(w), sqrt(p), sqrt(bb))
+                for name, w, p, bb in zip(names, weighted, plain, b, strict=True)]  # fmt: skip
 
 
 @dataclass
@@ -121,6 +161,29 @@ class StackProblem:
     def to_u(self, u_scaled: np.ndarray) -> np.ndarray:
         """Actuated velocity from the scaled one."""
         return self.scale * u_scaled
+
+    def residuals(
+        self, u_scaled: np.ndarray, tol: float, failed: Sequence[int] = ()
+    ) -> tuple[np.ndarray, dict[str, float], list[tuple[str, str]]]:
+        """At ``u~``: each level's weighted residual ``||A u~ - b||``, each task's unweighted
+        residual ``||J u - v||``, and the ``(level, task)`` pairs whose weighted residual
+        exceeds ``tol (1 + ||b_t||)`` (every task of the levels listed in ``failed``)."""
+        levels = self.levels
+        level_res = np.zeros(len(levels))
+        task_res: dict[str, float] = {}
+        infeasible: list[tuple[str, str]] = []
+        for i, lev in enumerate(levels):
+            if not lev.A.shape[0]:
+                continue
+            r = lev.A.dot(u_scaled)
+            r -= lev.b
+            level_res[i] = math.sqrt(r.dot(r))
+            skipped = i in failed
+            for name, weighted, plain, b in lev.task_residuals(r):
+                task_res[name] = plain
+                if skipped or weighted > tol * (1.0 + b):
+                    infeasible.append((lev.name, name))
+        return level_res, task_res, infeasible
 
 
 class Stack:
@@ -220,14 +283,15 @@ class Stack:
                 rows[t.name] = slice(k, k + t.dim)
                 k += t.dim
             if objectives:
-                rows["objectives"] = slice(k, k + nu)
+                rows[OBJECTIVES] = slice(k, k + nu)
                 k += nu
             irows, p = {}, 0
             for t in inequalities:
                 irows[t.name] = slice(p, p + t.dim)
                 p += t.dim
             buf = LevelProblem(level.name, np.zeros((k, nu)), np.zeros(k), np.zeros((p, nu)),
-                               np.zeros(p), np.zeros(p), rows, irows)  # fmt: skip
+                               np.zeros(p), np.zeros(p), rows, irows,
+                               unweight=np.zeros(k))  # fmt: skip
             self._buffers.append(buf)
             self._plans.append(_LevelPlan(level, buf, tasks, inequalities, objectives))
             for e in level.entries:
@@ -384,7 +448,7 @@ class _LevelPlan:
         self.weight_keys: list[object] = [None] * len(tasks)
         self.scale_version = -1
         if objectives:
-            sl = buf.task_rows["objectives"]
+            sl = buf.task_rows[OBJECTIVES]
             self.objective_A, self.objective_b = buf.A[sl], buf.b[sl]
         self.objective_scale: float | None = None
 
@@ -396,6 +460,7 @@ class _LevelPlan:
         sl = self.slices[i]
         np.multiply(sw[:, None], D, out=self.factor[sl])
         self.row_scale[sl] = sw
+        self.buffer.unweight[sl] = np.divide(1.0, sw, out=np.zeros_like(sw), where=sw > 0)
 
     def rescale(self, D: np.ndarray, version: int) -> None:
         """The metric changed: rebuild the factor from the cached sqrt-weights."""

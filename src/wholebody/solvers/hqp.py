@@ -335,6 +335,8 @@ class HierarchicalQPSolver(Solver):
         bt = self.bound_relaxation
         failures: list[str] = []
         self.levels = [LevelReport(lev.name) for lev in problem.levels]
+        self._notes: list[str] = []
+        self._native_from: int | None = None
         if not _all(lb <= ub):  # NaN compares false; Stack.evaluate never crosses the box
             failures.append("the box is empty or not a number (NaN bounds): u = 0")
             return np.zeros(n), failures, 0.0
@@ -347,12 +349,12 @@ class HierarchicalQPSolver(Solver):
         native_tried = False
         any_qp = False
         last = len(problem.levels) - 1
-        self._notes: list[str] = []
-        self._native_from: int | None = None
         for k, lev in enumerate(problem.levels):
             report = self.levels[k]
             report.free = r
-            if r == 0:
+            if r == 0:  # nothing left to move: report the inequality rows x leaves violated
+                if lev.C.shape[0]:
+                    report.limited = _violated(lev, lev.C.dot(x), self.tolerance)[1]
                 continue
             if not _finite_level(lev):
                 bad = _nonfinite_tasks(lev)
@@ -405,11 +407,7 @@ class HierarchicalQPSolver(Solver):
                             report.limited = self._bound_limited(lev, A.dot(xn) - b, A.dot(xc) - b)
                         for lv, rep in zip(problem.levels[k:], self.levels[k:], strict=True):
                             if lv.C.shape[0]:
-                                Cx = lv.C.dot(xn)
-                                tol = self.tolerance
-                                viol = (Cx > lv.upper + tol) | (Cx < lv.lower - tol)
-                                rep.limited += [nm for nm, sl in lv.inequality_rows.items()
-                                                if viol[sl].any()]  # fmt: skip
+                                rep.limited += _violated(lv, lv.C.dot(xn), self.tolerance)[1]
                         x = xn
                         r = 0  # solved to the end
                         break
@@ -441,11 +439,9 @@ class HierarchicalQPSolver(Solver):
             r = n if Z is None else Z.shape[1]
             if p:
                 Cx = C.dot(x)
-                tol = self.tolerance
-                viol = (Cx > lev.upper + tol) | (Cx < lev.lower - tol)
-                if np.any(viol) and report.qp:
-                    report.limited += [name for name, sl in lev.inequality_rows.items()
-                                          if np.any(viol[sl])]  # fmt: skip
+                viol, names = _violated(lev, Cx, self.tolerance)
+                if report.qp:
+                    report.limited += names
                 glo = np.minimum(np.where(viol, Cx, lev.lower), Cx) - bt
                 ghi = np.maximum(np.where(viol, Cx, lev.upper), Cx) + bt
                 inherited.append((C.copy(), glo, ghi))
@@ -859,6 +855,15 @@ def _finite_level(lev: LevelProblem) -> bool:
     if not math.isfinite(_sum(C)):
         return False
     return not (_any(np.isnan(lev.lower)) or _any(np.isnan(lev.upper)))
+
+
+def _violated(lev: LevelProblem, Cx: np.ndarray, tol: float) -> tuple[np.ndarray, list[str]]:
+    """The inequality rows of ``lev`` that ``Cx`` violates by more than ``tol`` (a mask) and
+    the names of their tasks."""
+    viol = (Cx > lev.upper + tol) | (Cx < lev.lower - tol)
+    if not _count_nonzero(viol):
+        return viol, []
+    return viol, [name for name, sl in lev.inequality_rows.items() if _count_nonzero(viol[sl])]
 
 
 def _nonfinite_tasks(lev: LevelProblem) -> list[str]:

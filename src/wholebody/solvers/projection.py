@@ -335,24 +335,23 @@ class ProjectionSolver(Solver):
         return _Level(u, _null_projector(free_b, null_b), s, skip)
 
     def _saturate_identity(self, lp: LevelProblem, prev: _Level, box: _Box) -> _Level:
-        """SNS for a level of objectives only (rows ``s I``): with ``F`` the free directions,
-        the level's damped least-squares move is ``c F b`` and the compensation of ``base``
-        ``-c s F base``, ``c = s / (s^2 + lambda^2)``; the rank is ``rank(F)``."""
+        """SNS for a level of objectives only (rows ``s I``, ``s > 0``): with ``F`` the free
+        directions, the level's move is ``F b / s`` and the compensation of ``base``
+        ``-F base`` (no damping: ``s I`` is never singular, and without bounds the move is
+        the same ``F (b/s - base)``); the rank is ``rank(F)``."""
         lo, hi = box.lo, box.hi
         u0, sat, b = prev.u, prev.saturated, lp.b
         s = lp.identity_scale
         free = _Free(prev, u0)
-        eps = self.singular_threshold
-        lam2 = 0.0 if s >= eps else (1.0 - (s / eps) ** 2) * self.damping**2
-        c = s / (s * s + lam2) if s > self.rank_tolerance * max(1.0, s) else 0.0
-        needed = free.rank() if c else 0
+        c = 1.0 / s
+        needed = free.rank()
         skip = sat.copy()  # saturated so far: at this level or above
         best: tuple[float, np.ndarray, np.ndarray, np.ndarray | None] | None = None
         for _ in range(u0.size + 1):
             base = free.base
-            rank = free.rank() if c else 0
+            rank = free.rank()
             a = c * free.apply(b)
-            rest = base - (c * s) * free.apply(base)
+            rest = base - free.apply(base)
             s_max, critical = _scaling(a, rest, box, skip)
             null = None if rank else free.matrix()  # what the level leaves free
             if best is None or s_max > best[0]:
@@ -384,6 +383,10 @@ class ProjectionSolver(Solver):
                     f"({', '.join(lp.inequality_rows)}); use HierarchicalQPSolver for those"
                 )
         nu = lo.size
+        if _count(lo <= hi) != nu:  # NaN compares false; Stack.evaluate never crosses the box
+            message = "the box is empty or not a number (NaN bounds): u = 0"
+            return self._result(problem, np.zeros(nu), np.ones(len(problem.levels)),
+                                time.perf_counter() - start, message, failed=True)  # fmt: skip
         u_start = np.minimum(np.maximum(0.0, lo), hi)  # 0 unless the box excludes it
         box = _Box.of(lo, hi)
         levels = problem.levels
@@ -405,13 +408,14 @@ class ProjectionSolver(Solver):
                 state_k = self._level(lp, state_k, box, i + 1 < len(levels), True)
                 scales[i] = state_k.scale
         u_s = state_k.u
-        message = ""
         if not math.isfinite(u_s.dot(u_s)) and not np.all(np.isfinite(u_s)):
-            u_s, message = u_start, "non-finite solution replaced by the box's closest point to 0"
-        return self._result(problem, u_s, scales, time.perf_counter() - start, message)
+            message = "non-finite solution replaced by the box's closest point to 0"
+            return self._result(problem, u_start, scales, time.perf_counter() - start, message,
+                                failed=True)  # fmt: skip
+        return self._result(problem, u_s, scales, time.perf_counter() - start, "")
 
     def _result(self, problem: StackProblem, u_s: np.ndarray, scales: np.ndarray, elapsed: float,
-                message: str) -> SolverResult:  # fmt: skip
+                message: str, failed: bool = False) -> SolverResult:  # fmt: skip
         lo, hi = problem.lower, problem.upper
         levels = problem.levels
         level_res, task_res, infeasible = problem.residuals(u_s, self.tolerance)
@@ -423,7 +427,9 @@ class ProjectionSolver(Solver):
         at = (u_s - lo <= 1e-9 * near_lo) & np.isfinite(lo)
         at |= (hi - u_s <= 1e-9 * near_hi) & np.isfinite(hi)
         top = levels[0].name if levels else ""
-        if scales[0] >= 1.0 and any(level == top for level, _ in infeasible):
+        if failed:
+            status = SolverStatus.FAILED
+        elif scales[0] >= 1.0 and any(level == top for level, _ in infeasible):
             status = SolverStatus.INFEASIBLE
         elif _count(scales < 1.0):
             status = SolverStatus.SCALED

@@ -39,7 +39,8 @@ class SolverResult:
     level_residuals
         Per level, the weighted residual norm ``||A u~ - b||`` of its equality rows.
     task_residuals
-        Per equality task, the residual norm of its rows ``||J u - v||`` (unweighted).
+        Per equality task, the residual norm of its rows ``||J u - v||`` (unweighted; rows
+        of weight 0 take no part in the problem and count as 0).
     active_bounds
         Indices of the entries of ``u`` at a bound of the box.
     scale

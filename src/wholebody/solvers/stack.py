@@ -71,6 +71,13 @@ class Level:
     objective_weight: float = 1.0
     name: str = ""
 
+    def __setattr__(self, name: str, value: object) -> None:
+        # entries are kept as a tuple: a new set of entries is a new object, which the stack
+        # notices (it lays its buffers out again), and cannot change behind its back
+        if name == "entries":
+            value = tuple(value)  # type: ignore[arg-type]
+        object.__setattr__(self, name, value)
+
     @property
     def tasks(self) -> list[Task]:
         return [e for e in self.entries if isinstance(e, Task)]
@@ -209,12 +216,9 @@ class Stack:
         metric: np.ndarray | Sequence[float] | None = None,
     ) -> None:
         self.robot = robot
-        self.levels: list[Level] = []
-        for i, lv in enumerate(levels):
-            level = lv if isinstance(lv, Level) else Level(entries=tuple(lv))
-            if not level.name:
-                level.name = f"level {i}"
-            self.levels.append(level)
+        self.levels: list[Level] = [
+            lv if isinstance(lv, Level) else Level(entries=tuple(lv)) for lv in levels
+        ]
         self.constraints = list(constraints)
         self._scale_version = 0
         self.metric = np.ones(robot.nu) if metric is None else metric
@@ -251,7 +255,11 @@ class Stack:
         if not self.levels:
             raise WholebodyError("a stack needs at least one level")
         seen: dict[str, str] = {}
-        for level in self.levels:
+        for i, level in enumerate(self.levels):
+            if not isinstance(level, Level):
+                raise WholebodyError(f"stack level {i} is not a Level: {level!r}")
+            if not level.name:
+                level.name = f"level {i}"
             if not level.entries:
                 raise WholebodyError(f"stack {level.name!r} is empty")
             for e in level.entries:
@@ -267,9 +275,16 @@ class Stack:
                 seen[e.name] = level.name
             if level.objectives and not np.isfinite(level.gain):
                 raise WholebodyError(f"{level.name}: gain must be finite, got {level.gain}")
+            if level.objectives and not 0.0 <= level.objective_weight < np.inf:
+                raise WholebodyError(f"{level.name}: objective_weight must be finite and >= 0, "
+                                     f"got {level.objective_weight}")  # fmt: skip
         for c in self.constraints:
             if not isinstance(c, Constraint):
                 raise WholebodyError(f"{c!r} is not a Constraint")
+
+    def _relayout(self) -> None:
+        self._check_entries()
+        self._allocate()
 
     def _allocate(self) -> None:
         nu = self.robot.nu
@@ -316,11 +331,14 @@ class Stack:
         coordinates, see the module docstring)."""
         if not dt > 0:
             raise DimensionError(f"control step dt must be > 0 s, got {dt}")
-        for level, plan in zip(self.levels, self._plans, strict=True):
-            if level.entries is not plan.entries:  # entries replaced: lay the buffers out anew
-                self._check_entries()
-                self._allocate()
-                break
+        plans = self._plans
+        if len(plans) != len(self.levels):  # levels added or removed: lay the buffers out anew
+            self._relayout()
+        else:
+            for level, plan in zip(self.levels, plans, strict=True):
+                if level is not plan.level or level.entries is not plan.entries:  # replaced
+                    self._relayout()
+                    break
         D = self._scale
         state.prefetch(self._frames)
         values: dict[str, ObjectiveValue] = {}
@@ -454,7 +472,15 @@ class _LevelPlan:
 
     def set_weight(self, i: int, w: object, D: np.ndarray) -> None:
         """Task i's rows now have weight(s) ``w``."""
-        sw = np.sqrt(np.broadcast_to(np.asarray(w, dtype=float), (self.tasks[i].dim,)))
+        task = self.tasks[i]
+        try:
+            wa = np.broadcast_to(np.asarray(w, dtype=float), (task.dim,))
+        except (TypeError, ValueError) as exc:
+            raise DimensionError(f"{task.name}: weight must be a number or {task.dim} numbers, "
+                                 f"got {w!r}") from exc  # fmt: skip
+        if not (np.all(np.isfinite(wa)) and np.all(wa >= 0)):
+            raise DimensionError(f"{task.name}: weights must be finite and >= 0, got {w!r}")
+        sw = np.sqrt(wa)
         self.sqrt_weights[i] = sw
         self.weight_keys[i] = float(w) if isinstance(w, (float, int)) else np.array(w, float)
         sl = self.slices[i]

@@ -8,6 +8,7 @@ import pytest
 from fdcheck import gradient_fd
 from test_tasks import configurations
 
+from wholebody.errors import FrameError
 from wholebody.humanlike import StiffnessModel, arm_angle
 from wholebody.robot.hessian import actuated_support_mask, frame_hessian
 from wholebody.tasks import ArmPotentialEnergy, JointLimitAvoidance, Manipulability
@@ -97,6 +98,18 @@ def test_joint_limit_avoidance_stays_finite_outside_limits(humanoid):
     v = objective.evaluate(humanoid.update(q))
     assert np.isfinite(v.value) and np.all(np.isfinite(v.gradient))
     assert v.gradient[i] < 0  # descending the gradient moves the elbow back inside
+
+
+def test_joint_limit_avoidance_takes_one_group_name(humanoid, rng):
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
+    one = JointLimitAvoidance(humanoid, "left_arm").evaluate(state)
+    listed = JointLimitAvoidance(humanoid, ["left_arm"]).evaluate(state)
+    assert one.value == listed.value and np.array_equal(one.gradient, listed.gradient)
+
+
+def test_unknown_arm_is_a_frame_error_with_a_suggestion(humanoid):
+    with pytest.raises(FrameError, match=r"no arm 'Left'.*left"):
+        ArmPotentialEnergy(humanoid, "Left", 1.0)
 
 
 @pytest.mark.parametrize("frames", [["left_tool", "right_tool"], ["right_tool"]])

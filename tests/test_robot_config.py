@@ -239,6 +239,7 @@ def test_unknown_robot_name_lists_the_bundled_ones():
         wholebody.load_robot("no_such_robot")
     with pytest.raises(ConfigError, match=r"no robot\.toml"):
         wholebody.load_robot(Path(__file__).parent)
+    assert wholebody.load_robot(Path("dual_arm_torso")).name == "dual_arm_torso"  # a name
 
 
 def test_fixed_base_torso_is_just_another_robot_toml(torso, rng):

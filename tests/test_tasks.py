@@ -128,6 +128,29 @@ def test_integral_anti_windup(humanoid):
     task.integral[0] = -0.01
     task.advance(state, 0.01, saturated=True)
     assert task.integral[0] == pytest.approx(-0.01 + 0.5 * 0.01)  # but it may unwind
+    task.integral[0] = -0.001
+    task.advance(state, 0.02, saturated=True)
+    assert task.integral[0] == 0.0  # down to 0, not past it (its size would grow)
+
+
+@pytest.mark.parametrize("kind", ["frame", "relative"])
+def test_reset_forgets_a_captured_target_and_keeps_a_set_one(humanoid, kind):
+    """Without a target a pose task holds the pose it first sees; reset() (a new run) must
+    capture it anew, not drag the frame back to the first run's pose."""
+    if kind == "frame":
+        task = FrameTask(humanoid, "left_tool")
+    else:
+        task = RelativeFrameTask(humanoid, "right_tool", "left_tool")
+    moved = humanoid.configuration({"left_elbow_flexion": 0.3}, base_pose=(0.5, 0.0, 0.0))
+    task.compute(humanoid.update(humanoid.home()))
+    second = humanoid.update(moved)
+    assert np.abs(task.error(second)).max() > 1e-3  # still holds the first pose
+    task.reset()
+    np.testing.assert_allclose(task.error(second), 0.0, atol=1e-12)  # captured anew
+    if kind == "frame":
+        task.set_target(humanoid.frame_pose(humanoid.home(), "left_tool"))
+        task.reset()
+        assert task.target is not None  # a target set by the user is kept
 
 
 def test_posture_task(humanoid, rng):
@@ -154,5 +177,8 @@ def test_bad_targets_are_rejected(humanoid):
         task.set_target(bad)
     with pytest.raises(DimensionError, match="twist"):
         task.set_target(np.eye(4), np.zeros(5))
+    pose = humanoid.frame_pose(humanoid.home(), "left_tool")
+    with pytest.raises(DimensionError, match="last row"):
+        task.set_target(pose.T)  # a transposed transform
     with pytest.raises(DimensionError, match="kp"):
         FrameTask(humanoid, "left_tool", kp=-1.0)

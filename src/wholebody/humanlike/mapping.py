@@ -102,7 +102,7 @@ class ArmParameters:
         form label (:mod:`wholebody.humanlike.labels`) assumes they lie on the segment axes;
         a centre of mass more than 1 mm off its axis raises.
         """
-        chain = arm if isinstance(arm, ArmChain) else robot.arms[arm]
+        chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         state = robot.update(robot.home())
         S, E, W = (state.position(f) for f in (chain.shoulder, chain.elbow, chain.wrist))
         fractions = []

@@ -51,8 +51,8 @@ def load_robot(name_or_path: str | Path) -> Robot:
         if not toml.is_file():
             raise ConfigError(f"{path}: robot directory has no robot.toml")
         return Robot(read_robot_config(toml))
-    bundled = robots_dir() / str(name_or_path) / "robot.toml"
-    if isinstance(name_or_path, str) and "/" not in name_or_path and bundled.is_file():
+    bundled = robots_dir() / path.name / "robot.toml"
+    if len(path.parts) == 1 and bundled.is_file():  # a name, as a str or a one-part Path
         return Robot(read_robot_config(bundled))
     raise ConfigError(
         f"no robot {str(name_or_path)!r}: expected a bundled robot name "

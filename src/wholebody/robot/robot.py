@@ -347,6 +347,15 @@ class Robot:
         mass, com = self._links[name]
         return Body(name, self.frame(name), mass, com)
 
+    def arm(self, name: str) -> ArmChain:
+        """The arm ``name`` of ``robot.toml``."""
+        try:
+            return self.arms[name]
+        except KeyError:
+            raise FrameError(
+                f"robot {self.name!r} has no arm {name!r}" + _suggest(name, self.arms)
+            ) from None
+
     def group(self, name: str) -> JointGroup:
         """The joint group ``name`` of ``robot.toml``."""
         try:

@@ -96,7 +96,7 @@ class ArmPotentialEnergy(Objective):
         name: str | None = None,
     ) -> None:
         self.robot = robot
-        self.arm = arm if isinstance(arm, ArmChain) else robot.arms[arm]
+        self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         self.name = name or f"{self.arm.name}_arm_energy"
         self.weight = float(weight)
         self.stiffness = (stiffness if isinstance(stiffness, StiffnessModel)

@@ -52,11 +52,14 @@ def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
     T = np.array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
     if T.shape != (4, 4):
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    (a0, a1, a2, p0), (b0, b1, b2, p1), (c0, c1, c2, p2), last = T.tolist()
+    (a0, a1, a2, p0), (b0, b1, b2, p1), (c0, c1, c2, p2), (d0, d1, d2, d3) = T.tolist()
     # A NaN or inf anywhere makes the sum non-finite (an overflow of it: the exact test).
-    total = a0 + a1 + a2 + p0 + b0 + b1 + b2 + p1 + c0 + c1 + c2 + p2 + sum(last)
+    total = a0 + a1 + a2 + p0 + b0 + b1 + b2 + p1 + c0 + c1 + c2 + p2 + d0 + d1 + d2 + d3
     if not math.isfinite(total) and not np.isfinite(T).all():
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
+    if abs(d0) + abs(d1) + abs(d2) + abs(d3 - 1.0) > 1e-9:
+        raise DimensionError(f"{what}: the last row of a 4x4 pose must be [0, 0, 0, 1], got "
+                             f"{T[3].tolist()} (a transposed matrix?)")  # fmt: skip
     det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
     # R^T R - I, entry by entry (its six distinct entries)
     gram = (
@@ -245,6 +248,7 @@ class FrameTask(Task):
         self.target: np.ndarray | None = None
         self.target_twist = np.zeros(6)
         self.integral = np.zeros(6)
+        self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
 
     @property
@@ -256,10 +260,12 @@ class FrameTask(Task):
         linear velocity of the target frame's origin; zero when omitted)."""
         self.target = check_pose(pose, f"{self.name}: target pose")
         self.target_twist = check_twist(twist, f"{self.name}: target twist")
+        self._held = False
 
     def _target(self, state: RobotState) -> np.ndarray:
         if self.target is None:  # hold the current pose until told otherwise
             self.target = state.pose(self.frame)
+            self._held = True
         return self.target
 
     def compute(self, state: RobotState) -> TaskRows:
@@ -293,7 +299,10 @@ class FrameTask(Task):
         integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 
     def reset(self) -> None:
+        """Zero the integral; a target captured at first use (none was set) is forgotten."""
         self.integral[:] = 0.0
+        if self._held:
+            self.target, self._held = None, False
 
     def __repr__(self) -> str:
         return f"FrameTask({self.name!r}, frame={self.frame.name!r}, rows={self.dim})"
@@ -301,9 +310,11 @@ class FrameTask(Task):
 
 def integrate_error(integral: np.ndarray, e: np.ndarray, dt: float, saturated: bool,
                     limit: float) -> None:  # fmt: skip
-    """``I += e dt`` clamped to ``+-limit``; while saturated only shrinking steps are taken."""
+    """``I += e dt`` clamped to ``+-limit``; while saturated the integral may only shrink
+    towards 0 (a step against it stops at 0, a step along it is dropped)."""
     step = e * dt
     if saturated:
-        step = np.where(step * integral < 0, step, 0.0)
+        size = np.abs(integral)
+        step = np.where(step * integral < 0, np.clip(step, -size, size), 0.0)
     integral += step
     np.clip(integral, -limit, limit, out=integral)

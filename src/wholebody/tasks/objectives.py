@@ -46,6 +46,8 @@ class JointLimitAvoidance(Objective):
                  weight: float = 1.0, name: str = "joint_limit_avoidance") -> None:  # fmt: skip
         lower, upper = robot.position_limits
         limited = np.isfinite(lower) & np.isfinite(upper)
+        if isinstance(joints, str):  # one group or joint name
+            joints = [joints]
         if joints is None:
             idx = np.flatnonzero(limited)
         else:

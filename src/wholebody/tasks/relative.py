@@ -66,6 +66,7 @@ class RelativeFrameTask(Task):
         self.target: np.ndarray | None = None
         self.target_twist = np.zeros(6)
         self.integral = np.zeros(6)
+        self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
 
     @property
@@ -76,6 +77,7 @@ class RelativeFrameTask(Task):
         """Target pose of b in a (4x4 or SE3) and relative twist (a's axes; zero if omitted)."""
         self.target = check_pose(pose, f"{self.name}: target pose")
         self.target_twist = check_twist(twist, f"{self.name}: target twist")
+        self._held = False
 
     def relative_pose(self, state: RobotState) -> np.ndarray:
         """The current pose of b in a (4x4): ``[R_a^T R_b, R_a^T (p_b - p_a)]``."""
@@ -101,7 +103,7 @@ class RelativeFrameTask(Task):
     def _relative(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         T = self.relative_pose(state)
         if self.target is None:  # hold the current relative pose
-            self.target = T.copy()
+            self.target, self._held = T.copy(), True
         return T[:3, 3], T[:3, :3], self.target
 
     def compute(self, state: RobotState) -> TaskRows:
@@ -130,7 +132,10 @@ class RelativeFrameTask(Task):
             integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 
     def reset(self) -> None:
+        """Zero the integral; a target captured at first use (none was set) is forgotten."""
         self.integral[:] = 0.0
+        if self._held:
+            self.target, self._held = None, False
 
     def __repr__(self) -> str:
         return f"RelativeFrameTask({self.name!r}, rows={self.dim})"

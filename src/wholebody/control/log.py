@@ -26,6 +26,16 @@ __all__ = ["ArmTrace", "RunLog", "concatenate"]
 ARM_FIELDS = ("energy", "gravity", "spring", "arm_angle", "stiffness", "rho")
 
 
+def json_default(value: object) -> object:
+    """``json.dumps``'s ``default`` for numpy scalars and arrays (the metadata of logs and
+    scenario outputs)."""
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
 @dataclass
 class ArmTrace:
     """Per-step energy terms of one arm (J, J, J, rad, N m/rad) and ``rho`` (m), how well
@@ -108,7 +118,7 @@ class RunLog:
         for arm, trace in self.arms.items():
             for f in ARM_FIELDS:
                 arrays[f"arm/{arm}/{f}"] = getattr(trace, f)
-        arrays["meta"] = np.array(json.dumps(self.meta))
+        arrays["meta"] = np.array(json.dumps(self.meta, default=json_default))
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("wb") as fh:
             np.savez_compressed(fh, **arrays)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wholebody.control.log import json_default
 from wholebody.scenarios import plots
 from wholebody.scenarios.runner import ScenarioRun
 
@@ -24,14 +25,6 @@ BACKEND_LABELS = {
     "projection": "projection + energy (paper's method)",
     "hqp": "hierarchical QP",
 }
-
-
-def _json_default(value):
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def write_run(run: ScenarioRun, out: Path) -> dict[str, Path]:
@@ -50,7 +43,7 @@ def write_run(run: ScenarioRun, out: Path) -> dict[str, Path]:
         ),
         "arm_energy": plots.arm_energy(run.log, out / "arm_energy.png", title=title),
     }
-    files["metrics"].write_text(json.dumps(run.metrics, indent=2, default=_json_default))
+    files["metrics"].write_text(json.dumps(run.metrics, indent=2, default=json_default))
     return files
 
 
@@ -125,7 +118,5 @@ def write_comparison(runs: list[ScenarioRun], out: Path) -> dict[str, Path]:
     md = out / "comparison.md"
     md.write_text(comparison_markdown(rows, spec.title or spec.name))
     js = out / "comparison.json"
-    js.write_text(
-        json.dumps({"scenario": spec.name, "rows": rows}, indent=2, default=_json_default)
-    )
+    js.write_text(json.dumps({"scenario": spec.name, "rows": rows}, indent=2, default=json_default))
     return {"markdown": md, "json": js}

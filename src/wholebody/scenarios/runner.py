@@ -14,10 +14,13 @@ For every phase, in order:
    and, for ``closed_chain`` phases, the relative pose of the secondary hand in the primary
    in a level above them (the grasp is met exactly, the hands' redundant rows in the least
    squares below); backend ``pinv`` drops the objectives;
-3. a :class:`~wholebody.control.Controller` runs the phase from the current configuration.
+3. a :class:`~wholebody.control.Controller` runs the phase from the current configuration,
+   for a whole number of control steps: the phase's duration is rounded to the nearest
+   multiple of ``dt`` (at least one step), and its references use that duration.
 
-The logs are concatenated; a carried object follows its hand rigidly from the phase in which
-it is carried (its pose relative to the hand fixed at that phase's start).
+The logs are concatenated. A carried object follows its hand rigidly during each phase in
+which it is carried (its pose relative to the hand fixed at that phase's start) and stays
+where it was left otherwise.
 """
 
 from __future__ import annotations
@@ -113,7 +116,7 @@ class _Planners:
         if shape == "aligned":
             return DMP.fit(align_to_chord(positions, *chord), times, config=config)
         if shape == "straight":
-            s, _, _ = minimum_jerk_scaling(times / times[-1])
+            s, _, _ = minimum_jerk_scaling((times - times[0]) / (times[-1] - times[0]))
             start, goal = chord
             return DMP.fit(start + np.outer(s, goal - start), times, config=config)
         if self._dmp is None:
@@ -142,7 +145,7 @@ class _Planners:
             if hp.planner == "free":
                 continue
             if hp.planner == "hold":
-                refs[hand] = HoldTrajectory(_goal_pose(T0, None, hp.rotate), phase.duration)
+                refs[hand] = HoldTrajectory(T0, phase.duration)
             elif hp.planner == "min_jerk":
                 refs[hand] = MinimumJerkTrajectory(
                     T0, _goal_pose(T0, hp.goal, hp.rotate), phase.duration
@@ -191,12 +194,12 @@ def run_scenario(
     state = robot.update(q)
     starts = {h: state.pose(t.frame) for h, t in tasks.items()}
     logs, start_wall, t0 = [], time.perf_counter(), 0.0
-    total = round(spec.duration * duration_scale / spec.dt)
-    bar = _progress_bar(total, spec.name) if progress else None
-    carried_by: dict[str, tuple[str, float]] = {}  # object -> (hand, phase start time)
+    steps = [max(1, round(p.duration * duration_scale / spec.dt)) for p in spec.phases]
+    bar = _progress_bar(sum(steps), spec.name) if progress else None
+    carries: dict[str, list[tuple[str, float, float]]] = {}  # object -> (hand, start, end)
     phases: dict[str, list[float]] = {}  # name -> [start, end] (s)
-    for phase in spec.phases:
-        duration = phase.duration * duration_scale
+    for phase, n in zip(spec.phases, steps, strict=True):
+        duration = n * spec.dt
         phases[phase.name] = [t0, t0 + duration]
         refs = planners.phase(_scaled(phase, duration), starts)
         entries = [tasks[h] for h in refs]
@@ -246,13 +249,13 @@ def run_scenario(
             h: refs[h].end_pose if h in refs else state.pose(t.frame) for h, t in tasks.items()
         }
         for hand, hp in phase.hands.items():
-            if hp.carry is not None and hp.carry not in carried_by:
-                carried_by[hp.carry] = (hand, t0)
+            if hp.carry is not None:
+                carries.setdefault(hp.carry, []).append((hand, t0, t0 + duration))
         t0 += duration
     if bar is not None:
         bar.close()
     log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend})
-    poses = _object_poses(robot, log, spec.objects, carried_by, {h: tasks[h].frame for h in tasks})
+    poses = _object_poses(robot, log, spec.objects, carries, {h: tasks[h].frame for h in tasks})
     metrics = _metrics(log, spec, duration_scale)
     return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
 
@@ -273,22 +276,31 @@ def _object_poses(
     robot: Robot,
     log: RunLog,
     objects: dict[str, ObjectSpec],
-    carried_by: dict[str, tuple[str, float]],
+    carries: dict[str, list[tuple[str, float, float]]],
     frames,
 ) -> dict[str, np.ndarray]:
-    """(N, 4, 4) pose of every object: fixed until carried, then rigid with its hand."""
+    """(N, 4, 4) pose of every object: rigid with its hand during each carrying phase
+    ``(hand, start, end)``, and where it was left before and after."""
     out = {}
+    n = len(log)
     for name, obj in objects.items():
-        T0 = np.eye(4)
-        T0[:3, 3] = obj.position
-        poses = np.repeat(T0[None], len(log), axis=0)
-        if name in carried_by:
-            hand, t_start = carried_by[name]
+        T = np.eye(4)
+        T[:3, 3] = obj.position
+        poses = np.empty((n, 4, 4))
+        k = 0  # poses before k are written
+        for hand, t_start, t_end in carries.get(name, ()):
             k0 = int(np.searchsorted(log.t, t_start - 1e-9))
-            hand_pose = robot.frame_pose(log.q[k0], frames[hand])
-            relative = np.linalg.solve(hand_pose, T0)
-            for k in range(k0, len(log)):
-                poses[k] = robot.frame_pose(log.q[k], frames[hand]) @ relative
+            k1 = int(np.searchsorted(log.t, t_end - 1e-9))
+            poses[k:k0] = T  # where it was left
+            relative = np.linalg.solve(robot.frame_pose(log.q[k0], frames[hand]), T)
+            for j in range(k0, k1):
+                poses[j] = robot.frame_pose(log.q[j], frames[hand]) @ relative
+            k = k1
+            if k1 < n:  # left where the hand is at the phase's end (the next sample)
+                T = robot.frame_pose(log.q[k1], frames[hand]) @ relative
+            elif k1 > k0:
+                T = poses[k1 - 1].copy()
+        poses[k:] = T
         out[name] = poses
     return out
 

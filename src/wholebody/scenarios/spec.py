@@ -51,7 +51,8 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     [phases.hands.right]
     planner = "dmp"                    # dmp | min_jerk | hold | follow | free
     goal = [1.701, -0.45675, 0.46133]  # m, world (dmp, min_jerk)
-    rotate = [0.0, -1.5708, 0.0]       # rad, world rotation vector applied to the start pose
+    rotate = [0.0, -1.5708, 0.0]       # rad, world rotation vector applied to the start
+                                       # pose to give the goal orientation (dmp, min_jerk)
     avoid = ["cylinder_1"]             # obstacles (dmp)
     shape = "demo"                     # dmp: "demo" (goal-shift generalisation of the
                                        # demonstration), "aligned" (the demonstration
@@ -347,12 +348,16 @@ def _phase(
         shape = r.string(spec, "shape", w, default="demo", choices=("demo", "aligned", "straight"))
         if shape != "demo" and kind != "dmp":
             raise r.fail(f"{w}.shape", "only the dmp planner has a shape")
+        if kind not in ("dmp", "min_jerk") and "rotate" in spec:
+            raise r.fail(f"{w}.rotate", f"planner {kind!r} takes no rotate")
         rotate = r.vector(spec, "rotate", w, 3, (0.0, 0.0, 0.0))
         out[hname] = HandPhase(kind, goal, rotate, avoid, carry, shape)  # type: ignore[arg-type]
     missing = [h for h in hands if h not in out]
     if missing:
         raise r.fail(f"{where}.hands", f"no planner for hand(s) {', '.join(missing)}")
     follow = [h for h, s in out.items() if s.planner == "follow"]
+    if closed and len(hands) != 2:
+        raise r.fail(f"{where}.closed_chain", f"needs two hands, the scenario has {len(hands)}")
     if follow or closed:
         if primary is None or primary not in hands:
             raise r.fail(

@@ -132,12 +132,38 @@ def test_stepper_with_obstacles_agrees_with_rollout() -> None:
     assert np.max(np.abs(r.positions[:, 0] - a[0])) > 0.03  # the obstacle did act
 
 
+@pytest.mark.parametrize("samples", [2, 5, 11, 20])
+def test_coarse_sampling_is_stable_and_accurate(dmp: DMP, samples: int) -> None:
+    """Few samples: the linear rollout takes as many RK4 steps per interval as it needs (one
+    RK4 step per interval of 0.5 s diverges), and the stepper does the same."""
+    dense = dmp.rollout(100 * (samples - 1) + 1)
+    r = dmp.rollout(samples)
+    np.testing.assert_allclose(r.times, dense.times[::100], atol=1e-12)
+    np.testing.assert_allclose(r.positions, dense.positions[::100], atol=1e-3)
+    stepper = dmp.stepper()
+    state = stepper.initial_state()
+    for k in range(1, samples):
+        stepper.step(state, dmp.duration / (samples - 1), out=state)
+        np.testing.assert_allclose(state.x, r.positions[k], atol=1e-12)
+
+
+def test_many_basis_functions_stay_finite_after_the_movement() -> None:
+    """Past T every Gaussian underflows; the normalised basis must not become 0/0."""
+    t, X = demo()
+    d = DMP.fit(X, t, config=DMPConfig(n_basis=150))
+    stepper = d.stepper(tolerance=1e-3, max_substeps=64)
+    state = stepper.initial_state()
+    for _ in range(2 * 160):
+        stepper.step(state, T_DEMO / 159, out=state)
+    np.testing.assert_allclose(state.x, d.goal, atol=1e-6)
+
+
 def test_linear_rollout_equals_plain_rk4() -> None:
     """The precomputed recurrence is algebraically RK4: compare with a textbook loop (2-D)."""
     rng = np.random.default_rng(5)
     cfg = DMPConfig(n_basis=12, stiffness=300.0)
     d = DMP(rng.normal(size=(12, 2)) * 0.1, [0.0, 0.1], [0.5, -0.2], 1.5, cfg)
-    N = 40
+    N = 80  # one RK4 step per interval (|lambda| h = 0.22)
     r = d.rollout(N)
     K, D, T = cfg.K, cfg.D, 1.5
     rate = cfg.alpha_s / (cfg.phase_tau_ratio * T)
@@ -206,6 +232,10 @@ def test_invalid_arguments() -> None:
         DMP.fit(np.where(X > 1.0, np.nan, X), t)
     with pytest.raises(DimensionError, match="need at least"):
         DMP.fit(X[:4], t[:4])
+    with pytest.raises(DimensionError, match="cannot determine 50 basis weights"):
+        DMP.fit(X[::4], t[::4])  # 40 samples for 50 weights
+    with pytest.raises(DimensionError, match=r"expected shape \(N, M\)"):
+        DMP.fit(X[:, 0], t)
     dmp = DMP.fit(X, t)
     with pytest.raises(DimensionError, match="samples"):
         dmp.rollout(1)

@@ -194,6 +194,8 @@ def test_presets_enclose_their_solids_grown_by_the_margin(rng: np.random.Generat
 def test_invalid_obstacles_are_rejected() -> None:
     with pytest.raises(DimensionError, match="exponent n must be >= 1"):
         Superquadric([0, 0, 0], np.eye(3), [1, 1, 1], n=0.5)
+    with pytest.raises(DimensionError, match="m = 1 needs n = 1"):
+        Superquadric([0, 0, 0], np.eye(3), [1, 1, 1], n=2.0, m=1.0)  # C not C2 on the axis
     with pytest.raises(DimensionError, match="semi_axes must be > 0"):
         Superquadric([0, 0, 0], np.eye(3), [1, 0, 1])
     with pytest.raises(DimensionError, match="not a rotation"):

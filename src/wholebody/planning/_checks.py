@@ -37,7 +37,8 @@ def as_array(value: object, shape: tuple[int | None, ...], name: str) -> np.ndar
     if arr.ndim != len(shape) or any(
         want is not None and have != want for have, want in zip(arr.shape, shape, strict=True)
     ):
-        spec = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        names = iter("NMLPQR")  # one letter per free dimension
+        spec = "(" + ", ".join(next(names) if s is None else str(s) for s in shape) + ")"
         raise DimensionError(f"{name}: expected shape {spec}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise DimensionError(f"{name}: contains NaN or infinite values")

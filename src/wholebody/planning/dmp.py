@@ -257,7 +257,9 @@ class DMP:
     def basis(self, s: np.ndarray) -> np.ndarray:
         """Normalised, phase-scaled basis ``s psi_i(s) / sum_j psi_j(s)`` (N, n_basis)."""
         s = np.asarray(s, dtype=float)
-        psi = np.exp(-self._h * (s[:, None] - self._c) ** 2)
+        e = -self._h * (s[:, None] - self._c) ** 2
+        e -= e.max(axis=1)[:, None]  # the ratio is unchanged; no 0/0 once every psi underflows
+        psi = np.exp(e)
         return psi * (s / psi.sum(axis=1))[:, None]
 
     def forcing(self, s: np.ndarray) -> np.ndarray:
@@ -283,7 +285,7 @@ class DMP:
         Parameters
         ----------
         positions
-            ``x(t_k)`` (N, d), m; N >= ``polyorder + 2``.
+            ``x(t_k)`` (N, d), m; N >= ``polyorder + 2`` and N >= ``config.n_basis``.
         times
             ``t_k`` (N,) s, strictly increasing; or give ``dt`` (s) for uniform sampling.
         config
@@ -313,6 +315,12 @@ class DMP:
         if polyorder + 2 > N:
             raise DimensionError(
                 f"DMP.fit: need at least {polyorder + 2} samples for polyorder {polyorder}, got {N}"
+            )
+        if cfg.n_basis > N:
+            raise DimensionError(
+                f"DMP.fit: {N} samples cannot determine {cfg.n_basis} basis weights (the fit "
+                "would swing between the samples): resample the demonstration to at least "
+                "n_basis samples or use fewer basis functions (DMPConfig(n_basis=...))"
             )
         if (times is None) == (dt is None):
             raise DimensionError("DMP.fit: give exactly one of times (N,) and dt")
@@ -398,10 +406,13 @@ class DMP:
         K, D = cfg.K, cfg.D
         tau = T
         h = T / (N - 1)
-        t_half = np.linspace(0.0, T, 2 * N - 1)  # samples and midpoints
-        s_half = np.exp(-cfg.alpha_s * t_half / (cfg.phase_tau_ratio * T))
-        b = K * (g - np.outer(s_half, g - x0) + self.forcing(s_half))  # (2N-1, d)
         kernel = make_point_force(tuple(obstacles))
+        # without obstacles: m RK4 steps per sample interval, enough for stability and
+        # accuracy however coarse the sampling (m = 1 unless N is small)
+        m = 1 if kernel is not None else _linear_substeps(cfg, h / tau)
+        t_half = np.linspace(0.0, T, 2 * m * (N - 1) + 1)  # steps and midpoints
+        s_half = np.exp(-cfg.alpha_s * t_half / (cfg.phase_tau_ratio * T))
+        b = K * (g - np.outer(s_half, g - x0) + self.forcing(s_half))  # (2m(N-1)+1, d)
         if kernel is not None:
             if self.dim != 3:
                 raise DimensionError(
@@ -411,15 +422,17 @@ class DMP:
                                              _max_substeps(max_substeps))  # fmt: skip
             x, v, vdot = integrator.rollout(b, h, s_half[::2])
         else:
-            x, v = _rk4_linear(b, x0, K, D, tau, h)
-            vdot = (b[::2] - K * x - D * v) / tau
+            x, v = _rk4_linear(b, x0, K, D, tau, h / m)
+            if m > 1:
+                x, v = x[::m].copy(), v[::m].copy()
+            vdot = (b[:: 2 * m] - K * x - D * v) / tau
         acc = vdot / tau
         return DMPRollout(
-            times=t_half[::2].copy(),
+            times=t_half[:: 2 * m].copy(),
             positions=x,
             velocities=v / tau,
             accelerations=acc,
-            phase=s_half[::2].copy(),
+            phase=s_half[:: 2 * m].copy(),
             start=x0.copy(),
             goal=g.copy(),
             duration=T,
@@ -432,9 +445,23 @@ class DMP:
         start: np.ndarray | None = None,
         goal: np.ndarray | None = None,
         obstacles: Sequence[Potential] = (),
+        tolerance: float = 1e-3,
+        max_substeps: int = 256,
     ) -> DMPStepper:
         """An online integrator of this DMP (see :class:`DMPStepper`)."""
-        return DMPStepper(self, duration=duration, start=start, goal=goal, obstacles=obstacles)
+        return DMPStepper(self, duration=duration, start=start, goal=goal, obstacles=obstacles,
+                          tolerance=tolerance, max_substeps=max_substeps)  # fmt: skip
+
+
+_LINEAR_STEP = 0.25  # largest |lambda| h of a linear RK4 step (stable below 2.78)
+
+
+def _linear_substeps(cfg: DMPConfig, r: float) -> int:
+    """RK4 steps per interval of ``r = h / tau`` for the linear DMP ``z' = A z / tau``:
+    ``|lambda_max(A)| h / tau <= 0.25`` (1 for the paper's 160 samples: 0.2)."""
+    K, D = cfg.K, cfg.D
+    rho = 0.5 * (D + math.sqrt(D * D - 4.0 * K)) if D * D >= 4.0 * K else math.sqrt(K)
+    return max(1, math.ceil(rho * r / _LINEAR_STEP - 1e-12))
 
 
 def _tolerance(value: float) -> float:
@@ -649,8 +676,9 @@ class _ObstacleIntegrator:
 class DMPStepper:
     """Online integration of a DMP, one ``dt`` at a time.
 
-    Without obstacles one RK4 step per call, into preallocated buffers: stepping with
-    ``dt = T / (N - 1)`` reproduces :meth:`DMP.rollout` to rounding. With obstacles (3-D) each
+    Without obstacles one RK4 step per call (several for a ``dt`` too coarse for one, as in
+    :meth:`DMP.rollout`), into preallocated buffers: stepping with ``dt = T / (N - 1)``
+    reproduces :meth:`DMP.rollout` to rounding. With obstacles (3-D) each
     call runs the rollout's adaptive substeps over ``[t, t + dt]``.
 
     Parameters
@@ -738,6 +766,8 @@ class DMPStepper:
         np.subtract(S, self._c, out=psi)
         np.square(psi, out=psi)
         np.multiply(psi, self._negh, out=psi)
+        np.max(psi, axis=1, out=self._den)  # as DMP.basis: scaled by the largest term
+        psi -= self._den[:, None]
         np.exp(psi, out=psi)
         np.sum(psi, axis=1, out=self._den)
         np.divide(S[:, 0], self._den, out=self._ratio)
@@ -770,13 +800,26 @@ class DMPStepper:
             self._eh = math.exp(-0.5 * self.alpha_s * dt / self.tau_s)
             self._e1 = self._eh * self._eh
             self._last_dt = dt
-        s = state.s
+        s, t = state.s, state.t
         if self._integrator is not None:
             self._step_obstacles(state, dt, out)
-        else:
-            self._step_linear(state, dt, out)
-        out.s = s * self._e1
-        out.t = state.t + dt
+            out.s = s * self._e1
+        else:  # m RK4 steps of dt / m (see DMP.rollout)
+            m = _linear_substeps(self.dmp.config, dt / self.tau)
+            if m > 1:
+                hs = dt / m
+                self._eh = math.exp(-0.5 * self.alpha_s * hs / self.tau_s)
+                self._e1 = self._eh * self._eh
+                self._last_dt = hs
+            else:
+                hs = dt
+            src = state
+            for _ in range(m):
+                s_j = src.s
+                self._step_linear(src, hs, out)
+                out.s = s_j * self._e1
+                src = out
+        out.t = t + dt
         return out
 
     def _step_obstacles(self, state: DMPState, dt: float, out: DMPState) -> None:

@@ -10,7 +10,8 @@ in world coordinates). In its own frame ``p = R^T (x - c)``, with ``u_k = p_k / 
 
 (``u^(2n)`` meaning ``|u|^(2n)``). ``C < 0`` inside, ``C = 0`` on the surface, ``C > 0`` outside.
 ``n = m = 1`` is an ellipsoid with semi-axes ``f``; large ``n`` gives a square cross-section,
-large ``m`` flat ends. ``n, m >= 1`` so that ``C`` is twice continuously differentiable. With
+large ``m`` flat ends. ``n, m >= 1``, and ``m > 1`` unless ``n = 1``, so that ``C`` is twice
+continuously differentiable (with ``m = 1 < n`` its Hessian jumps on the third axis). With
 ``a = u1^2``, ``b = u2^2``, ``q = a^n + b^n`` the derivatives in ``u`` are::
 
     dC/du1 = 2m q^(m/n-1) a^(n-1) u1          dC/du3 = 2m (u3^2)^(m-1) u3
@@ -138,6 +139,11 @@ class Superquadric:
                     f"got {value}"
                 )
             set_(self, name, value)
+        if self.m == 1.0 and self.n != 1.0:
+            raise DimensionError(
+                f"Superquadric: m = 1 needs n = 1 (C is not twice differentiable on the third "
+                f"axis otherwise), got n = {self.n}"
+            )
 
     def local(self, x: np.ndarray) -> np.ndarray:
         """Points ``x`` (..., 3) in the obstacle's frame, ``R^T (x - c)``."""

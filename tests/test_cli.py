@@ -67,6 +67,10 @@ def test_errors_are_reported_without_a_traceback(tmp_path, capsys):
     bad.write_text('[scenario]\nname = "x"\nbackend = "mpc"\n')
     assert main(["run", str(bad)]) == 2
     assert "[scenario.backend]" in capsys.readouterr().err
+    taken = tmp_path / "a_file"
+    taken.write_text("")
+    assert main(["run", "obstacle_avoidance", "--out", str(taken)]) == 2  # before the run
+    assert "exists and is not a directory" in capsys.readouterr().err
 
 
 def test_demo_runs_headless_without_a_display(tmp_path, monkeypatch, capsys):

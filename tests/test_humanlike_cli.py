@@ -13,6 +13,7 @@ import pytest
 pytest.importorskip("torch")
 pytest.importorskip("sklearn")
 
+from wholebody.errors import DataError
 from wholebody.humanlike.cli import add_stiffness_parser
 from wholebody.humanlike.dataset import StiffnessDataset
 from wholebody.humanlike.network import NetworkStiffness
@@ -50,6 +51,7 @@ def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     text = card.read_text()
     assert "2026-11-22" in text and "SYN03" in text
     assert f"{scores['svr']['r2']:.3f}" in text
+    assert "--test-participants SYN03" in text  # the card's command reproduces this split
 
     rep = tmp_path / "rep"
     assert _run("report", "--model", str(net_path), "--dataset", str(ds_path), "--quiet",
@@ -58,6 +60,20 @@ def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     saved = json.loads((rep / "scores.json").read_text())
     again = saved["recomputed_network_held_out"]
     assert again["r2"] == pytest.approx(scores["network"]["r2"], abs=1e-9)
+    with pytest.raises(DataError, match=r"nope\.npz"):  # a dataset named must exist
+        _run("report", "--model", str(net_path), "--dataset", str(tmp_path / "nope.npz"),
+             "--quiet", "--out", str(rep))  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [("fit", "--epochs", "0"), ("fit", "--batch-size", "0"), ("fit", "--threads", "0"),
+     ("dataset", "--synthetic-participants", "-1"), ("dataset", "--records", "0")],
+)  # fmt: skip
+def test_counts_are_checked_by_the_parser(argv, capsys):
+    with pytest.raises(SystemExit) as info:
+        _run(*argv)
+    assert info.value.code == 2 and "expected an integer >=" in capsys.readouterr().err
 
 
 def test_svr_baseline_on_a_noise_free_slice(humanoid):

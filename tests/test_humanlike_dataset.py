@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,17 @@ def test_split_by_participant_and_file_round_trip(recordings, params, tmp_path: 
     np.savez(tmp_path / "bad.npz", **arrays)
     with pytest.raises(DataError, match="missing key"):
         StiffnessDataset.load(tmp_path / "bad.npz")
+
+
+def test_no_surviving_frame_is_a_data_error(recordings, params, tmp_path: Path):
+    rec = recordings[0]
+    down = np.array([0.0, 0.0, 1.0])
+    hanging = replace(rec, elbow=rec.shoulder - 0.3 * down + [0.01, 0.0, 0.0],
+                      wrist=rec.shoulder - 0.55 * down)  # fmt: skip
+    with pytest.raises(DataError, match="no frame of the 1 recording"):
+        build_dataset([hanging], params, n_records=100)
+    ds, _ = build_dataset(recordings[:2], params, n_records=50)
+    assert ds.save(tmp_path / "named").name == "named.npz"  # the file written
 
 
 def test_shipped_dataset():

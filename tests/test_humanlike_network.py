@@ -115,6 +115,15 @@ def test_file_round_trip_and_errors(trained, tmp_path: Path, rng):
     np.savez(tmp_path / "fmt.npz", **{**arrays, "format": np.array("other")})
     with pytest.raises(DataError, match="format"):
         NetworkStiffness.load(tmp_path / "fmt.npz")
+    # a name without .npz: the path returned is the file written
+    named = net.save(tmp_path / "model.weights")
+    assert named.name == "model.weights.npz" and named.is_file()
+    # without a training range: none after a round trip either (not an infinite box)
+    bare = NetworkStiffness(net.weights, net.biases, net.x_mean, net.x_scale, net.k_mean,
+                            net.k_scale, net.floor_beta)  # fmt: skip
+    again = NetworkStiffness.load(bare.save(tmp_path / "bare.npz"))
+    with pytest.raises(DataError, match="no stored training range"):
+        again.in_range(np.zeros(3))
 
 
 def test_shipped_default_plugs_into_the_arm_energy(humanoid):

@@ -98,6 +98,21 @@ def test_participant_facing_minus_y_is_turned():
     assert other.note == ""
 
 
+def test_npz_recordings_take_the_csv_options_and_csv_blank_lines_are_skipped(tmp_path: Path):
+    raw = load_recording(real_recordings_dir() / "ADL009_forward_R1.csv", facing="as-is")
+    path = save_npz_recording(raw, tmp_path / "ADL009_forward_R1")  # .npz appended
+    assert path.name == "ADL009_forward_R1.npz" and path.is_file()
+    back = load_recording(path, facing="as-is", source="synthetic")
+    np.testing.assert_array_equal(back.wrist, raw.wrist)
+    assert back.source == "synthetic"
+    text = (real_recordings_dir() / "ADL001_forward_R1.csv").read_text()
+    (tmp_path / "ADL001_forward_R1.csv").write_text(text + "\n\n")
+    padded = load_recording(tmp_path / "ADL001_forward_R1.csv")
+    assert (
+        padded.n_frames == load_recording(real_recordings_dir() / "ADL001_forward_R1.csv").n_frames
+    )
+
+
 def test_directory_and_participants():
     recs = load_recordings(real_recordings_dir())
     assert len(recs) == 240

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 
@@ -14,8 +16,14 @@ from wholebody.humanlike.arm_angle_model import (
     summarise_arm_angles,
 )
 from wholebody.humanlike.arm_geometry import arm_angle
-from wholebody.humanlike.mapping import CANONICAL_SIDE, lab_to_canonical
-from wholebody.humanlike.recordings import load_participants, load_recordings
+from wholebody.humanlike.mapping import CANONICAL_SIDE, ArmParameters, lab_to_canonical
+from wholebody.humanlike.pipeline import make_dataset
+from wholebody.humanlike.recordings import (
+    load_participants,
+    load_recording,
+    load_recordings,
+    real_recordings_dir,
+)
 from wholebody.humanlike.synthetic import (
     DEFAULT_PARTICIPANTS,
     ROWS,
@@ -142,3 +150,23 @@ def test_synthetic_tabletop_matches_real_arm_angles():
     # and the real reaches in canonical axes go forward and down from the shoulder
     W = np.concatenate([lab_to_canonical(x.wrist[-1:] - x.shoulder[-1:], x.side) for x in real])
     assert W[:, 0].min() > 0.1 and W[:, 2].max() < 0.0
+
+
+def test_synthetic_out_writes_the_recordings_the_dataset_was_built_from(humanoid, tmp_path):
+    """With --calibrate the synthetic participants come from the re-fitted model: the files
+    written beside the dataset must be those recordings."""
+    sub = tmp_path / "real"
+    sub.mkdir()
+    for name in ("ADL001_forward_R1", "ADL001_across_R1", "ADL002_forward_R1",
+                 "ADL002_across_R1"):  # fmt: skip
+        shutil.copy(real_recordings_dir() / f"{name}.csv", sub)
+    params = ArmParameters.from_robot(humanoid, "right")
+    make_dataset(params, recordings_dir=sub, recalibrate=True, synthetic=DEFAULT_PARTICIPANTS[:1],
+                 n_records=200, synthetic_out=tmp_path / "syn")  # fmt: skip
+    model = calibrate(load_recordings(sub), load_participants()).model
+    expected = generate_synthetic(DEFAULT_PARTICIPANTS[:1], seed=0, model=model)
+    written = sorted((tmp_path / "syn").glob("*.npz"))
+    assert len(written) == len(expected)
+    for rec in expected:
+        np.testing.assert_array_equal(load_recording(tmp_path / "syn" / f"{rec.name}.npz").elbow,
+                                      rec.elbow)  # fmt: skip

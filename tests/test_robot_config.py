@@ -12,6 +12,7 @@ from fdcheck import frame_jacobian_fd
 
 import wholebody
 from wholebody import ConfigError, ModelError
+from wholebody.errors import FrameError
 from wholebody.resources import robots_dir
 
 
@@ -240,6 +241,13 @@ def test_unknown_robot_name_lists_the_bundled_ones():
     with pytest.raises(ConfigError, match=r"no robot\.toml"):
         wholebody.load_robot(Path(__file__).parent)
     assert wholebody.load_robot(Path("dual_arm_torso")).name == "dual_arm_torso"  # a name
+
+
+def test_unknown_names_suggest_or_list(humanoid):
+    with pytest.raises(FrameError, match="did you mean 'left_tool'"):
+        humanoid.frame("left_tol")
+    with pytest.raises(FrameError, match=r"known: .*right_tool"):  # nothing close: the list
+        humanoid.frame("nope")
 
 
 def test_fixed_base_torso_is_just_another_robot_toml(torso, rng):

@@ -74,17 +74,26 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     for name, f in files.items():
         print(f"  {name:17s} {f}")
     if scene is not None:
-        show_run(scene, run)
-        print(f"replay: the run is loaded as an animation at {scene.url}")
         if hold:
+            show_run(scene, run)
+            print(f"replay: the run is loaded as an animation at {scene.url}")
             input("press Enter to close the viewer ")
+        else:
+            print("MeshCat viewer closed (stdin is not a terminal: nothing to wait on)")
         scene.close()
     return 0
 
 
+def _output_dir(out: Path) -> Path:
+    """``out``, checked before a run so that a bad path does not cost the run."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out}: exists and is not a directory")
+    return out
+
+
 def _run(args: argparse.Namespace) -> int:
     path = _scenario_path(args.scenario)
-    out = Path(args.out) if args.out else Path("runs") / path.stem
+    out = _output_dir(Path(args.out) if args.out else Path("runs") / path.stem)
     return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty())
 
 
@@ -92,7 +101,7 @@ def _demo(args: argparse.Namespace) -> int:
     viz = args.viz or _display_available()
     if not viz:
         print("no display: running the demo headless (use --viz for the MeshCat viewer)")
-    out = Path(args.out) if args.out else Path("runs") / "demo"
+    out = _output_dir(Path(args.out) if args.out else Path("runs") / "demo")
     return _run_one(
         _scenario_path("coordinated_carry"), None, viz, out, hold=viz and sys.stdin.isatty()
     )
@@ -104,7 +113,7 @@ def _compare(args: argparse.Namespace) -> int:
 
     path = _scenario_path(args.scenario)
     spec = load_scenario(path)
-    out = Path(args.out) if args.out else Path("runs") / f"{path.stem}_comparison"
+    out = _output_dir(Path(args.out) if args.out else Path("runs") / f"{path.stem}_comparison")
     runs = []
     for backend in args.backends:
         print(f"running {spec.name} with {backend} ...")

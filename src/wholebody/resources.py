@@ -1,4 +1,4 @@
-"""Where the robots and scenario files that ship with wholebody live.
+"""Where the robots and scenario files that ship with wholebody live, and file naming.
 
 In a wheel they are package data under ``wholebody/_share/``; in a source checkout they are
 the repository's ``robots/``, ``tasks/`` and ``data/`` directories.
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["data_dir", "robots_dir", "share_dir", "tasks_dir"]
+__all__ = ["data_dir", "npz_path", "robots_dir", "share_dir", "tasks_dir"]
 
 
 def share_dir() -> Path:
@@ -32,3 +32,9 @@ def tasks_dir() -> Path:
 def data_dir() -> Path:
     """The bundled data sets (human reaching recordings, with their licences)."""
     return share_dir() / "data"
+
+
+def npz_path(path: str | Path) -> Path:
+    """``path`` with ``.npz`` appended unless it ends so: the file ``np.savez`` writes."""
+    path = Path(path)
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")

@@ -28,6 +28,21 @@ from wholebody.humanlike.training import DEFAULT_HIDDEN
 __all__ = ["add_stiffness_parser"]
 
 
+def _count(minimum: int):
+    """An argparse type: an integer >= ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    return parse
+
+
 def _ints(text: str) -> tuple[int, ...]:
     try:
         out = tuple(int(v) for v in text.split(",") if v.strip())
@@ -71,7 +86,6 @@ def _default_dataset() -> Path:
 def _dataset(args: argparse.Namespace) -> int:
     from wholebody.humanlike.mapping import ArmParameters
     from wholebody.humanlike.pipeline import make_dataset
-    from wholebody.humanlike.recordings import save_npz_recording
     from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS
     from wholebody.robot import load_robot
 
@@ -88,6 +102,7 @@ def _dataset(args: argparse.Namespace) -> int:
         seed=args.seed,
         n_records=args.records,
         recalibrate=args.calibrate,
+        synthetic_out=args.synthetic_out,
         progress=not args.quiet,
     )
     ds.meta["created"] = datetime.date.today().isoformat()
@@ -101,24 +116,18 @@ def _dataset(args: argparse.Namespace) -> int:
               f"{c['end_mean']:.1f} +- {c['end_sd']:.1f}, all {c['all_mean']:.1f} +- "
               f"{c['all_sd']:.1f} deg, {100 * c['negative_fraction']:.0f} % negative")  # fmt: skip
     if args.synthetic_out:
-        from wholebody.humanlike.synthetic import generate_synthetic
-
-        for rec in generate_synthetic(DEFAULT_PARTICIPANTS[:n_syn], seed=args.seed):
-            save_npz_recording(rec, Path(args.synthetic_out) / f"{rec.name}.npz")
         print(f"synthetic recordings written to {args.synthetic_out}")
     print(f"{len(ds)} records written to {out}")
     return 0
 
 
 def _fit(args: argparse.Namespace) -> int:
-    import torch
-
     from wholebody.humanlike.dataset import DEFAULT_TEST_PARTICIPANTS, StiffnessDataset
     from wholebody.humanlike.pipeline import PAPER_SCORES, fit_and_evaluate
     from wholebody.humanlike.report import data_card
-    from wholebody.humanlike.training import TrainingConfig
+    from wholebody.humanlike.training import TrainingConfig, _torch
 
-    torch.set_num_threads(args.threads)
+    _torch().set_num_threads(args.threads)
     path = Path(args.dataset) if args.dataset else _default_dataset()
     ds = StiffnessDataset.load(path)
     config = TrainingConfig(
@@ -167,6 +176,13 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
         f" --epochs {config.epochs} --lr {config.lr} --batch-size {config.batch_size} "  # type: ignore[attr-defined]
         f"--seed {config.seed}"  # type: ignore[attr-defined]
         + (" --paper-protocol" if args.paper_protocol else "")
+        + (
+            f" --test-participants {','.join(args.test_participants)}"
+            if args.test_participants
+            else ""
+        )
+        + (" --no-svr" if args.no_svr else "")
+        + f" --threads {args.threads}"
         + f" --out {args.out} --card {args.card}"
     )
     fit = f"wholebody stiffness fit --dataset data/stiffness/{dataset.name} "
@@ -199,8 +215,11 @@ def _report(args: argparse.Namespace) -> int:
     from wholebody.humanlike.report import plot_workspace
 
     net = NetworkStiffness.load(args.model) if args.model else default_stiffness()
-    path = Path(args.dataset) if args.dataset else _default_dataset()
-    ds = StiffnessDataset.load(path) if path.is_file() else None
+    if args.dataset:  # a dataset named on the command line must exist
+        ds = StiffnessDataset.load(Path(args.dataset))
+    else:  # the bundled one, when the data ship with the package
+        path = _default_dataset()
+        ds = StiffnessDataset.load(path) if path.is_file() else None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     report: dict = {"model": str(args.model or "default"), "stored": {
@@ -244,9 +263,9 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     d = sub.add_parser("dataset", help="label human (real + synthetic) reaches for a robot")
     d.add_argument("--robot", default="mobile_humanoid", help="bundled name, directory or toml")
     d.add_argument("--arm", default="right", help="arm whose lengths and masses label the data")
-    d.add_argument("--records", type=int, default=5000, help="about this many records")
+    d.add_argument("--records", type=_count(1), default=5000, help="about this many records")
     d.add_argument("--seed", type=int, default=0, help="seed of the synthetic data")
-    d.add_argument("--synthetic-participants", type=int, default=6, metavar="N",
+    d.add_argument("--synthetic-participants", type=_count(0), default=6, metavar="N",
                    help="virtual participants SYN01..SYN0N (0 for none)")  # fmt: skip
     d.add_argument("--recordings", default=None, help="directory of real recordings "
                    "(default: the bundled data/human_reaching/joint_centres)")  # fmt: skip
@@ -288,11 +307,11 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
         default=0.0,
         help="AdamW weight decay (0: plain Adam, the paper's)",
     )
-    f.add_argument("--epochs", type=int, default=1000)
+    f.add_argument("--epochs", type=_count(1), default=1000)
     f.add_argument("--lr", type=float, default=0.01)
-    f.add_argument("--batch-size", type=int, default=32)
+    f.add_argument("--batch-size", type=_count(1), default=32)
     f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    f.add_argument("--threads", type=_count(1), default=1, help="torch CPU threads")
     f.add_argument("--no-svr", action="store_true", help="skip the SVR baseline")
     f.add_argument(
         "--paper-protocol",

@@ -45,6 +45,7 @@ from wholebody.humanlike.labels import (
 )
 from wholebody.humanlike.mapping import ArmParameters, lab_to_canonical, map_to_robot
 from wholebody.humanlike.recordings import Recording
+from wholebody.resources import npz_path
 
 __all__ = [
     "DEFAULT_TEST_PARTICIPANTS",
@@ -132,7 +133,8 @@ class StiffnessDataset:
         return self.subset(~mask), self.subset(mask)
 
     def save(self, path: str | Path) -> Path:
-        path = Path(path)
+        """Write the dataset; returns the file written (``.npz`` appended if missing)."""
+        path = npz_path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {name: getattr(self, name) for name in _ARRAYS}
         meta = {"format": FORMAT, **self.meta}
@@ -224,6 +226,9 @@ def build_dataset(
         report.add(rec.source, "kept", int((~drop).sum()))
         labelled.append((rec, lab, np.flatnonzero(~drop)))
     trials = [t for t in labelled if len(t[2])]
+    if not trials:
+        raise DataError(f"no frame of the {len(labelled)} recording(s) passed the labelling "
+                        f"rules: {report.summary()}")  # fmt: skip
     quota = np.full(len(trials), n_records // len(trials))
     quota[: n_records % len(trials)] += 1
     parts: dict[str, list] = {name: [] for name in _ARRAYS}

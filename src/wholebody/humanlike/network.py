@@ -41,7 +41,7 @@ import numpy as np
 
 from wholebody.errors import DataError, DimensionError
 from wholebody.humanlike.stiffness import StiffnessModel
-from wholebody.resources import robots_dir
+from wholebody.resources import npz_path, robots_dir
 
 __all__ = ["FORMAT", "NetworkStiffness", "default_stiffness"]
 
@@ -178,14 +178,15 @@ class NetworkStiffness(StiffnessModel):
 
     # ----------------------------------------------------------------- file
     def save(self, path: str | Path) -> Path:
-        """Write the network (module docstring layout)."""
-        path = Path(path)
+        """Write the network (module docstring layout); returns the file written (``.npz``
+        appended to a name without it, as numpy does)."""
+        path = npz_path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         arrays: dict[str, np.ndarray] = {}
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             arrays[f"W{i}"], arrays[f"b{i}"] = w, b
-        lo = self.input_low if self.input_low is not None else np.full(3, -np.inf)
-        hi = self.input_high if self.input_high is not None else np.full(3, np.inf)
+        if self.input_low is not None and self.input_high is not None:  # else: no range stored
+            arrays["input_low"], arrays["input_high"] = self.input_low, self.input_high
         np.savez(
             path,
             format=np.array(FORMAT),
@@ -196,8 +197,6 @@ class NetworkStiffness(StiffnessModel):
             k_mean=np.array(self.k_mean),
             k_scale=np.array(self.k_scale),
             floor_beta=np.array(self.floor_beta),
-            input_low=lo,
-            input_high=hi,
             meta=np.array(json.dumps(self.meta, sort_keys=True)),
             **arrays,
         )

@@ -34,7 +34,12 @@ from wholebody.humanlike.dataset import (
 from wholebody.humanlike.evaluation import regression_scores
 from wholebody.humanlike.mapping import ArmParameters
 from wholebody.humanlike.network import NetworkStiffness
-from wholebody.humanlike.recordings import Recording, load_participants, load_recordings
+from wholebody.humanlike.recordings import (
+    Recording,
+    load_participants,
+    load_recordings,
+    save_npz_recording,
+)
 from wholebody.humanlike.synthetic import (
     DEFAULT_PARTICIPANTS,
     SyntheticSummary,
@@ -65,8 +70,11 @@ def make_dataset(
     n_records: int = 5000,
     recalibrate: bool = False,
     progress: bool = False,
+    synthetic_out: str | Path | None = None,
 ) -> tuple[StiffnessDataset, BuildReport, dict]:
-    """Build the dataset of real and synthetic reaches for one robot arm.
+    """Build the dataset of real and synthetic reaches for one robot arm; the synthetic
+    recordings it labels are also written to ``synthetic_out`` (a directory, ``.npz``) if
+    given.
 
     Returns the dataset, the frame counts and a dict of provenance (calibration, arm-angle
     comparison of the synthetic tabletop block with the real reaches) that is also stored
@@ -110,6 +118,9 @@ def make_dataset(
         summary = SyntheticSummary()
         syn = generate_synthetic(synthetic, seed=seed, model=model, summary=summary)
         recs += syn
+        if synthetic_out is not None:
+            for rec in syn:
+                save_npz_recording(rec, Path(synthetic_out) / f"{rec.name}.npz")
         info["synthetic"] = {
             "participants": [{"id": p.id, "sex": p.sex, "stature_m": p.stature} for p in synthetic],
             "trials": summary.trials,

@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.errors import DataError
-from wholebody.resources import data_dir
+from wholebody.resources import data_dir, npz_path
 
 __all__ = [
     "FOREARM_RANGE",
@@ -344,7 +344,7 @@ def load_csv_recording(
                              "trial": trial})  # fmt: skip
     try:
         with path.open(newline="") as fh:
-            lines = list(csv.reader(fh))
+            lines = [line for line in csv.reader(fh) if line]  # blank lines carry nothing
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except (UnicodeDecodeError, csv.Error) as exc:
@@ -493,9 +493,9 @@ def load_recording(path: str | Path, *, units: str = "auto", **identity: object)
     """Read a ``.csv`` or ``.npz`` recording (dispatch on the suffix)."""
     path = Path(path)
     if path.suffix == ".npz":
-        if identity:
-            return replace(load_npz_recording(path, units=units), **identity)  # type: ignore[arg-type]
-        return load_npz_recording(path, units=units)
+        options = {k: identity.pop(k) for k in ("source", "facing") if k in identity}
+        rec = load_npz_recording(path, units=units, **options)  # type: ignore[arg-type]
+        return replace(rec, **identity) if identity else rec  # type: ignore[arg-type]
     if path.suffix == ".csv":
         return load_csv_recording(path, units=units, **identity)  # type: ignore[arg-type]
     raise DataError(f"{path}: unknown recording format {path.suffix!r}; expected .csv or .npz")
@@ -528,8 +528,9 @@ def load_recordings(
 
 
 def save_npz_recording(rec: Recording, path: str | Path) -> Path:
-    """Write ``rec`` in the NPZ layout (metres), with its identity and source."""
-    path = Path(path)
+    """Write ``rec`` in the NPZ layout (metres), with its identity and source; returns the
+    file written (``.npz`` appended if missing)."""
+    path = npz_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         path,

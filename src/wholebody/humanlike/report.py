@@ -60,7 +60,8 @@ def data_card(
         f"- Trained with PyTorch {tr.get('torch', '')}: MSE, {tr.get('optimizer', 'Adam')} "
         f"(weight decay {tr.get('weight_decay', 0):g}), lr {tr.get('lr')}, batch "
         f"{tr.get('batch_size')}, {tr.get('epochs')} epochs, seed {tr.get('seed')} "
-        f"({tr.get('records')} training records, {tr.get('seconds')} s on 1 CPU thread; "
+        f"({tr.get('records')} training records, {tr.get('seconds')} s on "
+        f"{tr.get('threads', 1)} CPU thread{'' if tr.get('threads', 1) == 1 else 's'}; "
         f"final training loss {tr.get('final_loss', float('nan')):.3f} of the label variance).",
         "- Labels: `k = A sin|alpha| / (pi - |alpha|)`, `A = g (m1 c1 + m2 (1 - c2)) rho "
         "sin(theta)` with the robot's arm "

@@ -180,6 +180,7 @@ def train_network(
             "records": int(n),
             "final_loss": losses[-1] if losses else None,
             "seconds": round(seconds, 1),
+            "threads": int(torch.get_num_threads()),
             "torch": str(torch.__version__),
         },
         **(meta or {}),

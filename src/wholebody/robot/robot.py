@@ -732,8 +732,12 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
 
 
 def _suggest(name: object, candidates) -> str:
-    close = difflib.get_close_matches(str(name), [str(c) for c in candidates], n=3)
-    return f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
+    """Up to three close matches, or the candidates themselves when none is close."""
+    names = [str(c) for c in candidates]
+    close = difflib.get_close_matches(str(name), names, n=3)
+    if close:
+        return f" (did you mean {', '.join(repr(c) for c in close)}?)"
+    return f"; known: {', '.join(names)}" if names else ""
 
 
 def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], str]:

@@ -156,13 +156,16 @@ class Scene:
         color: str | int = "#d62728",
         opacity: float = 0.8,
     ) -> None:
-        """A cylinder (axis = the pose's z) of ``radius`` and ``height`` (m)."""
+        """A cylinder (axis = the pose's z) of ``radius`` and ``height`` (m). MeshCat's
+        cylinders run along y: the shape is a child node turned onto z, so the prop's own
+        node takes poses (also in :meth:`animate`) like every other prop."""
         node = self.viewer["scene/props"][name]
-        node.set_object(
+        node["shape"].set_object(
             mg.Cylinder(height, radius),
             _material(color, opacity),
         )
-        node.set_transform(np.asarray(pose, dtype=float) @ _Y_TO_Z)
+        node["shape"].set_transform(_Y_TO_Z)
+        node.set_transform(np.asarray(pose, dtype=float))
 
     def ellipsoid(
         self,

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from wholebody.errors import DataError
+from wholebody.humanlike.arm_angle_model import CALIBRATED_ON
 from wholebody.humanlike.dataset import (
     DEFAULT_TEST_PARTICIPANTS,
     StiffnessDataset,
@@ -16,6 +17,7 @@ from wholebody.humanlike.dataset import (
     label_recording,
 )
 from wholebody.humanlike.mapping import ArmParameters
+from wholebody.humanlike.pipeline import fit_and_evaluate, make_dataset
 from wholebody.humanlike.recordings import load_recording, real_recordings_dir
 from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS, generate_synthetic
 from wholebody.resources import data_dir
@@ -102,3 +104,16 @@ def test_shipped_dataset():
     assert ds.meta["real"]["turned_180"] and all(
         t.startswith("ADL009") for t in ds.meta["real"]["turned_180"]
     )
+    # no held-out participant shaped the synthetic data
+    assert ds.meta["arm_angle_model"]["calibrated_on"] == list(CALIBRATED_ON)
+
+
+def test_participants_that_shaped_the_synthetic_data_cannot_be_held_out(params):
+    """The synthetic elbows come from an arm-angle model calibrated on real participants;
+    scoring on one of them would leak: fit_and_evaluate refuses."""
+    ds, _, info = make_dataset(params, real=False, synthetic=DEFAULT_PARTICIPANTS[:2],
+                               n_records=200)  # fmt: skip
+    assert info["arm_angle_model"]["calibrated_on"] == list(CALIBRATED_ON)
+    assert not set(CALIBRATED_ON) & set(DEFAULT_TEST_PARTICIPANTS)
+    with pytest.raises(DataError, match="ADL001 shaped the synthetic training data"):
+        fit_and_evaluate(ds, test_participants=["ADL001", "SYN02"])

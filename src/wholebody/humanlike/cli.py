@@ -84,6 +84,7 @@ def _default_dataset() -> Path:
 
 
 def _dataset(args: argparse.Namespace) -> int:
+    from wholebody.humanlike.dataset import DEFAULT_TEST_PARTICIPANTS
     from wholebody.humanlike.mapping import ArmParameters
     from wholebody.humanlike.pipeline import make_dataset
     from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS
@@ -102,6 +103,7 @@ def _dataset(args: argparse.Namespace) -> int:
         seed=args.seed,
         n_records=args.records,
         recalibrate=args.calibrate,
+        held_out=args.held_out or DEFAULT_TEST_PARTICIPANTS,
         synthetic_out=args.synthetic_out,
         progress=not args.quiet,
     )
@@ -271,7 +273,11 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
                    "(default: the bundled data/human_reaching/joint_centres)")  # fmt: skip
     d.add_argument("--no-real", action="store_true", help="synthetic data only")
     d.add_argument("--calibrate", action="store_true",
-                   help="re-fit the arm-angle model on the real recordings")  # fmt: skip
+                   help="re-fit the arm-angle model on the real recordings of the participants "
+                   "not held out")  # fmt: skip
+    d.add_argument("--held-out", type=_names, default=None, metavar="IDS",
+                   help="participants kept out of the calibration, to be held out when the "
+                   "network is scored (default: fit's default test participants)")  # fmt: skip
     d.add_argument("--synthetic-out", default=None, metavar="DIR",
                    help="also write the synthetic recordings there (.npz)")  # fmt: skip
     d.add_argument("--out", default="stiffness_dataset.npz", help="dataset file to write")

@@ -20,6 +20,7 @@ import numpy as np
 from wholebody.errors import DataError
 from wholebody.humanlike.arm_angle_model import (
     CALIBRATED,
+    CALIBRATED_ON,
     ArmAngleModel,
     Calibration,
     calibrate,
@@ -69,12 +70,19 @@ def make_dataset(
     seed: int = 0,
     n_records: int = 5000,
     recalibrate: bool = False,
+    held_out: Sequence[str] = DEFAULT_TEST_PARTICIPANTS,
     progress: bool = False,
     synthetic_out: str | Path | None = None,
 ) -> tuple[StiffnessDataset, BuildReport, dict]:
     """Build the dataset of real and synthetic reaches for one robot arm; the synthetic
     recordings it labels are also written to ``synthetic_out`` (a directory, ``.npz``) if
     given.
+
+    The synthetic elbows come from an arm-angle model calibrated on real reaches: the shipped
+    :data:`~wholebody.humanlike.arm_angle_model.CALIBRATED`, or with ``recalibrate`` a new fit
+    on the real recordings of every participant not in ``held_out``. The participants it was
+    calibrated on are stored in the metadata (``arm_angle_model.calibrated_on``), and
+    :func:`fit_and_evaluate` refuses to score on any of them: they shaped the training data.
 
     Returns the dataset, the frame counts and a dict of provenance (calibration, arm-angle
     comparison of the synthetic tabletop block with the real reaches) that is also stored
@@ -95,13 +103,19 @@ def make_dataset(
             "turned_180": turned,
         }
     model: ArmAngleModel = CALIBRATED
+    calibrated_on: list[str] = list(CALIBRATED_ON)
     if recalibrate:
         if not real_recs:
             real_recs = load_recordings(recordings_dir, progress=progress)
-        cal: Calibration = calibrate(real_recs, load_participants())
+        used = [r for r in real_recs if r.participant not in set(held_out)]
+        if not used:
+            raise DataError("recalibrate: every real participant is held out")
+        cal: Calibration = calibrate(used, load_participants())
         model = cal.model
+        calibrated_on = sorted({r.participant for r in used})
         info["calibration"] = cal.summary()
     info["arm_angle_model"] = {
+        "calibrated_on": calibrated_on,
         "criterion": "Kim et al. 2012 (IEEE TBME 59(6):1770): maximise the projection of the "
         "wrist manipulability ellipsoid's major axis on the wrist-to-head-target vector",
         "target_x_stature": list(model.target),
@@ -259,6 +273,14 @@ def fit_and_evaluate(
     from wholebody.humanlike.training import TrainingConfig, train_network
 
     config = config or TrainingConfig()
+    shaped = set(dataset.meta.get("arm_angle_model", {}).get("calibrated_on", ()))
+    leaked = sorted(shaped & set(test_participants))
+    if leaked and dataset.meta.get("synthetic"):
+        raise DataError(
+            f"test participant(s) {', '.join(leaked)} shaped the synthetic training data (the "
+            "arm-angle model was calibrated on them): hold out others, or rebuild the dataset "
+            "with `wholebody stiffness dataset --calibrate --held-out ...`"
+        )
     train, test = dataset.split(test_participants)
     selection = None
     if candidates:

@@ -88,7 +88,9 @@ def data_card(
         f"{tuple(round(v, 3) for v in aam.get('target_x_stature', []))} x stature (forward, "
         f"medial, up from the shoulder), bias {aam.get('bias_deg', 0):.1f} deg, noise sd "
         + ", ".join(f"{k} {v:.1f}" for k, v in aam.get("sd_deg", {}).items())
-        + f" deg, within-trial tau {aam.get('tau_within_s', 0):.2f} s.",
+        + f" deg, within-trial tau {aam.get('tau_within_s', 0):.2f} s; calibrated on the real "
+        f"reaches of {', '.join(aam.get('calibrated_on', [])) or '-'} (no held-out "
+        "participant).",
         "",
         "Arm angle (deg), synthetic against real where they overlap (seated tabletop reaches):",
         "",

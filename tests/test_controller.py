@@ -9,6 +9,7 @@ import pytest
 
 from wholebody import WholebodyError
 from wholebody.control import Controller, RunLog, summary
+from wholebody.control.log import concatenate
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
 from wholebody.solvers import ProjectionSolver
@@ -93,3 +94,25 @@ def test_controller_rejects_bad_setups(humanoid):
         Controller(humanoid, stack, ProjectionSolver(), dt=0.0)
     with pytest.raises(WholebodyError, match="shorter than one step"):
         Controller(humanoid, stack, ProjectionSolver(), dt=0.01).run(humanoid.neutral(), 0.001)
+
+
+def test_summary_of_logs_joined_with_an_unmonitored_run(humanoid):
+    """concatenate() pads an arm a run did not monitor with NaN: the summary reads the
+    monitored rows."""
+    hand = FrameTask(humanoid, "right_tool", kp=20.0)
+    q0 = humanoid.neutral()
+    start = humanoid.frame_pose(q0, hand.frame)
+    goal = start.copy()
+    goal[:3, 3] += (0.05, 0.0, 0.0)
+    stack = paper_stack(humanoid, [hand], stiffness=0.1)
+    monitors = [ArmPotentialEnergy(humanoid, arm, 0.1) for arm in ("left", "right")]
+    moving = {hand: MinimumJerkTrajectory(start, goal, 0.2)}
+    holding = {hand: MinimumJerkTrajectory(goal, goal, 0.1)}
+    first = Controller(humanoid, stack, ProjectionSolver(), dt=0.01, monitors=monitors,
+                       references=moving).run(q0, 0.2)  # fmt: skip
+    second = Controller(humanoid, stack, ProjectionSolver(), dt=0.01, references=holding).run(
+        np.array(first.meta["final_q"]), 0.1
+    )
+    joined = summary(concatenate([first, second]))["arm_energy_j"]["right"]
+    alone = summary(first)["arm_energy_j"]["right"]
+    assert joined == pytest.approx(alone, rel=1e-12)

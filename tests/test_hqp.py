@@ -100,7 +100,7 @@ def equalities(problem):
 @pytest.mark.parametrize("name", ENGINE_NAMES)
 def test_engine_solves_a_box_qp_and_warm_starts(name, rng):
     eng, cold = make_engine(name), make_engine(name, warm_start=False)
-    ref = make_engine("daqp", warm_start=False)
+    ref = make_engine("proxsuite" if name == "daqp" else "daqp", warm_start=False)  # another
     n = 12
     M = rng.normal(size=(20, n))
     for _ in range(15):
@@ -116,6 +116,24 @@ def test_engine_solves_a_box_qp_and_warm_starts(name, rng):
             assert sol.status == QPStatus.SOLVED, sol.message
             np.testing.assert_allclose(sol.x, exact.x, atol=1e-5)
     assert eng.setups == 1  # the workspace was reused
+
+
+@pytest.mark.parametrize("name", ENGINE_NAMES)
+def test_engine_edge_cases_are_statuses_not_crashes(name):
+    """No rows and no box (twice: setup, then update); crossed bounds; inconsistent rows."""
+    eng, g = make_engine(name), np.array([1.0, -2.0, 3.0])
+    none = np.zeros(0)
+    for _ in range(2):
+        sol = eng.solve(np.eye(3), g, np.zeros((0, 3)), none, none)
+        assert sol.status == QPStatus.SOLVED
+        np.testing.assert_allclose(sol.x, -g, atol=1e-6)
+    C, box = np.ones((1, 3)), (-np.ones(3), np.ones(3))
+    crossed = make_engine(name).solve(np.eye(3), g, C, [1.0], [2.0], np.r_[0.5, -1, -1],
+                                      np.r_[0.0, 1, 1])  # fmt: skip
+    assert crossed.status == QPStatus.INFEASIBLE
+    # sum(x) in [5, 6] with |x_i| <= 1: no solution (proxsuite stops at its iteration limit)
+    far = make_engine(name).solve(np.eye(3), g, C, np.array([5.0]), np.array([6.0]), *box)
+    assert far.status == QPStatus.INFEASIBLE, far.message
 
 
 def test_unknown_engine_is_a_clear_error():

@@ -214,9 +214,9 @@ def test_limits_and_groups(humanoid):
     assert np.all(lower[joints] < 0) and np.all(upper[joints] > 0)  # zero is inside
     assert np.all(np.isfinite(r.velocity_limits)) and np.all(r.velocity_limits > 0)
     # both arms share their limits (the mirror convention)
-    for k in ("left_arm", "right_arm"):
-        idx = r.group(k).indices
-        np.testing.assert_array_equal(lower[idx], lower[r.group("left_arm").indices])
+    left, right = r.group("left_arm").indices, r.group("right_arm").indices
+    np.testing.assert_array_equal(lower[right], lower[left])
+    np.testing.assert_array_equal(upper[right], upper[left])
     jp = r.joint_positions(r.home())
     assert np.all(jp[joints] >= lower[joints]) and np.all(jp[joints] <= upper[joints])
     assert jp[r.index("left_elbow_flexion")] == pytest.approx(1.2)

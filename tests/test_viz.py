@@ -90,7 +90,7 @@ def test_robot_is_drawn_in_a_headless_browser(scene, tmp_path):
     assert dark > 0.002, "no dark pixels: the robot's chassis is not drawn"
 
 
-def test_replay_animation_and_props(scene):
+def test_replay_animation_and_props(scene, monkeypatch):
     robot = scene.robot
     qs = np.array([robot.neutral(), robot.home(), robot.neutral()])
     scene.marker("target", [1.7, -0.45, 0.46])
@@ -98,6 +98,22 @@ def test_replay_animation_and_props(scene):
     scene.cylinder("obstacle", 0.04, 0.2, np.eye(4))
     scene.box("panel", (0.1, 0.3, 0.02), np.eye(4))
     poses = np.repeat(np.eye(4)[None], 3, axis=0)
+    poses[:, 0, 3] = [0.0, 1.0, 2.0]  # the panel's x at the three samples
+    sent = []
+    send = type(scene.viewer).set_animation
+
+    def record(viewer, anim, **kw):
+        sent.append(anim)
+        return send(viewer, anim, **kw)
+
+    monkeypatch.setattr(type(scene.viewer), "set_animation", record)
     scene.animate(np.array([0.0, 0.5, 1.0]), qs, fps=10, extra={"scene/props/panel": poses})
     time.sleep(0.1)
     assert scene.server.process.poll() is None  # the server took it all and still runs
+    (anim,) = sent
+    clips = {path.lower(): clip for path, clip in anim.clips.items()}
+    panel = clips["/meshcat/scene/props/panel"].tracks["position"]
+    assert panel.frames == list(range(11))  # 1 s at 10 fps, both ends
+    # each frame shows the latest sample at or after its time (0, then 0.5 s, then 1 s)
+    assert [v[0] for v in panel.values] == [0.0] + [1.0] * 5 + [2.0] * 5
+    assert sum(len(c.tracks["position"].frames) == 11 for c in clips.values()) > 10  # links

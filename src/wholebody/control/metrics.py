@@ -105,18 +105,21 @@ def summary(log: RunLog) -> dict:
         out["mae_m"][task] = tr.mae_m
         out["max_tracking_error_m"][task] = tr.max_m
     for arm, trace in log.arms.items():
-        if np.isnan(trace.energy).all():
+        # rows where the arm was monitored (a concatenated log pads the others with NaN)
+        rows = np.flatnonzero(np.isfinite(trace.energy))
+        if not rows.size:
             continue
+        energy = trace.energy[rows]
         out["arm_energy_j"][arm] = {
-            "initial": float(trace.energy[0]),
-            "final": float(trace.energy[-1]),
-            "mean": float(np.mean(trace.energy)),
-            "gravity_final": float(trace.gravity[-1]),
+            "initial": float(energy[0]),
+            "final": float(energy[-1]),
+            "mean": float(np.mean(energy)),
+            "gravity_final": float(trace.gravity[rows[-1]]),
         }
-        defined = trace.arm_angle[trace.rho >= ARM_ANGLE_MIN_RHO]
+        defined = trace.arm_angle[rows][trace.rho[rows] >= ARM_ANGLE_MIN_RHO]
         out["arm_angle_rad"][arm] = {
             "min": float(np.min(defined)) if defined.size else float("nan"),
             "max": float(np.max(defined)) if defined.size else float("nan"),
-            "defined_fraction": float(defined.size / max(1, trace.rho.size)),
+            "defined_fraction": float(defined.size / rows.size),
         }
     return out

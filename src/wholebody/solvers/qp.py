@@ -133,6 +133,12 @@ class QPEngine(ABC):
     ) -> QPSolution:
         """Solve ``min 1/2 x'Hx + g'x`` s.t. ``lower <= C x <= upper``, ``lb <= x <= ub``."""
         n, m = g.shape[0], C.shape[0]
+        crossed = np.count_nonzero(lower > upper) + (
+            0 if lb is None else np.count_nonzero(lb > ub)  # type: ignore[operator]
+        )
+        if crossed:  # no engine is needed to see it (and some fail on it in setup)
+            return QPSolution(np.full(n, np.nan), QPStatus.INFEASIBLE, 0,
+                              f"{self.name}: {crossed} lower bound(s) above the upper")  # fmt: skip
         shape = (n, m, lb is not None)
         try:
             if shape != self._shape:
@@ -143,7 +149,8 @@ class QPEngine(ABC):
             else:
                 self._update(H, g, C, lower, upper, lb, ub)
             sol = self._solve()
-        except (ValueError, RuntimeError, TypeError, ArithmeticError) as exc:
+        except (ValueError, RuntimeError, TypeError, ArithmeticError, IndexError,
+                *self._errors) as exc:  # fmt: skip
             self._shape = None
             return QPSolution(np.full(n, np.nan), QPStatus.FAILED, 0, f"{self.name}: {exc}")
         if sol.status <= QPStatus.INACCURATE and not np.all(np.isfinite(sol.x)):
@@ -152,6 +159,9 @@ class QPEngine(ABC):
         if sol.status >= QPStatus.INFEASIBLE:
             self._shape = None  # do not warm-start from a failed solve
         return sol
+
+    _errors: tuple[type[BaseException], ...] = ()
+    """The engine package's own exception types (reported as FAILED, never raised)."""
 
     @abstractmethod
     def _setup(self, H, g, C, lower, upper, lb, ub) -> None: ...
@@ -200,6 +210,7 @@ class DaqpEngine(QPEngine):
         np.clip(self._bu, -_BIG, _BIG, out=self._bu)
 
     def _setup(self, H, g, C, lower, upper, lb, ub) -> None:
+        self._n = g.shape[0]
         total = C.shape[0] + (0 if lb is None else lb.shape[0])
         self._bl = np.empty(total)
         self._bu = np.empty(total)
@@ -208,13 +219,16 @@ class DaqpEngine(QPEngine):
         self._model = self._daqp.Model()
         self._model.settings = self.settings
         flag, _ = self._model.setup(H, g, C, self._bu, self._bl, self._sense)
-        if flag < 0:
+        self._infeasible = flag == -1  # setup already proved the constraints inconsistent
+        if flag < 0 and not self._infeasible:
             raise RuntimeError(f"daqp setup failed with exit flag {flag}")
 
     def _update(self, H, g, C, lower, upper, lb, ub) -> None:
         self._bounds(lower, upper, lb, ub)
-        args = {"H": H, "f": g, "bupper": self._bu, "blower": self._bl}
-        if C.shape[0]:  # daqp's update indexes A's first row even when it has none
+        args = {"H": H, "f": g}
+        if self._bu.shape[0]:  # daqp's update indexes the first bound even when there is none
+            args.update(bupper=self._bu, blower=self._bl)
+        if C.shape[0]:  # and A's first row
             args["A"] = C
         if not self.warm_start:
             self._sense.fill(0)
@@ -224,6 +238,10 @@ class DaqpEngine(QPEngine):
             raise RuntimeError(f"daqp update failed with exit flag {flag}")
 
     def _solve(self) -> QPSolution:
+        if self._infeasible:
+            self._infeasible = False
+            return QPSolution(np.full(self._n, np.nan), QPStatus.INFEASIBLE, 0,
+                              "daqp exit flag -1 (setup)")  # fmt: skip
         x, _, flag, info = self._model.solve()
         it = int(info.get("iterations", 0))
         if flag == 1 or flag == 2:  # optimal (2: optimal with soft constraints relaxed)
@@ -295,7 +313,10 @@ class ProxsuiteEngine(QPEngine):
         if st == pq.PROXQP_SOLVED:
             status = QPStatus.SOLVED
         elif st in (pq.PROXQP_MAX_ITER_REACHED, pq.PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE):
-            status = QPStatus.INACCURATE
+            # proxsuite runs out of iterations on an infeasible problem instead of detecting
+            # it: usable only if the constraints nearly hold
+            tol = 1e3 * max(float(self.settings.get("eps_abs", 1e-9)), 1e-9)
+            status = QPStatus.INACCURATE if res.info.pri_res <= tol else QPStatus.INFEASIBLE
         elif st == pq.PROXQP_PRIMAL_INFEASIBLE:
             status = QPStatus.INFEASIBLE
         else:
@@ -322,6 +343,11 @@ class OsqpEngine(QPEngine):
 
         self._osqp = osqp
         self._sparse = scipy.sparse
+        self._errors = tuple(
+            e for e in (getattr(osqp, "OSQPException", None),
+                        getattr(getattr(osqp, "interface", None), "OSQPException", None))
+            if isinstance(e, type)
+        )  # fmt: skip
         super().__init__(warm_start=warm_start, **settings)
 
     def _data(self, H, C, lower, upper, lb, ub) -> None:
@@ -355,7 +381,7 @@ class OsqpEngine(QPEngine):
         self._data(H, C, lower, upper, lb, ub)
         P = sp.csc_matrix((self._Px, self._iu[0], np.r_[0, np.cumsum(np.arange(1, n + 1))]),
                           shape=(n, n))  # fmt: skip
-        A = sp.csc_matrix((self._Ax.ravel(), indices.ravel(), np.arange(0, n * k + 1, k)),
+        A = sp.csc_matrix((self._Ax.ravel(), indices.ravel(), np.arange(n + 1) * k),
                           shape=(self._l.shape[0], n))  # fmt: skip
         solver = self._osqp.OSQP()
         solver.setup(P, g, A, self._l, self._u, warm_starting=self.warm_start, **self.settings)

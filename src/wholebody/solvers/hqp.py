@@ -153,6 +153,7 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg import lapack as _lapack
+from scipy.optimize import lsq_linear
 
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import SolverError
@@ -557,7 +558,12 @@ class HierarchicalQPSolver(Solver):
     ) -> np.ndarray:
         """Remove the Tikhonov bias: on the face of the constraints active at the QP's answer,
         the level's least squares is solved exactly (``y + W (M W)^+ (c - M y)``, ``W`` the
-        directions that keep the active constraints still); kept if it stays feasible."""
+        directions that keep the active constraints still); kept if it stays feasible.
+
+        The Tikhonov term can also move the QP's answer onto another face than the exact
+        optimum's. Where only the box bounds the level (the first level with a QP), a residual
+        still above the tolerance is checked against the exact bounded least squares (BVLS,
+        ``scipy.optimize.lsq_linear``), which is taken if it fits better."""
         xq = x + (y if Z is None else Z.dot(y))
         act = 1e-8
         on = (xq <= lo + act) | (xq >= hi - act)
@@ -599,7 +605,15 @@ class HierarchicalQPSolver(Solver):
         rp = c - M.dot(yp)
         if rp.dot(rp) > res.dot(res) or not _inside(x + (yp if Z is None else Z.dot(yp)), lo, hi,
                                                 inherited):  # fmt: skip
-            return y
+            yp, rp = y, res
+        if free is not None and math.sqrt(rp.dot(rp)) > self.tolerance * (
+            1.0 + math.sqrt(c.dot(c))
+        ):
+            fit = lsq_linear(M, c, bounds=(lo - x, hi - x), method="bvls", tol=1e-13)
+            yb = np.minimum(np.maximum(fit.x, lo - x), hi - x)
+            rb = c - M.dot(yb)
+            if np.isfinite(yb).all() and rb.dot(rb) < rp.dot(rp):
+                return yb
         return yp
 
     def _native(self, problem: StackProblem, first: int) -> np.ndarray | None:

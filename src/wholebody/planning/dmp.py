@@ -743,8 +743,9 @@ class DMPStepper:
         self._kv = np.empty((4, d))
         self._tmp = np.empty(d)
         self._x0, self._v0 = np.empty(d), np.empty(d)
-        self._last_dt = math.nan
-        self._eh = self._e1 = 1.0
+        self._last_dt = math.nan  # the dt the next three are for
+        self._m = 1  # RK4 steps per call without obstacles (see DMP.rollout)
+        self._eh = self._e1 = 1.0  # phase decay over half and one of those steps
 
     def set_goal(self, goal: np.ndarray) -> None:
         """Move the goal ``g`` (d,) m for the following steps."""
@@ -797,24 +798,22 @@ class DMPStepper:
         if out is None:
             out = DMPState(np.empty(self.dmp.dim), np.empty(self.dmp.dim))
         if dt != self._last_dt:
-            self._eh = math.exp(-0.5 * self.alpha_s * dt / self.tau_s)
+            self._m = (
+                1
+                if self._integrator is not None
+                else _linear_substeps(self.dmp.config, dt / self.tau)
+            )
+            self._eh = math.exp(-0.5 * self.alpha_s * dt / self._m / self.tau_s)
             self._e1 = self._eh * self._eh
             self._last_dt = dt
         s, t = state.s, state.t
         if self._integrator is not None:
             self._step_obstacles(state, dt, out)
             out.s = s * self._e1
-        else:  # m RK4 steps of dt / m (see DMP.rollout)
-            m = _linear_substeps(self.dmp.config, dt / self.tau)
-            if m > 1:
-                hs = dt / m
-                self._eh = math.exp(-0.5 * self.alpha_s * hs / self.tau_s)
-                self._e1 = self._eh * self._eh
-                self._last_dt = hs
-            else:
-                hs = dt
+        else:  # m RK4 steps of dt / m
+            hs = dt / self._m
             src = state
-            for _ in range(m):
+            for _ in range(self._m):
                 s_j = src.s
                 self._step_linear(src, hs, out)
                 out.s = s_j * self._e1

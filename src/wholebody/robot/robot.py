@@ -349,30 +349,23 @@ class Robot:
 
     def arm(self, name: str) -> ArmChain:
         """The arm ``name`` of ``robot.toml``."""
-        try:
-            return self.arms[name]
-        except KeyError:
-            raise FrameError(
-                f"robot {self.name!r} has no arm {name!r}" + _suggest(name, self.arms)
-            ) from None
+        return self._named(self.arms, name, "arm")
 
     def group(self, name: str) -> JointGroup:
         """The joint group ``name`` of ``robot.toml``."""
-        try:
-            return self.groups[name]
-        except KeyError:
-            raise FrameError(
-                f"robot {self.name!r} has no joint group {name!r}" + _suggest(name, self.groups)
-            ) from None
+        return self._named(self.groups, name, "joint group")
 
     def index(self, joint: str) -> int:
         """Index of an actuated joint (or base actuator) in ``u``."""
+        return self._named(self._u_index, joint, "actuated joint")
+
+    def _named(self, table: Mapping[str, T], name: str, what: str) -> T:
+        """``table[name]``, or a FrameError with the closest names."""
         try:
-            return self._u_index[joint]
+            return table[name]
         except KeyError:
             raise FrameError(
-                f"robot {self.name!r} has no actuated joint {joint!r}"
-                + _suggest(joint, self._u_index)
+                f"robot {self.name!r} has no {what} {name!r}" + _suggest(name, table)
             ) from None
 
     # ------------------------------------------------------------------ configurations

@@ -161,7 +161,7 @@ from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
-from wholebody.solvers.stack import OBJECTIVES, LevelProblem, Stack, StackProblem
+from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
 
@@ -796,16 +796,10 @@ class HierarchicalQPSolver(Solver):
 
     def _bound_limited(self, lev: LevelProblem, res: np.ndarray, res_free: np.ndarray) -> list[str]:
         """Tasks whose residual the hard constraints raised above the box-free optimum."""
-        out = []
-        for name, sl in lev.task_rows.items():
-            if name == OBJECTIVES:
-                continue
-            r, r0, bk = res[sl], res_free[sl], lev.b[sl]
-            if math.sqrt(r.dot(r)) - math.sqrt(r0.dot(r0)) > self.tolerance * (
-                1.0 + math.sqrt(bk.dot(bk))
-            ):
-                out.append(name)
-        return out
+        tol = self.tolerance
+        return [name for (name, r, _, b), (_, r0, _, _)
+                in zip(lev.task_residuals(res), lev.task_residuals(res_free), strict=True)
+                if r - r0 > tol * (1.0 + b)]  # fmt: skip
 
     # ------------------------------------------------------------------ the result
     def _result(

@@ -343,11 +343,7 @@ class OsqpEngine(QPEngine):
 
         self._osqp = osqp
         self._sparse = scipy.sparse
-        self._errors = tuple(
-            e for e in (getattr(osqp, "OSQPException", None),
-                        getattr(getattr(osqp, "interface", None), "OSQPException", None))
-            if isinstance(e, type)
-        )  # fmt: skip
+        self._errors = (osqp.OSQPException,)
         super().__init__(warm_start=warm_start, **settings)
 
     def _data(self, H, C, lower, upper, lb, ub) -> None:

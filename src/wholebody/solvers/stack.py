@@ -217,7 +217,7 @@ class Stack:
     ) -> None:
         self.robot = robot
         self.levels: list[Level] = [
-            lv if isinstance(lv, Level) else Level(entries=tuple(lv)) for lv in levels
+            lv if isinstance(lv, Level) else Level(entries=lv) for lv in levels
         ]
         self.constraints = list(constraints)
         self._scale_version = 0

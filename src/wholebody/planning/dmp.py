@@ -71,6 +71,7 @@ from functools import lru_cache
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+from scipy.linalg.lapack import dposv as _posv
 from scipy.signal import lfilter
 
 from wholebody.errors import DimensionError
@@ -151,15 +152,29 @@ class DMPConfig:
 
     def centers(self) -> np.ndarray:
         """Basis centres ``c_i = phase_end^(i / (n - 1))``: evenly spaced in time on [0, T]."""
-        return float(self.phase_end) ** np.linspace(0.0, 1.0, int(self.n_basis))
+        return self.layout()[0].copy()
 
     def widths(self) -> np.ndarray:
         """``h_i = 4 ln(1 / overlap) / (c_i - c_{i+1})^2`` (the last reuses the previous gap):
         neighbouring basis functions cross at height ``overlap``."""
-        c = self.centers()
-        gap = np.abs(np.diff(c))
-        gap = np.append(gap, gap[-1])
-        return 4.0 * math.log(1.0 / float(self.overlap)) / gap**2
+        return self.layout()[1].copy()
+
+    def layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(centers, widths)``, read-only and shared by every DMP of this configuration."""
+        return _basis_layout(int(self.n_basis), float(self.phase_end), float(self.overlap))
+
+
+@lru_cache(maxsize=32)
+def _basis_layout(n: int, phase_end: float, overlap: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and widths of :class:`DMPConfig` (read-only, cached: every DMP built from one
+    configuration shares them)."""
+    c = phase_end ** np.linspace(0.0, 1.0, n)
+    gap = np.abs(np.diff(c))
+    gap = np.append(gap, gap[-1])
+    h = 4.0 * math.log(1.0 / overlap) / gap**2
+    c.setflags(write=False)
+    h.setflags(write=False)
+    return c, h
 
 
 @dataclass(frozen=True)
@@ -249,18 +264,20 @@ class DMP:
         self.start = as_vector(start, self.dim, "DMP: start").copy()
         self.goal = as_vector(goal, self.dim, "DMP: goal").copy()
         self.duration = as_positive(duration, "DMP: duration")
-        self._c = self.config.centers()
-        self._h = self.config.widths()
+        self._c, self._h = self.config.layout()
 
     # ------------------------------------------------------------------ basis functions
 
     def basis(self, s: np.ndarray) -> np.ndarray:
         """Normalised, phase-scaled basis ``s psi_i(s) / sum_j psi_j(s)`` (N, n_basis)."""
         s = np.asarray(s, dtype=float)
-        e = -self._h * (s[:, None] - self._c) ** 2
-        e -= e.max(axis=1)[:, None]  # the ratio is unchanged; no 0/0 once every psi underflows
-        psi = np.exp(e)
-        return psi * (s / psi.sum(axis=1))[:, None]
+        psi = np.subtract(s[:, None], self._c)  # one (N, n_basis) array, worked in place
+        psi *= psi
+        psi *= -self._h
+        psi -= psi.max(axis=1)[:, None]  # the ratio is unchanged; no 0/0 once every psi underflows
+        np.exp(psi, out=psi)
+        psi *= (s / psi.sum(axis=1))[:, None]
+        return psi
 
     def forcing(self, s: np.ndarray) -> np.ndarray:
         """``f(s)`` (N, d) at phases ``s`` (N,)."""
@@ -329,12 +346,13 @@ class DMP:
             T = h * (N - 1)
         else:
             t = as_vector(times, N, "DMP.fit: times (one per row of positions)")
-            steps = np.diff(t)
-            if np.any(steps <= 0.0):
+            steps = t[1:] - t[:-1]
+            shortest, longest = float(steps.min()), float(steps.max())
+            if not shortest > 0.0:
                 raise DimensionError("DMP.fit: times must be strictly increasing")
             T = float(t[-1] - t[0])
             h = T / (N - 1)
-            if np.ptp(steps) > 1e-9 * h:  # non-uniform: resample onto a uniform grid
+            if longest - shortest > 1e-9 * h:  # non-uniform: resample onto a uniform grid
                 X = CubicSpline(t - t[0], X, axis=0)(np.linspace(0.0, T, N))
         if window is None:
             window = max(polyorder + 2, round(N / 8))
@@ -350,14 +368,16 @@ class DMP:
         x0, g = xs[0].copy(), xs[-1].copy()
         K, D = cfg.K, cfg.D
         tau = T
-        tk = np.linspace(0.0, T, N)
-        s = np.exp(-cfg.alpha_s * tk / (cfg.phase_tau_ratio * T))
+        s = np.exp(np.arange(N) * (-cfg.alpha_s * h / (cfg.phase_tau_ratio * T)))
         target = (tau * tau * xdd + D * tau * xd) / K - (g - xs) + np.outer(s, g - x0)
         dmp = cls(np.zeros((cfg.n_basis, d)), x0, g, T, cfg)
         Phi = dmp.basis(s)
-        A = Phi.T @ Phi
-        A[np.diag_indices_from(A)] += float(regularization) * np.trace(A) / cfg.n_basis
-        dmp.weights = np.linalg.solve(A, Phi.T @ target)
+        A = Phi.T.dot(Phi)
+        nb = cfg.n_basis
+        A.flat[:: nb + 1] += float(regularization) * A.trace() / nb
+        rhs = Phi.T.dot(target)
+        _, w, info = _posv(A, rhs)  # the ridge makes A positive definite: Cholesky
+        dmp.weights = w if info == 0 else np.linalg.solve(A, rhs)
         return dmp
 
     # ------------------------------------------------------------------ rollout
@@ -475,9 +495,11 @@ def _max_substeps(value: int) -> int:
     return m
 
 
+@lru_cache(maxsize=64)
 def _rk4_matrices(K: float, D: float, r: float) -> tuple[np.ndarray, ...]:
     """RK4 of ``z' = (A z + b(t)) / tau`` with ``r = h / tau`` as ``z+ = P z + m0 b0 + mh bh +
-    m1 b1`` (``b`` entering the second row only, so the ``m`` are 2-vectors)."""
+    m1 b1`` (``b`` entering the second row only, so the ``m`` are 2-vectors). Read-only and
+    cached (one set per DMP configuration and sampling)."""
     B = r * np.array([[0.0, 1.0], [-K, -D]])
     I2 = np.eye(2)
     B2 = B @ B
@@ -487,6 +509,8 @@ def _rk4_matrices(K: float, D: float, r: float) -> tuple[np.ndarray, ...]:
     m0 = (I2 + B + B2 / 2.0 + B3 / 4.0) @ e2 / 6.0
     mh = (4.0 * I2 + 2.0 * B + B2 / 2.0) @ e2 / 6.0
     m1 = e2 / 6.0
+    for a in (P, m0, mh, m1):
+        a.setflags(write=False)
     return P, m0, mh, m1
 
 
@@ -498,22 +522,29 @@ def _rk4_linear(
     d = b.shape[1]
     P, m0, mh, m1 = _rk4_matrices(K, D, h / tau)
     # c_n = m0 b_n + mh b_{n+1/2} + m1 b_{n+1}: (N-1, 2, d)
-    c = (
-        m0[None, :, None] * b[0:-1:2, None, :]
-        + mh[None, :, None] * b[1::2, None, :]
-        + m1[None, :, None] * b[2::2, None, :]
-    )
+    c = np.multiply.outer(b[0:-1:2], m0)  # (N-1, d, 2), transposed below
+    c += np.multiply.outer(b[1::2], mh)
+    c += np.multiply.outer(b[2::2], m1)
+    c = c.transpose(0, 2, 1)
     z = np.empty((N, 2, d))
     z[0, 0], z[0, 1] = x0, 0.0
-    z[1] = P @ z[0] + c[0]
+    z[1] = P.dot(z[0]) + c[0]
     if N > 2:
         # Cayley-Hamilton: z_{n+2} - tr(P) z_{n+1} + det(P) z_n = c_{n+1} + (P - tr(P) I) c_n
-        tr, det = float(np.trace(P)), float(np.linalg.det(P))
-        e = c[1:] + np.einsum("ij,njd->nid", P - tr * np.eye(2), c[:-1])
-        e = e.reshape(N - 2, 2 * d)
+        (p00, p01), (p10, p11) = P.tolist()
+        tr, det = p00 + p11, p00 * p11 - p01 * p10
+        e = np.empty((N - 2, 2, d))
+        np.multiply(c[:-1, 0], p00 - tr, out=e[:, 0])
+        e[:, 0] += p01 * c[:-1, 1]
+        np.multiply(c[:-1, 0], p10, out=e[:, 1])
+        e[:, 1] += (p11 - tr) * c[:-1, 1]
+        e += c[1:]
         y0, y1 = z[0].reshape(-1), z[1].reshape(-1)
-        zi = np.stack([tr * y1 - det * y0, -det * y1])  # direct form II transposed state
-        z[2:] = lfilter([1.0], [1.0, -tr, det], e, axis=0, zi=zi)[0].reshape(N - 2, 2, d)
+        zi = np.empty((2, 2 * d))  # direct form II transposed state
+        np.subtract(tr * y1, det * y0, out=zi[0])
+        np.multiply(y1, -det, out=zi[1])
+        z[2:] = lfilter((1.0,), (1.0, -tr, det), e.reshape(N - 2, 2 * d), axis=0,
+                        zi=zi)[0].reshape(N - 2, 2, d)  # fmt: skip
     return z[:, 0, :], z[:, 1, :]
 
 

@@ -145,7 +145,7 @@ def test_shipped_default_plugs_into_the_arm_energy(humanoid):
     assert value.stiffness > 0
     fd = gradient_fd(humanoid, q, lambda x: energy.evaluate(humanoid.update(x)).value)
     np.testing.assert_allclose(value.gradient, fd, rtol=1e-5, atol=1e-6)
-    with pytest.raises(DataError, match="ships no trained"):
+    with pytest.raises(DataError, match="has no trained stiffness network there"):
         default_stiffness("dual_arm_torso")
 
 

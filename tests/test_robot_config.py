@@ -114,6 +114,14 @@ CASES = [
         ["[base.wheels]", "exactly 4 names, got 3"],
     ),
     (
+        "a joint whose URDF limit has no lower and upper",
+        "robot.urdf",
+        '<limit lower="-0.79" upper="0.79" effort="150.0" velocity="1.0"/>',
+        '<limit effort="150.0" velocity="1.0"/>',
+        ModelError,
+        ["robot.urdf", "joint 'waist_yaw' cannot move", "[0, 0]", "fixed joint"],
+    ),
+    (
         "negative wheel radius",
         "robot.toml",
         "wheel_radius = 0.08",
@@ -327,3 +335,136 @@ def test_differential_base(tmp_path, rng):
     )
     with pytest.raises(ConfigError, match=r"\[base\].*'wheel_left'"):
         wholebody.load_robot(tmp_path)
+
+
+def _diff_robot(tmp_path: Path, urdf: str) -> wholebody.Robot:
+    (tmp_path / "robot.urdf").write_text(urdf)
+    (tmp_path / "robot.toml").write_text(
+        '[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
+        'wheels = ["wheel_left", "wheel_right"]\nwheel_radius = 0.1\ntrack = 0.4\n'
+    )
+    return wholebody.load_robot(tmp_path)
+
+
+AXLE_BEHIND = [
+    ('<origin xyz="0 0.2 0.1"/>', '<origin xyz="-0.3 0.2 0.1"/>'),
+    ('<origin xyz="0 -0.2 0.1"/>', '<origin xyz="-0.3 -0.2 0.1"/>'),
+]
+RIGHT_AXIS_REVERSED = [('<origin xyz="0 -0.2 0.1"/><axis xyz="0 1 0"/>',
+                        '<origin xyz="0 -0.2 0.1"/><axis xyz="0 -1 0"/>')]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("changes", "signs"),
+    [([], (1.0, 1.0)), (AXLE_BEHIND, (1.0, 1.0)), (RIGHT_AXIS_REVERSED, (1.0, -1.0))],
+    ids=["reference", "axle behind the origin", "right axis reversed"],
+)
+def test_differential_wheels_roll_without_slipping(tmp_path, rng, changes, signs):
+    """Whatever the axle's place and the wheels' axis directions in the URDF, the base model
+    moves every wheel centre straight ahead at r times its spin about its own joint axis (no
+    slip, no sideways drag)."""
+    urdf = DIFF_DRIVE_URDF
+    for old, new in changes:
+        assert old in urdf
+        urdf = urdf.replace(old, new)
+    r = _diff_robot(tmp_path, urdf)
+    q = r.random_configuration(rng)
+    u = rng.uniform(-3, 3, r.nu)
+    state = r.update(q)
+    R = state.rotation(r.base_frame)
+    for k, (link, sign) in enumerate(zip(("wl", "wr"), signs, strict=True)):
+        v = R.T @ (state.jacobian(r.frame(link)) @ u)[:3]  # wheel centre velocity, base axes
+        np.testing.assert_allclose(v[1:], 0.0, atol=1e-12)  # no sideways or vertical speed
+        # spinning by +w about +y rolls forward: v = r w, here w = sign * u_k
+        assert v[0] == pytest.approx(0.1 * sign * u[k], abs=1e-12)
+
+
+def test_differential_wheels_off_one_axle_or_axis_are_rejected(tmp_path):
+    split = DIFF_DRIVE_URDF.replace('<origin xyz="0 0.2 0.1"/>', '<origin xyz="0.1 0.2 0.1"/>')
+    with pytest.raises(ConfigError, match=r"share one axle.*'wheel_left' is at x=0\.1000"):
+        _diff_robot(tmp_path, split)
+    axis = '<axis xyz="0 1 0"/><limit effort="1" velocity="10"/>'
+    upright = DIFF_DRIVE_URDF.replace(axis, axis.replace("0 1 0", "0 0 1"), 1)
+    with pytest.raises(ConfigError, match=r"wheel 'wheel_left' turns about \(0, 0, 1\)"):
+        _diff_robot(tmp_path, upright)
+
+
+def test_a_mecanum_wheel_axis_reversed_in_the_urdf_reverses_its_speed(tmp_path, humanoid):
+    d = copy_robot(tmp_path)
+    front_left = '<origin xyz="0.25 0.22 0.08" rpy="0.0 0.0 0.0"/>\n    <axis xyz="0.0 1.0 0.0"/>'
+    edit(d / "robot.urdf", front_left, front_left.replace("0.0 1.0 0.0", "0.0 -1.0 0.0"))
+    r = wholebody.load_robot(d)
+    expected = humanoid.base.matrix.copy()
+    expected[:, 0] *= -1.0  # wheel_front_left: the same motion needs the opposite joint speed
+    np.testing.assert_allclose(r.base.matrix, expected, atol=1e-15)
+
+
+def endless_wrist(tmp_path: Path) -> wholebody.Robot:
+    """The torso with its left wrist roll made a continuous joint (no limits)."""
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    edit(d / "robot.urdf", '<joint name="left_wrist_roll" type="revolute">',
+         '<joint name="left_wrist_roll" type="continuous">')  # fmt: skip
+    return wholebody.load_robot(d)
+
+
+def test_an_endless_arm_joint_is_left_out_of_joint_limit_avoidance(tmp_path):
+    from wholebody.presets import paper_objectives
+
+    r = endless_wrist(tmp_path)
+    h1 = {o.name: o for o in paper_objectives(r)}["joint_limits_arms"]
+    arm = [r.index(j) for g in ("left_arm", "right_arm") for j in r.group(g).joints]
+    assert sorted(h1.indices.tolist()) == sorted(set(arm) - {r.index("left_wrist_roll")})
+
+
+def test_posture_error_of_an_endless_joint_is_wrapped(tmp_path):
+    from wholebody.tasks import PostureTask
+
+    r = endless_wrist(tmp_path)
+    task = PostureTask(r, "left_arm")
+    k = r.group("left_arm").joints.index("left_wrist_roll")
+    target = task.target.copy()
+    target[k] = -3.0
+    task.set_target(target)
+    state = r.update(r.configuration({"left_wrist_roll": 3.0}))
+    e = task.error(state)
+    assert e[k] == pytest.approx(2 * np.pi - 6.0)  # -3 - 3 = -6 rad: 0.28 rad the short way
+    J, v = np.zeros((task.dim, r.nu)), np.zeros(task.dim)
+    task.write_rows(state, J, v)
+    np.testing.assert_allclose(v, task.kp * e)
+
+
+def test_a_robot_loaded_from_its_own_directory_finds_its_network_there(tmp_path):
+    """A user's robot keeps its trained network beside its robot.toml; the bundled one of
+    the same name is not taken instead, and a missing one says where it was looked for."""
+    from wholebody.errors import DataError
+    from wholebody.humanlike import NetworkStiffness, default_stiffness
+    from wholebody.humanlike.stiffness import ConstantStiffness
+    from wholebody.presets import default_stiffness as preset
+
+    d = tmp_path / "mobile_humanoid"
+    shutil.copytree(robots_dir() / "mobile_humanoid", d)
+    (d / "stiffness.npz").unlink()
+    robot = wholebody.load_robot(d)
+    assert isinstance(preset(robot), ConstantStiffness)  # not the bundled robot's network
+    with pytest.raises(DataError, match=str(d / "stiffness.npz")):
+        default_stiffness(robot)
+    shutil.copy(robots_dir() / "mobile_humanoid" / "stiffness.npz", d / "own.npz")
+    (d / "own.npz").rename(d / "stiffness.npz")
+    assert isinstance(preset(robot), NetworkStiffness)
+    assert isinstance(default_stiffness(robot), NetworkStiffness)
+
+
+def test_a_joint_whose_range_excludes_zero_starts_at_its_nearer_limit(tmp_path):
+    """neutral() (where scenarios start) and the joints [home] leaves out are valid states."""
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    edit(d / "robot.urdf", '<limit lower="-0.05" upper="2.4"', '<limit lower="0.1" upper="2.4"')
+    edit(d / "robot.toml", "left_elbow = 1.0\n", "")
+    r = wholebody.load_robot(d)
+    k = r.index("left_elbow")
+    lower, upper = r.position_limits
+    for q in (r.neutral(), r.home(), r.configuration({"torso_yaw": 0.2})):
+        jp = r.joint_positions(q)
+        assert jp[k] == pytest.approx(0.1)
+        assert np.all(jp[r.positional] >= lower[r.positional])
+        assert np.all(jp[r.positional] <= upper[r.positional])
+    assert r.joint_positions(r.neutral())[r.index("torso_yaw")] == 0.0  # 0 where 0 is inside

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from wholebody.humanlike.network import default_stiffness as network_stiffness
+from wholebody.humanlike.network import stiffness_path
 from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
-from wholebody.resources import robots_dir
 from wholebody.robot import Robot
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import (
@@ -60,9 +60,10 @@ class PaperWeights:
 
 
 def default_stiffness(robot: Robot) -> StiffnessModel:
-    """The robot's learned stiffness network if it ships one (``robots/<name>/stiffness.npz``,
-    see :func:`wholebody.humanlike.default_stiffness`), else a constant 0.1 N m/rad."""
-    if (robots_dir() / robot.name / "stiffness.npz").is_file():
+    """The robot's learned stiffness network if it has one (``stiffness.npz`` beside its
+    ``robot.toml``, see :func:`wholebody.humanlike.default_stiffness`), else a constant
+    0.1 N m/rad."""
+    if stiffness_path(robot).is_file():
         return network_stiffness(robot)
     return ConstantStiffness(0.1)
 
@@ -84,12 +85,16 @@ def paper_objectives(
     objectives: list[Objective] = [
         ArmPotentialEnergy(robot, arm, k, weight=weights.energy) for arm in robot.arms
     ]
+    # h1 acts on the joints with position limits: continuous joints (wheels, an endless
+    # wrist) have no range to stay inside
     arm_groups = [a.group.name for a in robot.arms.values() if a.group is not None]
-    others = [g for g in robot.groups if g not in arm_groups and _limited(robot, g)]
-    if arm_groups:
+    arm_joints = _limited(robot, arm_groups)
+    others = _limited(robot, [g for g in robot.groups if g not in arm_groups])
+    others = [j for j in others if j not in arm_joints]
+    if arm_joints:
         objectives.append(
             JointLimitAvoidance(
-                robot, arm_groups, weight=weights.limits_arms, name="joint_limits_arms"
+                robot, arm_joints, weight=weights.limits_arms, name="joint_limits_arms"
             )
         )
     if others:
@@ -107,10 +112,16 @@ def paper_objectives(
     return objectives
 
 
-def _limited(robot: Robot, group: str) -> bool:
+def _limited(robot: Robot, groups: Sequence[str]) -> list[str]:
+    """The joints of ``groups`` with finite position limits, in order, without repeats."""
     lower, upper = robot.position_limits
-    idx = robot.group(group).indices
-    return bool(np.all(np.isfinite(lower[idx]) & np.isfinite(upper[idx])))
+    joints: list[str] = []
+    for g in groups:
+        group = robot.group(g)
+        for name, i in zip(group.joints, group.indices.tolist(), strict=True):
+            if np.isfinite(lower[i]) and np.isfinite(upper[i]) and name not in joints:
+                joints.append(name)
+    return joints
 
 
 def paper_stack(

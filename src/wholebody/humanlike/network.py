@@ -254,14 +254,25 @@ class NetworkStiffness(StiffnessModel):
                 raise DataError(f"{path}: {exc}") from None
 
 
+def stiffness_path(robot: object | str) -> Path:
+    """Where a robot's trained network lives: ``stiffness.npz`` beside its ``robot.toml``
+    (for a bundled robot's name, ``robots/<name>/stiffness.npz``)."""
+    if isinstance(robot, str):
+        return robots_dir() / robot / "stiffness.npz"
+    config = getattr(robot, "config", None)
+    if config is None:
+        raise DataError(f"expected a Robot or a bundled robot's name, got {robot!r}")
+    return Path(config.path).parent / "stiffness.npz"
+
+
 def default_stiffness(robot: object | str = "mobile_humanoid") -> NetworkStiffness:
-    """The trained network shipped with a robot: ``robots/<name>/stiffness.npz``.
+    """The trained network of a robot: ``stiffness.npz`` beside its ``robot.toml``.
 
     ``robot`` is a :class:`~wholebody.robot.Robot` or a bundled robot name.
     """
+    path = stiffness_path(robot)
     name = robot if isinstance(robot, str) else str(getattr(robot, "name", ""))
-    path = robots_dir() / name / "stiffness.npz"
     if not path.is_file():
-        raise DataError(f"{path}: robot {name!r} ships no trained stiffness network; train one "
-                        "with `wholebody stiffness fit`")  # fmt: skip
+        raise DataError(f"{path}: robot {name!r} has no trained stiffness network there; train "
+                        f"one with `wholebody stiffness fit --out {path}`")  # fmt: skip
     return NetworkStiffness.load(path)

@@ -14,7 +14,13 @@ velocity ``u``; a base model is the constant 3 x n matrix ``B`` with ``twist = B
 
   Its null space is the internal mode ``(1, 1, -1, -1)`` (front pair against rear pair),
   which moves nothing: a posture level or a regularisation must pin it.
-* ``differential``: wheels left, right: ``vx = r (wl + wr) / 2``, ``wz = r (wr - wl) / track``.
+* ``differential``: wheels left, right: ``vx = r (wl + wr) / 2``, ``wz = r (wr - wl) / track``
+  and, with the axle at ``x = x_a`` of the base origin, ``vy = -x_a wz``.
+
+Wheel speeds are positive when a wheel turns about the base's ``+y`` axis (which drives it
+forward); :class:`~wholebody.robot.Robot` negates the column of a wheel whose URDF axis is
+``-y`` and sets the axle offset from the URDF, so the matrices above are those of wheels whose
+joint axes point to the left.
 * ``planar``: three virtual actuators ``base_vx, base_vy, base_wz`` equal to the twist.
 * ``fixed``: no root joint, no base actuator.
 """

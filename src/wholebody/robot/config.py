@@ -12,7 +12,10 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     urdf = "robot.urdf"          # required, relative to this file
     description = "..."          # optional
 
-    [base]                       # optional; default type = "fixed"
+    [base]                       # optional; default type = "fixed"; wheels are URDF
+                                 # joints of the root link turning about its +y or -y
+                                 # axis (x forward, z up); a differential base's two
+                                 # wheels share one axle, anywhere along x
     type = "fixed" | "mecanum" | "differential" | "planar"
     wheels = [...]               # mecanum: 4 joints FL, FR, RL, RR; differential: left, right
     wheel_radius = 0.08          # m, mecanum and differential
@@ -25,12 +28,13 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     name = ["joint", ...]
 
     [arms.<name>]                # optional, any number
-    side = "left" | "right"
+    side = "left" | "right"      # mirrors the arm angle (a single arm: either)
     group = "<group name>"       # optional
     shoulder = elbow = wrist = tool = "<frame>"
     upper_arm = forearm = "<link>"
 
-    [home]                       # optional; joint = angle (rad), others at 0
+    [home]                       # optional; joint = angle (rad), others at 0 (or at
+                                 # the nearer limit when 0 is outside their range)
 """
 
 from __future__ import annotations

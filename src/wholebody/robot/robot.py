@@ -24,7 +24,7 @@ import difflib
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TypeVar
 
@@ -132,6 +132,7 @@ class Robot:
         except (RuntimeError, ValueError) as exc:
             raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
         self.data: pin.Data = self.model.createData()
+        self._oMf = self.data.oMf  # the frame placements, read through one reference
         self._version = 0
         self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(root_link)
@@ -163,6 +164,8 @@ class Robot:
                     f"wheel joint {w!r} is not a joint of {self.config.urdf.name}"
                     + _suggest(w, joint_ids),
                 )
+        if base.wheel_joints:
+            base = self.base = self._wheel_geometry(joint_ids)
         names = list(base.actuators) + [n for n in joint_ids if n not in base.wheel_joints]
         self.actuated_joints: tuple[str, ...] = tuple(names)
         self.nu = len(names)
@@ -199,6 +202,12 @@ class Robot:
                 upper[k] = model.upperPositionLimit[iq]
         lower[~np.isfinite(lower) | (lower < -1e300)] = -np.inf
         upper[~np.isfinite(upper) | (upper > 1e300)] = np.inf
+        for k in np.flatnonzero(~(lower < upper) & (kinds == 0)).tolist():
+            raise ModelError(
+                f"{self.config.urdf}: joint {names[k]!r} cannot move: its limits are "
+                f"[{lower[k]:g}, {upper[k]:g}] (a URDF <limit> without lower and upper means "
+                "0 and 0); give it its range, or make it a fixed joint"
+            )
         vmax[vmax <= 0] = np.inf  # URDF velocity 0 means "not given"
         self.actuation = A
         self.position_limits: tuple[np.ndarray, np.ndarray] = (lower, upper)
@@ -223,6 +232,10 @@ class Robot:
         self._cont_sin = _as_slice(self._cont_q + 1)
         self._joint_ids = joint_ids
         self._u_index = {n: k for k, n in enumerate(names)}
+        # the zero configuration, every joint whose range excludes 0 at its nearer limit
+        self._neutral = pin.neutral(model)
+        self._neutral[self._scalar_q] = np.clip(0.0, lower[self._scalar], upper[self._scalar])
+        self._neutral.setflags(write=False)
 
     def _group(self, gname: str, joints: tuple[str, ...]) -> JointGroup:
         for j in joints:
@@ -236,21 +249,55 @@ class Robot:
         idx.setflags(write=False)
         return JointGroup(gname, joints, idx)
 
+    def _wheel_geometry(self, joint_ids: Mapping[str, int]) -> BaseModel:
+        """The base model with the URDF's wheel axes and axle: a wheel turning positively
+        about ``+y`` of the base drives it forward, so a wheel whose joint axis is ``-y``
+        gets its column of ``B`` negated; a differential axle at ``x = x_a`` of the base
+        origin gives the origin the lateral speed ``vy = -x_a wz`` (the axle midpoint, not
+        the origin, cannot slide sideways)."""
+        model, base = self.model, self.base
+        data = model.createData()
+        pin.computeJointJacobians(model, data, pin.neutral(model))
+        B = base.matrix.copy()
+        xs = []
+        for k, w in enumerate(base.wheel_joints):
+            j = joint_ids[w]
+            if model.parents[j] != 1:
+                raise self.config.error(
+                    "base.wheels",
+                    f"wheel {w!r} must be attached to the base link (the root link of the URDF), "
+                    f"not below joint {model.names[model.parents[j]]!r}",
+                )
+            local = pin.getJointJacobian(model, data, j, pin.LOCAL)[3:, model.joints[j].idx_v]
+            axis = model.jointPlacements[j].rotation @ local  # in the base (root) frame
+            if abs(axis[1]) < 1.0 - 1e-6:
+                raise self.config.error(
+                    "base.wheels",
+                    f"wheel {w!r} turns about ({axis[0]:.3g}, {axis[1]:.3g}, {axis[2]:.3g}) in "
+                    "the base frame: a wheel's joint axis must be the base's lateral axis, "
+                    "+y or -y (x forward, z up)",
+                )
+            B[:, k] *= math.copysign(1.0, axis[1])
+            xs.append(float(model.jointPlacements[j].translation[0]))
+        if base.type == "differential":
+            if abs(xs[0] - xs[1]) > WHEEL_PLACEMENT_TOLERANCE:
+                raise self.config.error(
+                    "base.wheels",
+                    f"the wheels of a differential base share one axle: {base.wheel_joints[0]!r} "
+                    f"is at x={xs[0]:.4f} m, {base.wheel_joints[1]!r} at x={xs[1]:.4f} m",
+                )
+            B[1] = -0.5 * (xs[0] + xs[1]) * B[2]
+        B.setflags(write=False)
+        return replace(base, matrix=B)
+
     def _check_base_geometry(self) -> None:
         """Check the base parameters of robot.toml against the URDF's wheel placements."""
         base, cfg = self.base, self.config.base
         if not base.wheel_joints:
             return
         placements = []
-        for w in base.wheel_joints:
-            j = self._joint_ids[w]
-            if self.model.parents[j] != 1:
-                raise self.config.error(
-                    "base.wheels",
-                    f"wheel {w!r} must be attached to the base link (the root link of the URDF), "
-                    f"not below joint {self.model.names[self.model.parents[j]]!r}",
-                )
-            placements.append(self.model.jointPlacements[j].translation[:2])
+        for w in base.wheel_joints:  # (attached to the base: see _wheel_geometry)
+            placements.append(self.model.jointPlacements[self._joint_ids[w]].translation[:2])
         xy = np.array(placements)
         if base.type == "mecanum":
             expected = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]]) * [
@@ -258,16 +305,18 @@ class Robot:
                 cfg.track / 2,
             ]
             what = "front-left, front-right, rear-left, rear-right at (+-wheel_base/2, +-track/2)"
+            keys = "wheel_base/track/wheel order"
         else:
             expected = np.array([[np.nan, 1], [np.nan, -1]]) * [1.0, cfg.track / 2]
             expected[:, 0] = xy[:, 0]
             what = "left, right at y = +-track/2"
+            keys = "track/wheel order"
         err = np.abs(xy - expected)
         if np.any(err > WHEEL_PLACEMENT_TOLERANCE):
             bad = int(np.argmax(err.max(axis=1)))
             raise self.config.error(
                 "base",
-                f"wheel_base/track/wheel order do not match the URDF: wheel "
+                f"{keys} do not match the URDF: wheel "
                 f"{base.wheel_joints[bad]!r} is at x={xy[bad, 0]:.4f}, y={xy[bad, 1]:.4f} m but "
                 f"the [base] table puts it at x={expected[bad, 0]:.4f}, y={expected[bad, 1]:.4f}"
                 f" m (expected wheels {what})",
@@ -370,8 +419,9 @@ class Robot:
 
     # ------------------------------------------------------------------ configurations
     def neutral(self) -> np.ndarray:
-        """The zero configuration: base at the world origin facing +x, all joints at 0."""
-        return pin.neutral(self.model)
+        """The zero configuration: base at the world origin facing +x, all joints at 0 (a
+        joint whose range excludes 0 at its nearer limit, so that it is a valid state)."""
+        return self._neutral.copy()
 
     def home(self) -> np.ndarray:
         """The home posture of ``robot.toml`` (base at the origin)."""
@@ -561,33 +611,37 @@ class RobotState:
 
     def _data(self) -> pin.Data:
         if self._version != self.robot._version:
-            raise WholebodyError(
-                "this RobotState is stale: Robot.update() was called again since it was "
-                "made; keep using the newest state"
-            )
+            _stale()
         return self.robot.data
+
+    def _placements(self) -> pin.StdVec_SE3:
+        """The robot's frame placements (``data.oMf``), checked fresh."""
+        robot = self.robot
+        if self._version != robot._version:
+            _stale()
+        return robot._oMf
 
     def placement(self, frame: Frame) -> pin.SE3:
         """The frame's world placement as a ``pinocchio.SE3`` (a copy)."""
-        return pin.SE3(self._data().oMf[frame.index])
+        return pin.SE3(self._placements()[frame.index])
 
     def pose(self, frame: Frame) -> np.ndarray:
         """4x4 world pose of ``frame``."""
-        return self._data().oMf[frame.index].homogeneous
+        return self._placements()[frame.index].homogeneous
 
     def position(self, frame: Frame) -> np.ndarray:
         """World position (m) of the frame origin."""
-        return self._data().oMf[frame.index].translation.copy()
+        return self._placements()[frame.index].translation.copy()
 
     def rotation(self, frame: Frame) -> np.ndarray:
         """3x3 world orientation of the frame."""
-        return self._data().oMf[frame.index].rotation.copy()
+        return self._placements()[frame.index].rotation.copy()
 
     def rotation_translation(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """The frame's world rotation (3x3) and position (3,) **without a copy**: views of the
         robot's data, overwritten by the next :meth:`Robot.update`; read, never write, them
         (for the control loop; :meth:`rotation` and :meth:`position` return copies)."""
-        M = self._data().oMf[frame.index]
+        M = self._placements()[frame.index]
         return M.rotation, M.translation
 
     def jacobian(self, frame: Frame) -> np.ndarray:
@@ -683,13 +737,13 @@ class RobotState:
 
     def com_position(self, body: Body) -> np.ndarray:
         """World position (m) of the body's centre of mass."""
-        M = self._data().oMf[body.frame.index]
+        M = self._placements()[body.frame.index]
         return M.translation + M.rotation @ body.com
 
     def com_jacobian(self, body: Body) -> np.ndarray:
         """3 x nu Jacobian of the body's centre of mass (world axes)."""
         J = self.jacobian(body.frame)
-        rx, ry, rz = self._data().oMf[body.frame.index].rotation @ body.com
+        rx, ry, rz = self._placements()[body.frame.index].rotation @ body.com
         # v_com = v_o + w x r = v_o - [r]x w
         return J[:3] - np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ J[3:]
 
@@ -713,6 +767,13 @@ class RobotState:
 
 
 # ---------------------------------------------------------------------- helpers
+def _stale() -> None:
+    raise WholebodyError(
+        "this RobotState is stale: Robot.update() was called again since it was made; keep "
+        "using the newest state"
+    )
+
+
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
     """``idx`` as an equivalent slice when it is an arithmetic run (step >= 1), else itself."""
     k = idx.tolist()

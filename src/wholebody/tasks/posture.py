@@ -1,12 +1,15 @@
 """Joint posture regulation: ``u_j = kp (q_ref,j - q_j)`` for a set of actuated joints.
 
-For joints with a position (revolute, prismatic) the error is ``q_ref - q``; for wheels and
-the virtual actuators of a planar base it is zero, so their rows damp the speed to zero
-(at a low priority this pins, e.g., the Mecanum base's internal wheel mode).
+For joints with a position (revolute, prismatic) the error is ``q_ref - q``; for continuous
+joints other than wheels (an endless wrist) it is that difference wrapped into ``[-pi, pi)``,
+the shorter way round; for wheels and the virtual actuators of a planar base it is zero, so
+their rows damp the speed to zero (at a low priority this pins, e.g., the Mecanum base's
+internal wheel mode).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -58,7 +61,9 @@ class PostureTask(Task):
         self.indices = idx
         self._all = idx.size == robot.nu and bool(np.all(idx == np.arange(robot.nu)))
         self.name = name or label
-        self._positional = robot.positional[idx]
+        base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, planar actuators
+        self._tracked = (~base)[idx].astype(float)  # 0: no position error
+        self._wrapped = np.flatnonzero(~robot.positional[idx] & ~base[idx])  # endless joints
         self.kp = np.broadcast_to(np.asarray(kp, float), idx.shape).copy()
         if not np.all(np.isfinite(self.kp)) or np.any(self.kp < 0):
             raise DimensionError(f"{self.name}: kp must be finite and >= 0")
@@ -82,8 +87,15 @@ class PostureTask(Task):
 
     def error(self, state: RobotState) -> np.ndarray:
         e = self.target - state.joint_positions()[self.indices]
-        e[~self._positional] = 0.0
+        self._finish(e)
         return e
+
+    def _finish(self, e: np.ndarray) -> None:
+        """``target - q`` into the error: wrapped for endless joints, 0 for the base."""
+        w = self._wrapped
+        if w.size:
+            e[w] = np.remainder(e[w] + math.pi, 2.0 * math.pi) - math.pi
+        e *= self._tracked
 
     def compute(self, state: RobotState) -> TaskRows:
         return TaskRows(self._J, self.kp * self.error(state), self._weights())
@@ -91,7 +103,7 @@ class PostureTask(Task):
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         jp = state.joint_positions()
         np.subtract(self.target, jp if self._all else jp[self.indices], out=v)
-        v *= self._positional  # e = 0 for wheels and planar-base actuators
+        self._finish(v)
         v *= self.kp
         J[...] = self._J
         return self.weight

@@ -116,3 +116,37 @@ def test_summary_of_logs_joined_with_an_unmonitored_run(humanoid):
     joined = summary(concatenate([first, second]))["arm_energy_j"]["right"]
     alone = summary(first)["arm_energy_j"]["right"]
     assert joined == pytest.approx(alone, rel=1e-12)
+
+
+def test_solver_failures_mean_the_first_level_unmet_for_every_backend(torso, tmp_path):
+    """A posture level that the velocity limits hold back is INFEASIBLE for the HQP (the box
+    cost it part of its optimum) and SCALED or BOUNDS_ACTIVE for the projection; the hand
+    above it is met by both, so neither run counts a failure. A hand target out of reach
+    counts for both."""
+    from wholebody.solvers import Level, Stack
+    from wholebody.solvers.hqp import HierarchicalQPSolver
+    from wholebody.solvers.result import SolverStatus
+    from wholebody.tasks import PostureTask, VelocityLimits
+
+    q0 = torso.home()
+    target = torso.joint_positions(q0) + 1.0  # far: the posture row asks for 50 rad/s
+
+    def run(solver, reach: float):
+        hand = FrameTask(torso, "left_tool", kp=20.0)
+        pose = torso.frame_pose(q0, "left_tool")
+        pose[0, 3] += reach
+        hand.set_target(pose)
+        posture = PostureTask(torso, target=target, kp=50.0)
+        stack = Stack(torso, [Level([hand], name="hand"), Level([posture], name="posture")],
+                      [VelocityLimits(torso)])  # fmt: skip
+        log = Controller(torso, stack, solver, dt=0.01).run(q0, 0.1)
+        log = RunLog.load(log.save(tmp_path / "run.npz"))  # the rule survives a round trip
+        return log, summary(log)["solver_failures"]
+
+    hqp_log, hqp_failures = run(HierarchicalQPSolver(), 0.0)
+    _, proj_failures = run(ProjectionSolver(), 0.0)
+    assert np.any(hqp_log.status == SolverStatus.INFEASIBLE)  # the posture level was limited
+    assert hqp_failures == proj_failures == 0
+    for solver in (HierarchicalQPSolver(), ProjectionSolver()):
+        log, failures = run(solver, 5.0)  # 5 m away: the first level cannot be met
+        assert failures == len(log) and bool(np.all(log.failed))

@@ -169,3 +169,24 @@ planner = "hold"
     log.meta["gain"] = np.float32(0.5)
     back = RunLog.load(log.save(tmp_path / "log.npz"))
     assert back.meta["trial"] == 3 and back.meta["gain"] == 0.5
+
+
+def test_outputs_follow_the_robots_own_groups(tmp_path):
+    """On a robot without a waist and with a torso group, the velocity plot shows every group
+    and the comparison table has no waist column (it read nan)."""
+    from wholebody.scenarios import outputs, plots
+
+    text = HEAD.replace("mobile_humanoid", "dual_arm_torso") + """
+[[phases]]
+name = "hold"
+duration = 0.03
+[phases.hands.right]
+planner = "hold"
+"""  # fmt: skip
+    path = tmp_path / "torso.toml"
+    path.write_text(text)
+    run = run_scenario(load_scenario(path))
+    assert plots.plotted_groups(run.log) == ["left_arm", "right_arm", "torso"]
+    table = outputs.comparison_markdown(outputs.comparison([run]), "torso")
+    assert "waist" not in table and "| method | frequency (Hz) |" in table
+    outputs.write_run(run, tmp_path / "out")  # the figures draw on this robot too

@@ -28,6 +28,7 @@ from wholebody.errors import DimensionError, WholebodyError
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot
 from wholebody.solvers.base import Solver
+from wholebody.solvers.result import SolverStatus
 from wholebody.solvers.stack import Stack
 from wholebody.tasks.arm_energy import ArmPotentialEnergy
 from wholebody.tasks.base import Task
@@ -171,6 +172,8 @@ class _Recorder:
         self.solve_time = np.zeros(n)
         self.status = np.zeros(n, dtype=np.int8)
         self.limit_hit = np.zeros(n, dtype=bool)
+        self.failed = np.zeros(n, dtype=bool)
+        self.top = stack.levels[0].name
         self.level_res = np.zeros((n, len(stack.levels)))
         self.errors = {t.name: np.zeros((n, t.dim)) for t in self.tasks}
         self.pos = {t.name: np.zeros((n, 3)) for t in tracked}
@@ -185,6 +188,9 @@ class _Recorder:
         self.solve_time[k] = result.solve_time
         self.status[k] = int(result.status)
         self.limit_hit[k] = result.limit_hit
+        self.failed[k] = result.status == SolverStatus.FAILED or any(
+            level == self.top for level, _ in result.infeasible
+        )
         self.level_res[k] = result.level_residuals
         for task in self.tasks:
             self.errors[task.name][k] = task.error(state)
@@ -218,6 +224,7 @@ class _Recorder:
             reference_positions=self.ref,
             arms={a: ArmTrace(*v.T.copy()) for a, v in self.arms.items()},
             meta=meta,
+            failed=self.failed,
         )
 
 

@@ -3,6 +3,8 @@
 Arrays have one row per control step. Keys in the file (no pickle; metadata as JSON)::
 
     t, q, u, joint_positions, step_time, solve_time, status, limit_hit, level_residuals
+    failed                          (N,) bool: status FAILED, or the first level not met
+                                    within the solver's tolerance (any backend)
     task_error/<task>               (N, dim)  task errors (m, rad)
     frame_position/<task>           (N, 3)    tracked frame position (m, world)
     reference_position/<task>       (N, 3)    its reference (m, world)
@@ -67,6 +69,10 @@ class RunLog:
     reference_positions: dict[str, np.ndarray] = field(default_factory=dict)
     arms: dict[str, ArmTrace] = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
+    failed: np.ndarray | None = None
+    """Per step: the solve failed (status FAILED) or left a task of the first level unmet
+    (see :attr:`SolverResult.infeasible`), by the same rule for every backend; None in logs
+    written before it was recorded."""
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -108,6 +114,8 @@ class RunLog:
             "limit_hit": self.limit_hit,
             "level_residuals": self.level_residuals,
         }
+        if self.failed is not None:
+            arrays["failed"] = self.failed
         for prefix, table in (
             ("task_error", self.task_errors),
             ("frame_position", self.frame_positions),
@@ -168,6 +176,7 @@ class RunLog:
             reference_positions=tables["reference_position"],
             arms={a: ArmTrace(**{f: v[f] for f in ARM_FIELDS}) for a, v in arms.items()},
             meta=json.loads(str(data["meta"])),
+            failed=data.get("failed"),
         )
 
 
@@ -234,4 +243,9 @@ def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
         reference_positions=merge([log.reference_positions for log in logs]),
         arms=arms,
         meta=base,
+        failed=(
+            None
+            if any(log.failed is None for log in logs)
+            else np.concatenate([log.failed for log in logs])
+        ),
     )

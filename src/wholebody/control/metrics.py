@@ -7,7 +7,9 @@
   defined (``rho >= ARM_ANGLE_MIN_RHO``: not a straight arm, not a vertical shoulder-wrist
   line),
 * limit violations (steps with a joint outside its limits by more than 1e-9 rad) and solver
-  failures (steps with status INFEASIBLE or FAILED).
+  failures (steps whose solve failed or left a task of the first level unmet within the
+  solver's tolerance: :attr:`RunLog.failed`, the same rule for every backend; in logs without
+  it, steps with status INFEASIBLE or FAILED).
 """
 
 from __future__ import annotations
@@ -94,7 +96,11 @@ def summary(log: RunLog) -> dict:
             for g in log.meta.get("groups", {})
         },
         "limit_violations": limit_violations(log),
-        "solver_failures": int(np.count_nonzero(log.status >= SolverStatus.INFEASIBLE)),
+        "solver_failures": int(
+            np.count_nonzero(
+                log.status >= SolverStatus.INFEASIBLE if log.failed is None else log.failed
+            )
+        ),
         "limit_hit_steps": int(np.count_nonzero(log.limit_hit)),
         "arm_energy_j": {},
         "arm_angle_rad": {},

@@ -10,6 +10,7 @@ hierarchical QP) from runs of one scenario; ``write_comparison`` writes them as
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -87,8 +88,10 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
         "MAE x (m)",
         "MAE y (m)",
         "MAE z (m)",
-        "waist travel (rad)",
     ]
+    waist = any(math.isfinite(r["waist_travel_rad"]) for r in rows)  # a robot with a waist
+    if waist:
+        head.append("waist travel (rad)")
     head += [f"final {a} arm energy (J)" for a in arms]
     head += ["failures", "limit violations"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -96,7 +99,8 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
         cells = [r["label"], f"{r['frequency_hz']:.0f}"]
         cells += [f"{r['mse_m2'][a]:.2e}" for a in "xyz"]
         cells += [f"{r['mae_m'][a]:.2e}" for a in "xyz"]
-        cells += [f"{r['waist_travel_rad']:.3f}"]
+        if waist:
+            cells += [f"{r['waist_travel_rad']:.3f}"]
         cells += [f"{r['final_arm_energy_j'].get(a, float('nan')):.3f}" for a in arms]
         cells += [str(r["solver_failures"]), str(r["limit_violations"])]
         lines.append("| " + " | ".join(cells) + " |")

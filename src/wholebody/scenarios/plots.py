@@ -4,7 +4,7 @@ importing this module changes no matplotlib state).
 * :func:`hand_paths`: executed hand paths in 3-D with their references, the obstacles,
   the props and a carried object at a few instants (Figs. 9, 10, 15);
 * :func:`joint_velocities`: actuated velocities per group, left arm, right arm, waist and
-  wheels (Figs. 12, 17);
+  wheels first (Figs. 12, 17), then the robot's other groups;
 * :func:`arm_energy`: per arm, gravity and spring energy over time, the arm angle over time
   and the spring energy against the arm angle (Fig. 13).
 """
@@ -168,11 +168,17 @@ def _obstacle_detail(ax, log: RunLog, obstacles: list[ObjectSpec]) -> None:
     ax.legend(fontsize=7)
 
 
+def plotted_groups(log: RunLog) -> list[str]:
+    """The joint groups of :func:`joint_velocities`: every group of the robot, those of the
+    paper's figures (left arm, right arm, waist, wheels) first."""
+    present = list(log.meta.get("groups", {}))
+    first = [g for g in ("left_arm", "right_arm", "waist", "wheels") if g in present]
+    return first + [g for g in present if g not in first]
+
+
 def joint_velocities(log: RunLog, out: Path, title: str = "") -> Path:
     """Actuated velocities per joint group against time (rad/s; wheels in rad/s)."""
-    groups = [
-        g for g in ("left_arm", "right_arm", "waist", "wheels") if g in log.meta.get("groups", {})
-    ] or list(log.meta.get("groups", {}))
+    groups = plotted_groups(log)
     fig = Figure(figsize=(8, 2.2 * len(groups)))
     axes = fig.subplots(len(groups), 1, sharex=True)
     axes = np.atleast_1d(axes)

@@ -1,0 +1,489 @@
+"""Stacks found by fuzzing the HQP against an independent lexicographic reference (two
+solvers, KKT-certified): each failed a promise of the module docstring before its fix."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.solvers.result import SolverStatus
+from wholebody.solvers.stack import LevelProblem, StackProblem
+
+
+def top_level_with_a_lower_level(seed: int = 1075) -> StackProblem:
+    """Level 0: rank-1 equality rows and one inequality row; level 1: random rows; a box."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 12))
+    m = int(rng.integers(1, 13))
+    A = np.outer(rng.normal(size=m), rng.normal(size=n))
+    b = rng.normal(size=m) * rng.choice([0.3, 1, 3])
+    C = rng.normal(size=(1, n))
+    hi = rng.normal(size=1) * rng.choice([0.3, 1, 3])
+    L0 = LevelProblem("L0", A, b, C, np.full(1, -np.inf), hi, {"t0": slice(0, m)},
+                      {"i0": slice(0, 1)})  # fmt: skip
+    m1 = int(rng.integers(1, n + 1))
+    L1 = LevelProblem("L1", rng.normal(size=(m1, n)), rng.normal(size=m1), np.zeros((0, n)),
+                      np.zeros(0), np.zeros(0), {"t1": slice(0, m1)}, {})  # fmt: skip
+    h = rng.uniform(0.1, 0.5, n) * rng.choice([0.3, 1, 3])
+    return StackProblem([L0, L1], -h, h, np.ones(n), {})
+
+
+def objective(lev: LevelProblem, x: np.ndarray) -> float:
+    """sqrt(||A x - b||^2 + ||s||^2), s the least slack of the inequality rows."""
+    r = lev.A @ x - lev.b
+    Cx = lev.C @ x
+    s = np.maximum(Cx - lev.upper, 0.0) + np.maximum(lev.lower - Cx, 0.0)
+    return math.sqrt(r @ r + s @ s)
+
+
+def test_daqps_hierarchy_does_not_let_a_lower_level_spoil_the_top_one():
+    """daqp's soft-weighted hierarchy returned a top level 8 % worse than the top level alone,
+    violating its inequality row by 1.44; the solver now checks the level where the box
+    bites against that level's own QP."""
+    problem = top_level_with_a_lower_level(1075)
+    alone = StackProblem(problem.levels[:1], problem.lower, problem.upper, problem.scale, {})
+    best = objective(
+        problem.levels[0], HierarchicalQPSolver(method="cascade").solve_problem(alone).u
+    )
+    u = HierarchicalQPSolver(method="native").solve_problem(problem).u
+    assert objective(problem.levels[0], u) <= best + 1e-6 * (
+        1 + np.linalg.norm(problem.levels[0].b)
+    )
+    assert np.all(u >= problem.lower - 1e-9) and np.all(u <= problem.upper + 1e-9)
+
+
+@pytest.mark.parametrize("engine", ["daqp", "proxsuite", "osqp"])
+def test_the_cascade_removes_the_tikhonov_bias_of_a_level_with_inequality_rows(engine):
+    """10 x1 = 10 and x2 >= 100 are met exactly at (1, 100); the Tikhonov term used to leave
+    x2 = 99.99999 and the row reported INFEASIBLE."""
+    lev = LevelProblem("top", np.array([[10.0, 0.0]]), np.array([10.0]), np.array([[0.0, 1.0]]),
+                       np.array([100.0]), np.array([np.inf]), {"task": slice(0, 1)},
+                       {"above": slice(0, 1)})  # fmt: skip
+    problem = StackProblem([lev], np.full(2, -1000.0), np.full(2, 1000.0), np.ones(2), {})
+    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem)
+    assert r.status == SolverStatus.OK and not r.infeasible
+    assert r.u[0] == pytest.approx(1.0, abs=1e-8) and r.u[1] >= 100.0 - 1e-8
+
+
+def inherited_rows_off_by_round_off() -> StackProblem:
+    inf = np.inf  # noqa: F841
+    n = 10
+    levels = []
+    levels.append(
+        LevelProblem(
+            "L0",
+            np.array([]).reshape(0, n),
+            np.array([]),
+            np.array(
+                [
+                    [
+                        1.096039412089566,
+                        0.05691587474064322,
+                        -0.8391628657432598,
+                        -0.8221751342080243,
+                        0.3325989942003731,
+                        -1.9280692858999664,
+                        0.11209641208466647,
+                        -1.310405694834296,
+                        -0.8677925637577188,
+                        -0.40422157426117156,
+                    ]
+                ]
+            ).reshape(1, n),
+            np.array([0.9032428496447734]),
+            np.array([1.3080171131334075]),
+            {},
+            {"i0": slice(0, 1, None)},
+            0.0,
+        )
+    )
+    levels.append(
+        LevelProblem(
+            "L1",
+            np.array(
+                [
+                    [
+                        2.921301596304578,
+                        0.18532191955645536,
+                        -1.0425468370244437,
+                        -3.382833031322096,
+                        4.0514227125968905,
+                        -3.0231020716267025,
+                        1.793381234848084,
+                        5.162794980279268,
+                        0.050219947805589804,
+                        -4.710531214070736,
+                    ],
+                    [
+                        -3.276777663108734,
+                        -0.3663802314204625,
+                        -4.200258179090208,
+                        -9.896687741419258,
+                        0.5110190033223702,
+                        -4.492175761325114,
+                        3.0261592756536926,
+                        -2.3924649730023244,
+                        -7.121070193462943,
+                        4.131226509495153,
+                    ],
+                    [
+                        5.842603192609156,
+                        0.3706438391129107,
+                        -2.0850936740488875,
+                        -6.765666062644192,
+                        8.102845425193781,
+                        -6.046204143253405,
+                        3.586762469696168,
+                        10.325589960558537,
+                        0.10043989561117961,
+                        -9.421062428141472,
+                    ],
+                ]
+            ).reshape(3, n),
+            np.array([-0.37581891855078875, 0.0002261807692221507, -0.7516378371015776]),
+            np.array(
+                [
+                    [
+                        -0.3042966241007544,
+                        0.7021518015544637,
+                        0.26841658396666507,
+                        -1.6106439061795974,
+                        1.2900964325333935,
+                        1.0542424814624531,
+                        -0.7940502423513628,
+                        0.015576879289825466,
+                        -0.47331825371290354,
+                        1.3636930995241778,
+                    ],
+                    [
+                        -0.17177429145659237,
+                        1.084312687300683,
+                        0.499411278649456,
+                        -1.6707851783688454,
+                        1.0027090380942487,
+                        -0.2495901766422241,
+                        0.7792310454298716,
+                        1.9875091492752166,
+                        0.6673848421177521,
+                        -0.2087533554667897,
+                    ],
+                    [
+                        0.22872010155347455,
+                        -0.34667996722947586,
+                        1.1277302258412574,
+                        1.4945346459120974,
+                        -2.5988905470069166,
+                        -0.592349165235548,
+                        -0.34396241663885446,
+                        1.2523523079565597,
+                        0.0675126652962519,
+                        1.467525654976188,
+                    ],
+                ]
+            ).reshape(3, n),
+            np.array([1.4662588865429769, -np.inf, -0.06578802338404069]),
+            np.array([1.4662588865429769, -0.9192493087564896, -0.0029601567380109634]),
+            {"t1": slice(0, 2, None), "t2": slice(2, 3, None)},
+            {"i3": slice(0, 1, None), "i4": slice(1, 3, None)},
+            0.0,
+        )
+    )
+    levels.append(
+        LevelProblem(
+            "L2",
+            np.array(
+                [
+                    [
+                        0.5923448293205124,
+                        0.3239802127213234,
+                        0.49171508409032605,
+                        0.07457472380785883,
+                        -0.12540789064074495,
+                        -0.2714660794691634,
+                        -0.22151137387264974,
+                        -0.24956440530556667,
+                        -0.19393729093690923,
+                        0.17057459694403754,
+                    ],
+                    [
+                        0.16135704380737767,
+                        0.08378801740336542,
+                        0.29021438363105334,
+                        0.20537324463404324,
+                        0.15715459721650435,
+                        -0.34056972894160475,
+                        -0.046559420471664274,
+                        -0.0858671522296936,
+                        -0.11199669948794438,
+                        -0.04126270601442074,
+                    ],
+                    [
+                        -0.4241333811686716,
+                        -0.014619482834295797,
+                        -0.1233411769319248,
+                        -0.21515436333697202,
+                        -0.1819494314779348,
+                        -0.009661336983970249,
+                        -0.09472817716766051,
+                        0.5183834569092242,
+                        -0.2486177235084743,
+                        -0.5414330448145852,
+                    ],
+                    [
+                        -0.007413670763647447,
+                        0.06537966800616622,
+                        0.02342066399201319,
+                        0.5045829362460517,
+                        0.3896187092313722,
+                        0.10271277516266926,
+                        -0.0852880402607728,
+                        -0.15795242231267592,
+                        0.4240613685278568,
+                        0.2555038701631787,
+                    ],
+                    [
+                        0.03611141215096971,
+                        -0.2518403734356324,
+                        -0.062213155004885716,
+                        0.23582642539632792,
+                        -0.5647311327870623,
+                        0.15373646813109765,
+                        0.08190687786918845,
+                        -0.22045346224643075,
+                        0.25741615712250565,
+                        0.04809014104104835,
+                    ],
+                    [
+                        -0.013559039102341306,
+                        -0.03764728086299159,
+                        -0.39653590637309516,
+                        0.4010258192848344,
+                        0.15392111183987836,
+                        0.1516929234310559,
+                        -0.03783178813857609,
+                        0.11993600785712742,
+                        0.2851090352169951,
+                        -0.06320099231256242,
+                    ],
+                    [
+                        -0.5388801948706521,
+                        -0.4799751931984888,
+                        -0.4600283191047441,
+                        -0.2666149357398341,
+                        -0.4817251273233658,
+                        0.5719560756296763,
+                        0.6705565686855233,
+                        0.052306853476283034,
+                        0.2374423883958397,
+                        -0.21061819329790143,
+                    ],
+                    [
+                        -0.1290693363451308,
+                        -0.3655353248824744,
+                        0.407649084011624,
+                        0.3228330749973318,
+                        0.09223906106476182,
+                        0.03628897853390855,
+                        0.004618158180945707,
+                        -0.2432960926390616,
+                        0.20012043223060572,
+                        0.32732881669935954,
+                    ],
+                    [
+                        0.13071634284372352,
+                        -0.053288943088218015,
+                        -0.07132897888797392,
+                        -0.0830325890641373,
+                        -0.4583488047171829,
+                        -0.1929198496213279,
+                        -0.19172409318409392,
+                        -0.09219763251470287,
+                        -0.0905856162486071,
+                        -0.02669134583863292,
+                    ],
+                ]
+            ).reshape(9, n),
+            np.array(
+                [
+                    1.8379763348167577,
+                    -0.6643339118380369,
+                    -4.9584851428286285,
+                    0.3873470215807612,
+                    1.7250617718938974,
+                    -2.661015748878566,
+                    2.232512705672293,
+                    2.3867308281619417,
+                    -0.13217390024717404,
+                ]
+            ),
+            np.array([]).reshape(0, n),
+            np.array([]),
+            np.array([]),
+            {"t5": slice(0, 2, None), "t6": slice(2, 9, None)},
+            {},
+            0.0,
+        )
+    )
+    PROBLEM = StackProblem(
+        levels,
+        np.array(
+            [
+                -0.04417740208581993,
+                -0.021303630853667366,
+                -0.0454130569188396,
+                -0.02560705501597116,
+                -0.012661946269875865,
+                -0.04768782979080765,
+                0.025768440221358935,
+                -0.016951877784693665,
+                -0.01318337888572032,
+                -0.049473732039425504,
+            ]
+        ),
+        np.array(
+            [
+                0.04417740208581993,
+                0.021303630853667366,
+                0.0454130569188396,
+                0.02560705501597116,
+                0.012661946269875865,
+                0.04768782979080765,
+                0.025768440221358935,
+                0.016951877784693665,
+                0.01318337888572032,
+                0.049473732039425504,
+            ]
+        ),
+        np.ones(n),
+        {},
+    )
+    return PROBLEM
+
+
+def test_a_level_qp_is_feasible_at_its_start_when_inherited_rows_drifted():
+    """proxsuite's answer at a level left an inherited inequality row 3.4e-10 beyond its
+    relaxed bound, in directions the next level cannot move: that level's QP was infeasible
+    at y = 0 (with the default iteration limit, 230 s and FAILED). The inherited bounds are
+    now widened to contain the current point, like the box."""
+    solver = HierarchicalQPSolver("proxsuite", method="cascade", engine_settings={"max_iter": 100})
+    r = solver.solve_problem(inherited_rows_off_by_round_off())
+    assert r.status != SolverStatus.FAILED, r.message
+    assert not any(rep.failed for rep in solver.levels)
+
+
+def a_level_proxsuite_skips() -> StackProblem:
+    inf = np.inf  # noqa: F841
+    n = 4
+    levels = []
+    levels.append(
+        LevelProblem(
+            "L0",
+            np.array(
+                [
+                    [
+                        0.016220601299327113,
+                        -0.10186127214970553,
+                        0.08604499368154317,
+                        -0.06393893788146486,
+                    ],
+                    [
+                        0.04136954767406533,
+                        0.11701316796473267,
+                        0.0734079433625417,
+                        0.03485055989857369,
+                    ],
+                    [
+                        -0.10546043925563467,
+                        -0.0038198929092664504,
+                        -0.07443676955067277,
+                        0.134099276570765,
+                    ],
+                    [
+                        -0.08273909534813066,
+                        -0.23402633592946534,
+                        -0.1468158867250834,
+                        -0.06970111979714738,
+                    ],
+                ]
+            ).reshape(4, n),
+            np.array(
+                [2.317027489805335, 0.7295438483562269, -4.728755217182777, -1.4590876967124538]
+            ),
+            np.array(
+                [
+                    [
+                        0.2659036732597148,
+                        -0.06291214267953195,
+                        0.5228093225601586,
+                        1.0878171125335243,
+                    ],
+                    [2.4700336888381353, -1.1747857367542427, 0.383714419583565, 1.308381953258571],
+                    [
+                        0.7832877888632044,
+                        1.5329713674277197,
+                        1.2754514445188159,
+                        0.11672772826045018,
+                    ],
+                ]
+            ).reshape(3, n),
+            np.array([-0.19578573229639945, -np.inf, -np.inf]),
+            np.array([0.378682391171929, -1.1650947192787695, 0.3384002713131977]),
+            {"t0": slice(0, 4, None)},
+            {"i1": slice(0, 2, None), "i2": slice(2, 3, None)},
+            0.0,
+        )
+    )
+    levels.append(
+        LevelProblem(
+            "L1",
+            np.array([]).reshape(0, n),
+            np.array([]),
+            np.array(
+                [
+                    [
+                        1.894155003115881,
+                        -1.7758737888237626,
+                        -1.7652428352785405,
+                        1.6821814381302067,
+                    ],
+                    [
+                        0.20666147427968162,
+                        -0.26419927468041104,
+                        0.6713824697288665,
+                        -0.6518178099961335,
+                    ],
+                ]
+            ).reshape(2, n),
+            np.array([-0.06306845716293247, -0.4393403795160304]),
+            np.array([np.inf, -0.25379165245890317]),
+            {},
+            {"i3": slice(0, 2, None)},
+            0.0,
+        )
+    )
+    PROBLEM = StackProblem(
+        levels,
+        np.array(
+            [-304.62228503623106, -0.032813929632419025, -459.89055323207623, -508.68191382754844]
+        ),
+        np.array(
+            [304.62228503623106, -0.032813929632419025, 459.89055323207623, 508.68191382754844]
+        ),
+        np.ones(n),
+        {},
+    )
+    return PROBLEM
+
+
+def test_a_skipped_levels_inequality_tasks_are_listed_as_infeasible():
+    """proxsuite fails the second level's QP (inequality rows only): the level is skipped and
+    its inequality task, violated by 3.9 at the answer, is now listed like its equalities."""
+    solver = HierarchicalQPSolver("proxsuite", method="cascade")
+    r = solver.solve_problem(a_level_proxsuite_skips())
+    if not solver.levels[1].failed:
+        pytest.skip("proxsuite solved the level on this machine: nothing skipped to list")
+    assert r.status == SolverStatus.FAILED
+    assert ("L1", "i3") in r.infeasible

@@ -566,41 +566,8 @@ class HierarchicalQPSolver(Solver):
             # bounds, so its face is re-solved exactly
             y = self._polish(x, y, Z, M, c, lo, hi, inherited)
         elif M is not None and p:
-            y = self._polish_rows(lev, x, y, Z, M, c, lo, hi, inherited)
+            y = self._polish(x, y, Z, M, c, lo, hi, inherited, lev)
         return x + (y if Z is None else Z.dot(y))
-
-    def _polish_rows(
-        self,
-        lev: LevelProblem,
-        x: np.ndarray,
-        y: np.ndarray,
-        Z: np.ndarray | None,
-        M: np.ndarray,
-        c: np.ndarray,
-        lo: np.ndarray,
-        hi: np.ndarray,
-        inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-    ) -> np.ndarray:
-        """:meth:`_polish` for a level with inequality rows: the rows at or beyond a bound at
-        the QP's answer join the least squares (their slack is ``C x - bound``), and the
-        polished point is kept only if the level's objective (:func:`_level_objective`) is
-        lower there. Without it the Tikhonov term trades slack for step length: a row met
-        exactly at the optimum was left violated by 1e-5 and reported INFEASIBLE."""
-        Cz = lev.C if Z is None else lev.C.dot(Z)
-        Cx = lev.C.dot(x)
-        v = Cx + Cz.dot(y)
-        low = v <= lev.lower + 1e-8
-        touch = low | (v >= lev.upper - 1e-8)
-        if _any(touch):
-            bound = np.where(low, lev.lower, lev.upper)[touch]
-            M = np.vstack((M, Cz[touch]))
-            c = np.concatenate((c, bound - Cx[touch]))
-        yp = self._polish(x, y, Z, M, c, lo, hi, inherited)
-        if yp is y:
-            return y
-        xo = x + (y if Z is None else Z.dot(y))
-        xp = x + (yp if Z is None else Z.dot(yp))
-        return yp if _level_objective(lev, xp) < _level_objective(lev, xo) else y
 
     def _polish(
         self,
@@ -612,16 +579,38 @@ class HierarchicalQPSolver(Solver):
         lo: np.ndarray,
         hi: np.ndarray,
         inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+        lev: LevelProblem | None = None,
     ) -> np.ndarray:
         """Remove the Tikhonov bias: on the face of the constraints active at the QP's answer,
         the level's least squares is solved exactly (``y + W (M W)^+ (c - M y)``, ``W`` the
         directions that keep the active constraints still); kept if it stays feasible.
+
+        With ``lev``, a level with inequality rows: the rows at or beyond a bound at the QP's
+        answer join the least squares (their slack is ``C x - bound``), and the polished point
+        is kept only if the level's objective (:func:`_level_objective`) is lower there.
+        Without it the Tikhonov term trades slack for step length: a row met exactly at the
+        optimum was left violated by 1e-5 and reported INFEASIBLE.
 
         The Tikhonov term can also move the QP's answer onto another face than the exact
         optimum's. Where only the box bounds the level (the first level with a QP), a residual
         still above the tolerance is checked against the exact bounded least squares (BVLS,
         ``scipy.optimize.lsq_linear``), which is taken if it fits better."""
         xq = x + (y if Z is None else Z.dot(y))
+        if lev is not None:
+            Cz = lev.C if Z is None else lev.C.dot(Z)
+            Cx = lev.C.dot(x)
+            v = Cx + Cz.dot(y)
+            low = v <= lev.lower + 1e-8
+            touch = low | (v >= lev.upper - 1e-8)
+            if _any(touch):
+                bound = np.where(low, lev.lower, lev.upper)[touch]
+                M = np.vstack((M, Cz[touch]))
+                c = np.concatenate((c, bound - Cx[touch]))
+            yp = self._polish(x, y, Z, M, c, lo, hi, inherited)
+            if yp is y:
+                return y
+            xp = x + (yp if Z is None else Z.dot(yp))
+            return yp if _level_objective(lev, xp) < _level_objective(lev, xq) else y
         act = 1e-8
         on = (xq <= lo + act) | (xq >= hi - act)
         grows = []

@@ -115,3 +115,30 @@ def test_a_skipped_levels_inequality_tasks_are_listed_as_infeasible():
         pytest.skip("proxsuite solved the level on this machine: nothing skipped to list")
     assert r.status == SolverStatus.FAILED
     assert ("L1", "i3") in r.infeasible
+
+
+def test_a_level_bought_off_its_optimum_by_the_tikhonov_term_does_not_freeze_the_next():
+    """Three consistent rank-1 levels whose exact answer lies inside the box (the recursive
+    pseudo-inverse meets every row). The Tikhonov term held the second level's QP on a box
+    face with a 2.7e-5 residual, that face was pinned, and the third level lost all its
+    freedom (residual 0.75). Proximal-point QPs now walk the level to its exact optimum."""
+    n = 4
+    none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
+    rows = [
+        ([[0.10768802093886205, -0.11149084417956046, -0.006547636480641782, -0.016465019683374993]], [0.4839591707781613]),
+        ([[0.1014796419487467, -0.02417750431791603, -0.010611651929785377, -0.06214827546833107]], [0.3420448611465455]),
+        ([[-0.5742738652264434, 1.5340271673908883, -0.8381439152506317, -0.5730366720775424],
+          [0.435038123239999, -1.162094151085485, 0.6349314812574374, 0.4341008941265498]], [-0.9784726279284293, 0.7412367538749924]),
+    ]  # fmt: skip
+    levels = [LevelProblem(f"L{k}", np.array(A), np.array(b), *none,
+                           {f"t{k}": slice(0, len(b))}, {}) for k, (A, b) in enumerate(rows)]  # fmt: skip
+    lower = np.array(
+        [-0.05253910673085642, -2.0671328175526664, -3.5174178321854197, -0.8560662118772109]
+    )
+    upper = np.array(
+        [2.0731344405461356, 0.06390362752565901, 0.09517461611250529, 0.08258190095972785]
+    )
+    problem = StackProblem(levels, lower, upper, np.ones(n), {})
+    r = HierarchicalQPSolver("daqp", method="cascade").solve_problem(problem)
+    assert r.status == SolverStatus.OK and not r.infeasible
+    np.testing.assert_array_less(r.level_residuals, 1e-8)

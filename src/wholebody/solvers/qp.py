@@ -264,7 +264,13 @@ class ProxsuiteEngine(QPEngine):
 
     @staticmethod
     def default_settings() -> dict[str, Any]:
-        return {"eps_abs": 1e-9, "eps_rel": 0.0, "max_iter": 1000, "verbose": False}
+        return {
+            "eps_abs": 1e-9,
+            "eps_rel": 0.0,
+            "max_iter": 1000,
+            "max_iter_in": 100,
+            "verbose": False,
+        }
 
     def __init__(self, *, warm_start: bool = True, **settings: Any) -> None:
         from proxsuite import proxqp

@@ -12,7 +12,7 @@ from fdcheck import frame_jacobian_fd
 
 import wholebody
 from wholebody import ConfigError, ModelError
-from wholebody.errors import FrameError
+from wholebody.errors import DimensionError, FrameError
 from wholebody.resources import robots_dir
 
 
@@ -468,3 +468,17 @@ def test_a_joint_whose_range_excludes_zero_starts_at_its_nearer_limit(tmp_path):
         assert np.all(jp[r.positional] >= lower[r.positional])
         assert np.all(jp[r.positional] <= upper[r.positional])
     assert r.joint_positions(r.neutral())[r.index("torso_yaw")] == 0.0  # 0 where 0 is inside
+
+
+def test_a_configuration_with_broken_cos_sin_pairs_is_rejected(humanoid):
+    """np.zeros(nq) looks like "the zero configuration" but its base yaw and wheel angles are
+    (cos, sin) = (0, 0): it gave a singular pose and, closed-loop, FAILED steps."""
+    with pytest.raises(
+        DimensionError, match=r"\(q\[2\], q\[3\]\) = \(0, 0\) is not a \(cos, sin\)"
+    ):
+        humanoid.frame_pose(np.zeros(humanoid.nq), "right_tool")
+    q = humanoid.neutral()
+    q[23:25] = (0.6, 0.6)  # a wheel's pair off the unit circle
+    with pytest.raises(DimensionError, match=r"q\[23\], q\[24\]"):
+        humanoid.check_configuration(q)
+    humanoid.check_configuration(humanoid.random_configuration(np.random.default_rng(3)))

@@ -233,6 +233,8 @@ class Robot:
         self._joint_ids = joint_ids
         self._u_index = {n: k for k, n in enumerate(names)}
         # the zero configuration, every joint whose range excludes 0 at its nearer limit
+        # where q holds (cos, sin) pairs: the planar root's yaw, every continuous joint
+        self._pairs = np.concatenate(([2] if base.mobile else [], self._cont_q)).astype(int)
         self._neutral = pin.neutral(model)
         self._neutral[self._scalar_q] = np.clip(0.0, lower[self._scalar], upper[self._scalar])
         self._neutral.setflags(write=False)
@@ -513,6 +515,16 @@ class Robot:
             )
         if not np.all(np.isfinite(q)):
             raise DimensionError(f"configuration of robot {self.name!r} is not finite: {q}")
+        c, s = q[self._pairs], q[self._pairs + 1]
+        bad = np.flatnonzero(np.abs(c * c + s * s - 1.0) > 1e-6)
+        if bad.size:
+            i = int(self._pairs[bad[0]])
+            raise DimensionError(
+                f"configuration of robot {self.name!r}: (q[{i}], q[{i + 1}]) = ({q[i]:g}, "
+                f"{q[i + 1]:g}) is not a (cos, sin) pair: q stores the base's yaw and every "
+                f"continuous joint's angle as cos and sin (nq = {self.nq} for nu = {self.nu}); "
+                "build q with robot.neutral(), robot.home() or robot.configuration()"
+            )
         return q
 
     def update(self, q: np.ndarray) -> RobotState:
@@ -534,17 +546,17 @@ class Robot:
 
     def frame_pose(self, q: np.ndarray, frame: str | Frame) -> np.ndarray:
         """4x4 pose of ``frame`` in the world at ``q``."""
-        return self.update(q).pose(self.frame(frame))
+        return self.update(self.check_configuration(q)).pose(self.frame(frame))
 
     def frame_jacobian(self, q: np.ndarray, frame: str | Frame) -> np.ndarray:
         """6 x nu Jacobian of ``frame`` at ``q``: world-aligned axes at the frame origin,
         linear rows first, wheel columns through the base actuation map."""
-        return self.update(q).jacobian(self.frame(frame)).copy()
+        return self.update(self.check_configuration(q)).jacobian(self.frame(frame)).copy()
 
     def com_position(self, q: np.ndarray, body: str | Body) -> np.ndarray:
         """World position (m) of a body's centre of mass at ``q``."""
         body = body if isinstance(body, Body) else self.body(body)
-        return self.update(q).com_position(body)
+        return self.update(self.check_configuration(q)).com_position(body)
 
     def integrate(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """Configuration reached from ``q`` by applying ``u`` for ``dt`` seconds (exact on

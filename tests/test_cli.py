@@ -71,6 +71,9 @@ def test_errors_are_reported_without_a_traceback(tmp_path, capsys):
     taken.write_text("")
     assert main(["run", "obstacle_avoidance", "--out", str(taken)]) == 2  # before the run
     assert "exists and is not a directory" in capsys.readouterr().err
+    below_a_file = taken / "x"  # cannot be made: found before the run, not after it
+    assert main(["run", "obstacle_avoidance", "--out", str(below_a_file)]) == 2
+    assert "cannot make the directory" in capsys.readouterr().err
 
 
 def test_demo_runs_headless_without_a_display(tmp_path, monkeypatch, capsys):

@@ -150,3 +150,29 @@ def test_solver_failures_mean_the_first_level_unmet_for_every_backend(torso, tmp
     for solver in (HierarchicalQPSolver(), ProjectionSolver()):
         log, failures = run(solver, 5.0)  # 5 m away: the first level cannot be met
         assert failures == len(log) and bool(np.all(log.failed))
+
+
+def test_misused_arguments_say_what_is_expected(torso):
+    """Mistakes a user makes on a first try fail at construction with the fix in the message,
+    not later with an AttributeError."""
+    from wholebody.planning import DMP, cylinder
+    from wholebody.solvers import Stack
+    from wholebody.tasks import Manipulability
+
+    hand = FrameTask(torso, "left_tool")
+    stack = Stack(torso, [[hand]])
+    pose = torso.frame_pose(torso.home(), "left_tool")
+    traj = MinimumJerkTrajectory(pose, pose, 1.0)
+    with pytest.raises(WholebodyError, match="solver must be a solver object"):
+        Controller(torso, stack, "hqp", dt=0.01)
+    with pytest.raises(WholebodyError, match="keyed by the task object"):
+        Controller(torso, stack, ProjectionSolver(), dt=0.01, references={"left_tool": traj})
+    with pytest.raises(WholebodyError, match=r"must be a Trajectory .*set_target"):
+        Controller(torso, stack, ProjectionSolver(), dt=0.01, references={hand: pose})
+    with pytest.raises(WholebodyError, match=r"a number .* or a StiffnessModel"):
+        ArmPotentialEnergy(torso, "left", "learned")
+    assert len(Manipulability(torso, "left_tool").frames) == 1  # one name, not its letters
+    t = np.linspace(0.0, 1.0, 60)
+    dmp = DMP.fit(np.c_[t, t, t], t)
+    with pytest.raises(WholebodyError, match=r"DynamicPotential\(cylinder"):
+        dmp.rollout(obstacles=[cylinder(np.zeros(3), 0.04, 0.2)])

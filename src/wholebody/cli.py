@@ -85,9 +85,14 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
 
 
 def _output_dir(out: Path) -> Path:
-    """``out``, checked before a run so that a bad path does not cost the run."""
+    """``out``, made (with its parents) before a run so that a bad path does not cost the
+    run."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {out}: cannot make the directory: {exc.strerror}") from None
     return out
 
 

@@ -7,7 +7,8 @@
   matrix"): heavy on the waist, light on the arms. That is what turns the paper's principle
   "more arm, less waist" into numbers: ``h1`` pulls joints to mid-range, and a heavy waist
   weight makes the null-space motion straighten the trunk and let the base and arms work;
-* ``h2`` manipulability of both hands (:class:`Manipulability`), weight ``w3``;
+* ``h2`` manipulability of both hands (:class:`Manipulability`), weight ``w3`` (0 by default:
+  ``h2`` is left out unless ``PaperWeights.manipulability`` is set);
 * descent gain ``k`` (``u = J+ v - k (I - J+ J) grad H``).
 
 The velocity metric makes one wheel radian per second as cheap as 0.01 of a joint's, so the

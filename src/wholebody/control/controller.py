@@ -74,10 +74,26 @@ class Controller:
             raise DimensionError(f"control period dt must be > 0 s, got {dt}")
         if feedforward not in ("midpoint", "start"):
             raise WholebodyError(f"feedforward must be 'midpoint' or 'start', got {feedforward!r}")
+        if not callable(getattr(solver, "solve", None)):
+            raise WholebodyError(
+                f"solver must be a solver object (ProjectionSolver(), HierarchicalQPSolver()), "
+                f"got {solver!r}"
+            )
         self.robot, self.stack, self.solver, self.dt = robot, stack, solver, float(dt)
         self.references = dict(references or {})
         stacked = set(map(id, stack.tasks))
-        for task in self.references:
+        for task, traj in self.references.items():
+            if not isinstance(task, (FrameTask, RelativeFrameTask)):
+                raise WholebodyError(
+                    f"references are keyed by the task object (a FrameTask or "
+                    f"RelativeFrameTask of the stack), got the key {task!r}"
+                )
+            if not isinstance(traj, Trajectory):
+                raise WholebodyError(
+                    f"reference for task {task.name!r} must be a Trajectory (a DMPTrajectory, "
+                    f"MinimumJerkTrajectory, ...; for a fixed pose call task.set_target), got "
+                    f"{type(traj).__name__}"
+                )
             if id(task) not in stacked:
                 raise WholebodyError(
                     f"reference given for task {task.name!r}, which is not in the stack"

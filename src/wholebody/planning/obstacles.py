@@ -666,6 +666,12 @@ def total_force(potentials: Sequence[Potential], x: np.ndarray, v: np.ndarray) -
 
 def make_point_force(potentials: Sequence[Potential]) -> PointForce | None:
     """One scalar closure summing the forces of ``potentials`` (``None`` if there are none)."""
+    for p in potentials:
+        if not callable(getattr(p, "point_force", None)):
+            raise DimensionError(
+                "obstacles are repulsive potentials: wrap each shape in one, e.g. "
+                f"DynamicPotential(cylinder(center, radius, height)); got a {type(p).__name__}"
+            )
     kernels = [p.point_force() for p in potentials]
     if not kernels:
         return None

@@ -99,6 +99,12 @@ class ArmPotentialEnergy(Objective):
         self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         self.name = name or f"{self.arm.name}_arm_energy"
         self.weight = float(weight)
+        if not isinstance(stiffness, (StiffnessModel, int, float, np.floating, np.integer)):
+            raise DimensionError(
+                f"{self.name}: stiffness must be a number (N m/rad) or a StiffnessModel (the "
+                "learned one: wholebody.humanlike.default_stiffness(robot)), got "
+                f"{stiffness!r}"
+            )
         self.stiffness = (stiffness if isinstance(stiffness, StiffnessModel)
                           else ConstantStiffness(stiffness))  # fmt: skip
         if not smoothing > 0 or not fade > 0:

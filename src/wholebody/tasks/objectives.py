@@ -120,6 +120,8 @@ class Manipulability(Objective):
 
     def __init__(self, robot: Robot, frames: Sequence[str | Frame], *, weight: float = -1.0,
                  name: str = "manipulability") -> None:  # fmt: skip
+        if isinstance(frames, (str, Frame)):  # one frame, not its characters
+            frames = [frames]
         if not frames:
             raise DimensionError(f"{name}: needs at least one frame")
         self.name, self.weight, self.robot = name, float(weight), robot

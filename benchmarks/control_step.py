@@ -4,9 +4,19 @@
 A step is: kinematics at q, the hand targets, the stack (both hand tasks, both arm energies,
 h1, h2 where the stack has them), the solve and the integration: what a real controller
 does every period. Every case follows the same target sequence (both hands on
-minimum-jerk reaches, repeated), its own state evolving; the cases run interleaved step by
-step, so machine noise hits all of them alike. Printed: median and p90 per case (us) and the
-ratio of medians to the plain pseudo-inverse measured in the same run.
+minimum-jerk reaches, repeated), its own state evolving. Two schedules, both in the same run
+(as in ``benchmarks/peers.py``):
+
+* **step-interleaved** (cold): the cases take turns step by step, so every step starts after
+  six other stacks have run, with cold caches, as in a controller that shares its machine
+  with a simulator or other processes between two periods;
+* **block-interleaved** (warm): the cases take turns every ``BLOCK`` (50) steps, so a step
+  follows steps of its own stack, as in a tight simulation loop.
+
+Each repeat runs both schedules, one after the other, so that machine noise (which drifts
+over seconds on this shared host) hits all the cases and both schedules alike. Printed:
+median and p90 per case (us) and the ratio of medians to the plain pseudo-inverse measured
+in the same schedule and run.
 
     python benchmarks/control_step.py [--steps N] [--repeat R]
 
@@ -41,6 +51,7 @@ from wholebody.tasks import (
 )
 
 DT = 0.01
+BLOCK = 50  # steps of one case in a row in the warm schedule
 PAPER = PaperWeights(manipulability=0.05)  # the full H = w1 f_p + w2 h1 - w3 h2
 
 Factory = Callable[[wholebody.Robot, list[FrameTask]], tuple[Stack, Solver]]
@@ -140,45 +151,52 @@ def run(steps: int, repeat: int) -> None:
     for name, factory in CASES:
         hands = [FrameTask(robot, "left_tool", kp=20.0), FrameTask(robot, "right_tool", kp=20.0)]
         stack, solver = factory(robot, hands)
-        runs.append(
-            {
-                "name": name,
-                "stack": stack,
-                "solver": solver,
-                "hands": hands,
-                "q": q0.copy(),
-                "times": [],
-            }
-        )
+        runs.append({"name": name, "stack": stack, "solver": solver, "hands": hands,
+                     "cold": [], "warm": []})  # fmt: skip
+    samples = [forth_and_back(refs, k * DT) for k in range(steps)]
+
+    def steps_of(r: dict, ks: range, out: list[float]) -> None:
+        """Steps ``ks`` of case ``r`` from its current state (``r["q"]``)."""
+        hands, stack, solver = r["hands"], r["stack"], r["solver"]
+        q = r["q"]
+        for k in ks:
+            start = time.perf_counter()
+            for hand, (pose, twist) in zip(hands, samples[k], strict=True):
+                hand.set_target(pose, twist)
+            state = robot.update(q)
+            result = solver.solve(stack, state, DT)
+            stack.advance(state, DT, result.limit_hit)
+            q = robot.integrate(q, result.u, DT)
+            out.append(time.perf_counter() - start)
+        r["q"] = q
+
     for _ in range(repeat):
-        for r in runs:
-            r["q"] = q0.copy()
-            r["stack"].reset()
-        for k in range(steps):
-            samples = forth_and_back(refs, k * DT)
+        for schedule in ("cold", "warm"):
             for r in runs:
-                start = time.perf_counter()
-                for hand, (pose, twist) in zip(r["hands"], samples, strict=True):
-                    hand.set_target(pose, twist)
-                state = robot.update(r["q"])
-                result = r["solver"].solve(r["stack"], state, DT)
-                r["stack"].advance(state, DT, result.limit_hit)
-                r["q"] = robot.integrate(r["q"], result.u, DT)
-                r["times"].append(time.perf_counter() - start)
-    base = np.median(runs[0]["times"])
+                r["q"] = q0.copy()
+                r["stack"].reset()
+            size = 1 if schedule == "cold" else BLOCK
+            for k in range(0, steps, size):
+                for r in runs:
+                    steps_of(r, range(k, min(k + size, steps)), r[schedule])
     print(
         f"control step, mobile_humanoid (nu = {robot.nu}), dt = {DT} s, "
         f"{steps} steps x {repeat}, {platform.processor() or platform.machine()}, "
         f"Python {platform.python_version()}"
     )
-    print(f"{'case':42s} {'median us':>10s} {'p90 us':>10s} {'x pinv':>8s} {'Hz':>8s}")
+    cols = f"{'median us':>10s} {'p90 us':>9s} {'x pinv':>7s} {'Hz':>7s}"
+    print(f"{'':42s} {'step-interleaved (cold)':^36s}  {'block-interleaved (warm)':^36s}".rstrip())
+    print(f"{'case':42s} {cols}  {cols}")
+    base = {sch: float(np.median(runs[0][sch])) * 1e6 for sch in ("cold", "warm")}
     for r in runs:
-        t = np.asarray(r["times"]) * 1e6
-        med = float(np.median(t))
-        print(
-            f"{r['name']:42s} {med:10.1f} {np.percentile(t, 90):10.1f} "
-            f"{med / (base * 1e6):8.2f} {1e6 / med:8.0f}"
-        )
+        cells = []
+        for sch in ("cold", "warm"):
+            t = np.asarray(r[sch]) * 1e6
+            med = float(np.median(t))
+            cells.append((med, float(np.percentile(t, 90)), med / base[sch]))
+        (cm, cp, cx), (wm, wp, wx) = cells
+        print(f"{r['name']:42s} {cm:10.1f} {cp:9.1f} {cx:7.2f} {1e6 / cm:7.0f}  "
+              f"{wm:10.1f} {wp:9.1f} {wx:7.2f} {1e6 / wm:7.0f}")  # fmt: skip
     print("paper (Table 2 / Sec. 5.2): pseudo-inverse 343.46 Hz, paper's method 40.55 Hz")
 
 

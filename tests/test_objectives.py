@@ -181,3 +181,13 @@ def test_arm_angle_equal_for_mirrored_postures(humanoid, rng):
         ArmPotentialEnergy(humanoid, a, 1.0).evaluate(state).arm_angle for a in ("left", "right")
     ]
     assert angles[0] == pytest.approx(angles[1], abs=1e-12)
+
+
+def test_joint_limit_avoidance_names_groups_and_joints(humanoid):
+    from wholebody.errors import WholebodyError
+    from wholebody.tasks import JointLimitAvoidance
+
+    with pytest.raises(WholebodyError, match=r"'rigth_arm' is neither a joint group .*'right_arm'"):
+        JointLimitAvoidance(humanoid, ["left_arm", "rigth_arm"])
+    both = JointLimitAvoidance(humanoid, ["left_arm", "waist_yaw"])
+    assert humanoid.index("waist_yaw") in both.indices.tolist()

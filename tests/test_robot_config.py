@@ -256,6 +256,11 @@ def test_unknown_names_suggest_or_list(humanoid):
         humanoid.frame("left_tol")
     with pytest.raises(FrameError, match=r"known: .*right_tool"):  # nothing close: the list
         humanoid.frame("nope")
+    with pytest.raises(KeyError, match="no arm 'rigth' \\(did you mean 'right'"):
+        humanoid.arms["rigth"]  # the README's idiom
+    with pytest.raises(KeyError, match="no joint group 'wasit'"):
+        humanoid.groups["wasit"]
+    assert humanoid.groups.get("wasit") is None and "waist" in humanoid.groups
 
 
 def test_fixed_base_torso_is_just_another_robot_toml(torso, rng):
@@ -482,3 +487,13 @@ def test_a_configuration_with_broken_cos_sin_pairs_is_rejected(humanoid):
     with pytest.raises(DimensionError, match=r"q\[23\], q\[24\]"):
         humanoid.check_configuration(q)
     humanoid.check_configuration(humanoid.random_configuration(np.random.default_rng(3)))
+
+
+def test_the_stiffness_network_checks_its_input(humanoid):
+    from wholebody.humanlike import default_stiffness
+
+    model = default_stiffness(humanoid)
+    k, _ = model.evaluate([0.25, 0.05, -0.25])  # a list is a position too
+    assert k == pytest.approx(model.evaluate(np.array([0.25, 0.05, -0.25]))[0])
+    with pytest.raises(DimensionError, match=r"\(3,\) array .* got shape \(2,\)"):
+        model.evaluate(np.zeros(2))

@@ -144,7 +144,10 @@ class NetworkStiffness(StiffnessModel):
 
         Plain numpy on preloaded arrays (a few microseconds): it runs twice per control step.
         """
-        h = wrist
+        h = np.asarray(wrist, dtype=float)
+        if h.shape != (3,):
+            raise DimensionError(f"stiffness network: the wrist position is a (3,) array (m), "
+                                 f"got shape {h.shape}")  # fmt: skip
         hs = []
         for W, b in self._layers:
             h = np.tanh(W @ h + b)

@@ -138,11 +138,13 @@ class Robot:
         self.base_frame: Frame = self.frame(root_link)
         """The URDF's root link (the moving base of a mobile robot)."""
         self._build_actuation()
-        self.groups: dict[str, JointGroup] = {
-            g: self._group(g, joints) for g, joints in config.groups.items()
-        }
+        self.groups: dict[str, JointGroup] = _Named(
+            "joint group", {g: self._group(g, joints) for g, joints in config.groups.items()}
+        )
         self._check_base_geometry()
-        self.arms: dict[str, ArmChain] = {a: self._arm(c) for a, c in config.arms.items()}
+        self.arms: dict[str, ArmChain] = _Named(
+            "arm", {a: self._arm(c) for a, c in config.arms.items()}
+        )
         self._home = self._configuration_from(config.home, "home")
 
     # ------------------------------------------------------------------ construction
@@ -795,6 +797,17 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
     if step >= 1 and k == list(range(k[0], k[-1] + 1, step)):
         return slice(k[0], k[-1] + 1, step)
     return idx
+
+
+class _Named(dict):
+    """A dict of named parts (arms, groups) whose missing key says what there is."""
+
+    def __init__(self, kind: str, items: Mapping[str, object]) -> None:
+        super().__init__(items)
+        self.kind = kind
+
+    def __missing__(self, key: object) -> object:
+        raise KeyError(f"no {self.kind} {key!r}" + _suggest(key, self))
 
 
 def _suggest(name: object, candidates) -> str:

@@ -7,6 +7,7 @@ weighted sum a stack level forms from its objectives (manipulability with a nega
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Sequence
 
@@ -51,6 +52,14 @@ class JointLimitAvoidance(Objective):
         if joints is None:
             idx = np.flatnonzero(limited)
         else:
+            for j in joints:
+                if j not in robot.groups and j not in robot.actuated_joints:
+                    close = difflib.get_close_matches(j, [*robot.groups, *robot.actuated_joints])
+                    raise WholebodyError(
+                        f"{name}: {j!r} is neither a joint group ({', '.join(robot.groups)}) nor "
+                        "an actuated joint"
+                        + (f" (did you mean {', '.join(map(repr, close))}?)" if close else "")
+                    )
             parts = [robot.groups[j].indices if j in robot.groups else [robot.index(j)]
                      for j in joints]  # fmt: skip
             idx = np.unique(np.concatenate(parts)).astype(int)

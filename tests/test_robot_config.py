@@ -497,3 +497,26 @@ def test_the_stiffness_network_checks_its_input(humanoid):
     assert k == pytest.approx(model.evaluate(np.array([0.25, 0.05, -0.25]))[0])
     with pytest.raises(DimensionError, match=r"\(3,\) array .* got shape \(2,\)"):
         model.evaluate(np.zeros(2))
+
+
+def test_h1_of_a_group_named_like_one_of_its_joints(tmp_path):
+    """A group "torso" holding the joint "torso" and an endless roll: h1 takes the joint
+    only (the group's name used to bring the endless joint back in, and loading failed)."""
+    from wholebody.presets import paper_objectives
+
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    roll = '<joint name="right_wrist_roll" type="revolute">'
+    urdf = (d / "robot.urdf").read_text().replace('"torso_yaw"', '"torso"')
+    (d / "robot.urdf").write_text(urdf.replace(roll, roll.replace("revolute", "continuous")))
+    edit(d / "robot.toml", 'torso = ["torso_yaw"]', 'torso = ["torso", "right_wrist_roll"]')
+    edit(d / "robot.toml", '"right_wrist_pitch", "right_wrist_roll",', '"right_wrist_pitch",')
+    r = wholebody.load_robot(d)
+    h1 = {o.name: o for o in paper_objectives(r)}["joint_limits_body"]
+    assert h1.indices.tolist() == [r.index("torso")]
+
+
+def test_a_stiffness_read_back_from_a_file_is_a_number(humanoid):
+    from wholebody.tasks import ArmPotentialEnergy
+
+    energy = ArmPotentialEnergy(humanoid, "right", np.array(0.1))  # a 0-d array, as from .npz
+    assert energy.stiffness.k == pytest.approx(0.1)

@@ -278,3 +278,15 @@ def test_bad_arguments_are_reported(humanoid):
         humanoid.frame("left_tol")
     with pytest.raises(WholebodyError, match="outside the joint's limits"):
         humanoid.configuration({"left_elbow_flexion": 3.0})
+
+
+def test_a_copied_robot_reads_its_own_kinematics(humanoid, rng):
+    """copy.deepcopy of a Robot (e.g. one per worker) computes poses from its own data."""
+    import copy
+
+    other = copy.deepcopy(humanoid)
+    q = humanoid.random_configuration(rng)
+    state = other.update(q)
+    frame = other.frame("right_tool")
+    np.testing.assert_allclose(state.position(frame), other.data.oMf[frame.index].translation)
+    np.testing.assert_allclose(state.pose(frame), humanoid.frame_pose(q, "right_tool"), atol=1e-12)

@@ -113,15 +113,15 @@ def paper_objectives(
     return objectives
 
 
-def _limited(robot: Robot, groups: Sequence[str]) -> list[str]:
-    """The joints of ``groups`` with finite position limits, in order, without repeats."""
+def _limited(robot: Robot, groups: Sequence[str]) -> list[int]:
+    """The entries of ``u`` of the joints of ``groups`` with finite position limits, in order,
+    without repeats (indices: a joint may be named like a group)."""
     lower, upper = robot.position_limits
-    joints: list[str] = []
+    joints: list[int] = []
     for g in groups:
-        group = robot.group(g)
-        for name, i in zip(group.joints, group.indices.tolist(), strict=True):
-            if np.isfinite(lower[i]) and np.isfinite(upper[i]) and name not in joints:
-                joints.append(name)
+        for i in robot.group(g).indices.tolist():
+            if np.isfinite(lower[i]) and np.isfinite(upper[i]) and i not in joints:
+                joints.append(i)
     return joints
 
 

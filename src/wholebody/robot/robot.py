@@ -132,7 +132,6 @@ class Robot:
         except (RuntimeError, ValueError) as exc:
             raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
         self.data: pin.Data = self.model.createData()
-        self._oMf = self.data.oMf  # the frame placements, read through one reference
         self._version = 0
         self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(root_link)
@@ -633,7 +632,7 @@ class RobotState:
         robot = self.robot
         if self._version != robot._version:
             _stale()
-        return robot._oMf
+        return robot.data.oMf
 
     def placement(self, frame: Frame) -> pin.SE3:
         """The frame's world placement as a ``pinocchio.SE3`` (a copy)."""

@@ -571,7 +571,12 @@ class HierarchicalQPSolver(Solver):
         y = self._polish(x, y, Z, M, c, lo, hi, inherited, lev if p else None)
         # The Tikhonov term d/2 |y|^2 can also hold the answer on a face the exact optimum is
         # not on (a long step bought with a 1e-5 residual): proximal-point steps, the term
-        # centred on the last answer, walk to the level's exact optimum within the constraints
+        # centred on the last answer, walk to the level's exact optimum within the constraints.
+        # Not needed where the answer already meets the level's optimality conditions (a level
+        # that the bounds hold back: the common case).
+        if p == 0 and self._optimal(lev, x + (y if Z is None else Z.dot(y)), Z, lo, hi,
+                                    inherited):  # fmt: skip
+            return x + (y if Z is None else Z.dot(y))
         g0 = g[:r].copy()
         tol = self.tolerance * (1.0 + math.sqrt(c.dot(c)))
         f = _level_objective(lev, x + (y if Z is None else Z.dot(y))) if p else 0.0
@@ -709,6 +714,8 @@ class HierarchicalQPSolver(Solver):
         box-free candidate, hence optimal), against the level's QP alone (one cascade QP).
         daqp's soft-weighted levels can let a lower level pull a higher one off its optimum
         (measured on random stacks: 2 in 5000, the top level's residual 8 % worse)."""
+        if not lev.C.shape[0] and self._optimal(lev, xn, Z, lo, hi, inherited):
+            return False  # daqp's answer meets the level's optimality conditions: no QP
         scratch = LevelReport(lev.name, free=self.levels[k].free, rank=self.levels[k].rank)
         xq = self._level_qp(k, lev, x, Z, M, c, smax, lo, hi, inherited, scratch)
         if xq is None:
@@ -716,6 +723,57 @@ class HierarchicalQPSolver(Solver):
         fn, fq = _level_objective(lev, xn), _level_objective(lev, xq)
         return math.sqrt(2.0 * fn) > math.sqrt(2.0 * fq) + self.tolerance * (
             1.0 + math.sqrt(lev.b.dot(lev.b))
+        )
+
+    def _optimal(
+        self,
+        lev: LevelProblem,
+        x: np.ndarray,
+        Z: np.ndarray | None,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+        rtol: float = 1e-4,
+    ) -> bool:
+        """Whether ``x`` meets the optimality conditions of the level's least squares (no
+        inequality rows of its own) over ``x + Z y`` within the box and the inherited rows:
+        the gradient ``g = Z^T A^T (A x - b)`` is ``-N^T nu`` for the normals ``N`` of the
+        constraints active at ``x``, with ``nu >= 0`` on upper and ``<= 0`` on lower bounds,
+        both to ``rtol |g|`` (a sufficient test: degenerate multipliers may fail it, and then
+        the caller only does more work)."""
+        g = lev.A.T.dot(lev.A.dot(x) - lev.b)
+        gy = g if Z is None else Z.T.dot(g)
+        gn = math.sqrt(gy.dot(gy))
+        if gn == 0.0:
+            return True
+        act = self.active_tolerance
+        up, low = x >= hi - act, x <= lo + act
+        on = up | low
+        if Z is None and not inherited:  # the normals are unit vectors: nu = -g on the bounds
+            free = ~on
+            if gy[free].dot(gy[free]) > (rtol * gn) ** 2:
+                return False
+            return bool(np.all(gy[up] <= rtol * gn) and np.all(gy[low] >= -rtol * gn))
+        normals = [np.eye(x.shape[0])[on] if Z is None else Z[on]]
+        signs = [np.where(up[on], 1.0, -1.0)]
+        for G, glo, ghi in inherited:
+            Gx = G.dot(x)
+            gu, gl = Gx >= ghi - act, Gx <= glo + act
+            if _any(gu | gl):
+                Ga = G[gu | gl]
+                normals.append(Ga if Z is None else Ga.dot(Z))
+                signs.append(np.where(gu[gu | gl], 1.0, -1.0))
+        N = np.vstack(normals)
+        if not N.shape[0]:
+            return False
+        try:
+            _, nu, _, _ = _cod(N.T, -gy, np.zeros(N.shape[0]), self.rank_tolerance)
+        except (np.linalg.LinAlgError, ValueError):
+            return False
+        res = N.T.dot(nu) + gy
+        return bool(
+            math.sqrt(res.dot(res)) <= rtol * gn
+            and np.all(np.concatenate(signs) * nu >= -rtol * gn)
         )
 
     def _native(self, problem: StackProblem, first: int) -> np.ndarray | None:

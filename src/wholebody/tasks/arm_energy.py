@@ -99,14 +99,20 @@ class ArmPotentialEnergy(Objective):
         self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         self.name = name or f"{self.arm.name}_arm_energy"
         self.weight = float(weight)
-        if not isinstance(stiffness, (StiffnessModel, int, float, np.floating, np.integer)):
-            raise DimensionError(
-                f"{self.name}: stiffness must be a number (N m/rad) or a StiffnessModel (the "
-                "learned one: wholebody.humanlike.default_stiffness(robot)), got "
-                f"{stiffness!r}"
-            )
-        self.stiffness = (stiffness if isinstance(stiffness, StiffnessModel)
-                          else ConstantStiffness(stiffness))  # fmt: skip
+        if isinstance(stiffness, StiffnessModel):
+            self.stiffness = stiffness
+        else:
+            try:  # a number, a numpy scalar or 0-d array; not a string such as "learned"
+                k = float(stiffness) if not isinstance(stiffness, str) else None
+            except (TypeError, ValueError):
+                k = None
+            if k is None:
+                raise DimensionError(
+                    f"{self.name}: stiffness must be a number (N m/rad) or a StiffnessModel "
+                    "(the learned one: wholebody.humanlike.default_stiffness(robot)), got "
+                    f"{stiffness!r}"
+                )
+            self.stiffness = ConstantStiffness(k)
         if not smoothing > 0 or not fade > 0:
             raise DimensionError(f"{self.name}: smoothing and fade must be > 0")
         self.smoothing, self.fade = float(smoothing), float(fade)

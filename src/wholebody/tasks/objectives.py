@@ -40,10 +40,11 @@ class JointLimitAvoidance(Objective):
     Parameters
     ----------
     joints
-        Group names and/or joint names to include (default: every joint with finite limits).
+        Group names, joint names and/or indices into ``u`` to include (default: every joint
+        with finite limits); a name is a group's before a joint's.
     """
 
-    def __init__(self, robot: Robot, joints: Sequence[str] | None = None, *,
+    def __init__(self, robot: Robot, joints: Sequence[str | int] | None = None, *,
                  weight: float = 1.0, name: str = "joint_limit_avoidance") -> None:  # fmt: skip
         lower, upper = robot.position_limits
         limited = np.isfinite(lower) & np.isfinite(upper)
@@ -53,6 +54,10 @@ class JointLimitAvoidance(Objective):
             idx = np.flatnonzero(limited)
         else:
             for j in joints:
+                if isinstance(j, (int, np.integer)):
+                    if not 0 <= j < robot.nu:
+                        raise WholebodyError(f"{name}: index {j} is not in [0, {robot.nu})")
+                    continue
                 if j not in robot.groups and j not in robot.actuated_joints:
                     close = difflib.get_close_matches(j, [*robot.groups, *robot.actuated_joints])
                     raise WholebodyError(
@@ -60,8 +65,8 @@ class JointLimitAvoidance(Objective):
                         "an actuated joint"
                         + (f" (did you mean {', '.join(map(repr, close))}?)" if close else "")
                     )
-            parts = [robot.groups[j].indices if j in robot.groups else [robot.index(j)]
-                     for j in joints]  # fmt: skip
+            parts = [[int(j)] if isinstance(j, (int, np.integer)) else robot.groups[j].indices
+                     if j in robot.groups else [robot.index(j)] for j in joints]  # fmt: skip
             idx = np.unique(np.concatenate(parts)).astype(int)
             if not np.all(limited[idx]):
                 bad = [robot.actuated_joints[i] for i in idx if not limited[i]]

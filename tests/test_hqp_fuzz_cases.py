@@ -178,3 +178,34 @@ def test_proxsuite_keeps_solving_a_stack_with_a_safety_half_space(humanoid):
         stack.advance(state, 0.01, saturated=result.limit_hit)
         q = humanoid.integrate(q, result.u, 0.01)
     assert humanoid.frame_pose(q, "right_tool")[2, 3] >= start[2, 3] - 0.1 - 1e-3
+
+
+def _equality_levels(rows: list[tuple[list[list[float]], list[float]]]) -> list[LevelProblem]:
+    n = len(rows[0][0][0])
+    none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
+    return [LevelProblem(f"L{k}", np.array(A), np.array(b), *none, {f"t{k}": slice(0, len(b))},
+                         {}) for k, (A, b) in enumerate(rows)]  # fmt: skip
+
+
+@pytest.mark.parametrize("engine", ["daqp", "osqp"])
+def test_round_off_rows_do_not_use_up_a_lower_levels_freedom(engine):
+    """L0 leaves a segment free; L1's row is 2e-16 along it (pure round-off) and used to be
+    given rank 1, which froze the segment: L2 then missed its optimum (4.33 against 4.05)."""
+    levels = _equality_levels([([[-1.0, 1.0, 0.6, 0.25], [-1.0, 1.0, 0.3, -0.95]], [-3.0, 0.0]),
+                               ([[0.0, 0.0, 0.0, 1.0]], [3.0]), ([[0.1, 1.0, 0.0, 0.0]], [-5.0])])  # fmt: skip
+    problem = StackProblem(levels, np.array([-1.0, -1.0, -0.1, -0.1]),
+                           np.array([1.0, 1.0, 0.1, 0.1]), np.ones(4), {})  # fmt: skip
+    u = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem).u
+    np.testing.assert_allclose(u, [0.49, -1.0, -0.1, -0.1], atol=1e-6)  # the certified optimum
+
+
+@pytest.mark.parametrize("engine", ["daqp", "osqp"])
+def test_a_bound_the_optimal_set_does_not_move_along_is_not_pinned_away(engine):
+    """The box caps L0 at x1 = 1 and leaves the segment x0 in [-1, -0.5], x2 = -1.1 - 0.2 x0;
+    pinning x1 projected to a round-off row that removed the segment, and L2 got x0 = -0.5
+    (residual 0.5) instead of -1 (0.39)."""
+    levels = _equality_levels([([[0.2, -0.9, 1.0], [0.2, -0.3, 1.0]], [-2.9, -0.5]),
+                               ([[0.4, 0.0, 0.9]], [-1.6])])  # fmt: skip
+    problem = StackProblem(levels, -np.ones(3), np.ones(3), np.ones(3), {})
+    u = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem).u
+    np.testing.assert_allclose(u, [-1.0, 1.0, -0.9], atol=1e-6)

@@ -391,7 +391,12 @@ class HierarchicalQPSolver(Solver):
                     y = (c if Z is None else Z.T.dot(c)) / sw
                 else:
                     try:
-                        rank, y, null, smax = _cod(M, c, t, self.rank_tolerance)
+                        # rows below rank_tolerance |A| in the free directions are round-off
+                        fa = A.ravel()
+                        floor = (
+                            self.rank_tolerance * math.sqrt(fa.dot(fa)) if Z is not None else 0.0
+                        )
+                        rank, y, null, smax = _cod(M, c, t, self.rank_tolerance, floor)
                     except (np.linalg.LinAlgError, ValueError) as exc:
                         failures.append(f"{lev.name}: decomposition failed ({exc}); level skipped")
                         report.failed = True
@@ -462,7 +467,10 @@ class HierarchicalQPSolver(Solver):
                 delta = self.regularization * (smax * smax if smax > 0 else 1.0)
                 pins = self._strongly_active(lev, x, Z_level, lo, hi, inherited, delta)
                 if pins is not None:
-                    Z = _null_space(pins.dot(Z) if Z is not None else pins, Z, self.rank_tolerance)
+                    # (pins are rows of unit size: box rows, or inherited rows, scaled below)
+                    floor = self.rank_tolerance * float(np.abs(pins).max())
+                    Z = _null_space(pins.dot(Z) if Z is not None else pins, Z,
+                                    self.rank_tolerance, floor)  # fmt: skip
             r = n if Z is None else Z.shape[1]
             if p:
                 Cx = C.dot(x)
@@ -1105,13 +1113,15 @@ _geqp3, _orgqr, _gels, _trtrs = (getattr(_lapack, f) for f in ("dgeqp3", "dorgqr
 
 
 def _cod(
-    M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float
+    M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: float = 0.0
 ) -> tuple[int, np.ndarray, np.ndarray | None, float | None]:
     """Minimum-norm least squares with a rank threshold, by a complete orthogonal
     decomposition (LAPACK ``dgeqp3`` + ``dorgqr``, about 3x faster than an SVD here).
 
     ``M^T P = Q R`` (QR with column pivoting of ``M^T``, Q square); the rank is the number of
-    ``|R_ii| > rtol |R_00|``; ``Q_1`` spans ``M``'s row space and ``Q_2`` its null space. Returns
+    ``|R_ii| > max(rtol |R_00|, floor)`` (``floor``: the size below which a row of ``M`` is
+    round-off, e.g. a level's rows projected on directions they do not move); ``Q_1`` spans
+    ``M``'s row space and ``Q_2`` its null space. Returns
     ``(rank, y, Q_2 or None when rank = r, |R_00|)`` with ``y = Q_1 a - Q_2 Q_2^T t``, ``a`` the
     least-squares solution of ``R_1^T a = P^T c``: ``M y`` is the best fit of ``c``, and among
     the ``y`` that achieve it, ``t + y`` has the smallest norm. When ``M`` has full column
@@ -1128,7 +1138,7 @@ def _cod(
         lqr, z, info = _gels(M, c)
         if info == 0:
             tall = z[:r]
-            if _full_column_rank(M, lqr, rtol):
+            if _full_column_rank(M, lqr, rtol, floor):
                 return r, tall, None, None
     k = min(m, r)
     qr, jpvt, tau, _, info = _geqp3(M.T, lwork=8 * (m + 1))
@@ -1137,8 +1147,8 @@ def _cod(
     if k:
         diag = qr.diagonal()[:k].tolist()
         smax = abs(diag[0])
-        if smax > 0:
-            thr = rtol * smax
+        if smax > floor:
+            thr = max(rtol * smax, floor)
             rank = 0
             for v in diag:  # |R_ii| is non-increasing, but count every one like the rule
                 if abs(v) > thr:
@@ -1182,7 +1192,7 @@ _trtri = _lapack.dtrtri
 _CERTIFY_MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
 
 
-def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float) -> bool:
+def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float, floor: float = 0.0) -> bool:
     """Whether the rank rule of :func:`_cod` (``|R_ii| > rtol |R_00|`` in the pivoted QR of
     ``M^T``) is certain to find full column rank, from the unpivoted QR ``M = Q R`` in ``lqr``
     (``dgels``'s output) of a tall ``M`` (m x r, m > r).
@@ -1191,7 +1201,8 @@ def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float) -> bool:
     norm of the trailing block, whose 2-norm is at least ``sigma_r(M)`` (a rank-i matrix is at
     least that far from ``M^T``), so ``|R_ii| >= sigma_r / sqrt(m)``; ``|R_00|`` is a column
     norm, at most ``||M||_F``; and ``sigma_r(M) = sigma_min(R) >= 1 / ||R^-1||_F``. Hence full
-    rank when ``||R^-1||_F ||M||_F sqrt(m) rtol < 1``, here with a margin of 1e3.
+    rank when ``||R^-1||_F ||M||_F sqrt(m) rtol < 1``, here with a margin of 1e3; and every
+    ``|R_ii| > floor`` when ``||R^-1||_F sqrt(m) floor < 1``.
     """
     r = M.shape[1]
     Rinv, info = _trtri(lqr[:r, :r], lower=0)
@@ -1200,7 +1211,8 @@ def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float) -> bool:
     fi = Rinv.ravel(order="K")
     fm = M.ravel(order="K")
     margin = _CERTIFY_MARGIN * rtol
-    return bool(fi.dot(fi) * fm.dot(fm) * (M.shape[0] * margin * margin) < 1.0)
+    inv2 = fi.dot(fi) * M.shape[0]  # >= 1 / |R_ii|^2 for every pivot of the rule
+    return bool(inv2 * fm.dot(fm) * margin * margin < 1.0 and inv2 * floor * floor < 1.0)
 
 
 def _pivot_norm(M: np.ndarray) -> float:
@@ -1226,10 +1238,14 @@ def _lower_mask(m: int, k: int) -> np.ndarray:
     return mask
 
 
-def _null_space(Nz: np.ndarray, Z: np.ndarray | None, rank_tolerance: float) -> np.ndarray:
-    """Basis of ``{Z y : Nz y = 0}`` (``Z = None``: the identity)."""
+def _null_space(Nz: np.ndarray, Z: np.ndarray | None, rank_tolerance: float,
+                floor: float = 0.0) -> np.ndarray:  # fmt: skip
+    """Basis of ``{Z y : Nz y = 0}`` (``Z = None``: the identity); singular values at most
+    ``max(rank_tolerance s_max, floor)`` count as zero (``floor``: the size of a row of
+    ``Nz`` that is round-off, a constraint on directions it does not move)."""
     _, S, Vt = np.linalg.svd(Nz, full_matrices=True)
-    rank = int(np.count_nonzero(rank_tolerance * S[0] < S)) if S.size and S[0] > 0 else 0
+    thr = max(rank_tolerance * S[0], floor) if S.size else 0.0
+    rank = int(np.count_nonzero(thr < S)) if S.size and S[0] > floor else 0
     V2 = Vt[rank:].T
     return V2 if Z is None else Z.dot(V2)
 

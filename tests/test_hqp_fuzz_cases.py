@@ -107,12 +107,12 @@ def a_level_proxsuite_skips() -> StackProblem:
 
 
 def test_a_skipped_levels_inequality_tasks_are_listed_as_infeasible():
-    """proxsuite fails the second level's QP (inequality rows only): the level is skipped and
-    its inequality task, violated by 3.9 at the answer, is now listed like its equalities."""
-    solver = HierarchicalQPSolver("proxsuite", method="cascade")
-    r = solver.solve_problem(a_level_proxsuite_skips())
-    if not solver.levels[1].failed:
-        pytest.skip("proxsuite solved the level on this machine: nothing skipped to list")
+    """proxsuite fails the second level's QP (inequality rows only; here held to one
+    iteration): the level is skipped and its inequality task, violated at the answer, is
+    listed like its equalities."""
+    solver = HierarchicalQPSolver("proxsuite", method="cascade", engine_settings={"max_iter": 1})
+    r = solver.solve_problem(a_level_proxsuite_skips())  # one iteration: the level fails
+    assert solver.levels[1].failed
     assert r.status == SolverStatus.FAILED
     assert ("L1", "i3") in r.infeasible
 
@@ -209,3 +209,44 @@ def test_a_bound_the_optimal_set_does_not_move_along_is_not_pinned_away(engine):
     problem = StackProblem(levels, -np.ones(3), np.ones(3), np.ones(3), {})
     u = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem).u
     np.testing.assert_allclose(u, [-1.0, 1.0, -0.9], atol=1e-6)
+
+
+@pytest.mark.parametrize("engine", ["daqp", "osqp"])
+def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
+    """Three stacks of the second fuzzing round (each against a hand-derived optimum)."""
+    n, none = 3, (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    # (1) a level of one inequality row, x >= 400: its Tikhonov bias left it violated by 8e-6
+    L0 = LevelProblem("L0", np.zeros((0, 1)), np.zeros(0), np.array([[0.05]]), np.array([20.0]),
+                      np.array([np.inf]), {}, {"above": slice(0, 1)})  # fmt: skip
+    L1 = LevelProblem("L1", np.eye(1), np.zeros(1), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
+                      {"t1": slice(0, 1)}, {})  # fmt: skip
+    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+        StackProblem([L0, L1], np.full(1, -1000.0), np.full(1, 1000.0), np.ones(1), {})
+    )
+    assert ("L0", "above") not in r.infeasible and r.u[0] == pytest.approx(400.0, abs=1e-6)
+    # (2) an inequality level above objectives: the bounded least squares (BVLS) of the
+    # objectives' level ignored the inherited row and violated it by 0.66
+    C = np.array([[1.0351879907581838, -0.7756413745956193, 1.6667497504903537]])
+    L0 = LevelProblem("L0", np.zeros((0, n)), np.zeros(0), C, np.array([0.8062776506186784]),
+                      np.array([np.inf]), {}, {"half_space": slice(0, 1)})  # fmt: skip
+    L1 = LevelProblem("L1", np.eye(n), np.array([2.2191508000828906, -1.7598913582999285,
+                      -2.813567964954028]), *none, {"t1": slice(0, n)}, {})  # fmt: skip
+    u = (
+        HierarchicalQPSolver(engine, method="cascade")
+        .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
+        .u
+    )
+    assert C[0] @ u >= 0.8062776506186784 - 1e-8
+    # (3) the slack of a violated row presses on a bound too: pinning from the equality rows
+    # alone took a free direction from the next level (1.94 optimal, 2.02 found)
+    L0 = LevelProblem("L0", np.array([[-0.9, -0.3, -0.9]]), np.array([2.7]),
+                      np.array([[-1.2, -0.4, 1.1]]), np.array([-np.inf]), np.array([-0.6]),
+                      {"t0": slice(0, 1)}, {"i0": slice(0, 1)})  # fmt: skip
+    L1 = LevelProblem("L1", np.array([[1.5, 0.8, 0.2], [-1.9, -0.3, 0.4]]),
+                      np.array([-0.8, -0.4]), *none, {"t1": slice(0, 2)}, {})  # fmt: skip
+    u = (
+        HierarchicalQPSolver(engine, method="cascade")
+        .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
+        .u
+    )
+    assert np.linalg.norm(L1.A @ u - L1.b) == pytest.approx(1.941162, abs=1e-5)

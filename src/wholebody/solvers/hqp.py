@@ -577,6 +577,8 @@ class HierarchicalQPSolver(Solver):
             return None
         y = sol.x[:r]
         if M is None:
+            if p:  # only inequality rows: their slack is the level's least squares
+                y = self._polish(x, y, Z, np.zeros((0, r)), np.zeros(0), lo, hi, inherited, lev)
             return x + (y if Z is None else Z.dot(y))
         y = self._polish(x, y, Z, M, c, lo, hi, inherited, lev if p else None)
         # The Tikhonov term d/2 |y|^2 can also hold the answer on a face the exact optimum is
@@ -701,7 +703,11 @@ class HierarchicalQPSolver(Solver):
             fit = lsq_linear(M, c, bounds=(lo - x, hi - x), method="bvls", tol=1e-13)
             yb = np.minimum(np.maximum(fit.x, lo - x), hi - x)
             rb = c - M.dot(yb)
-            if np.isfinite(yb).all() and rb.dot(rb) < rp.dot(rp):
+            if (
+                np.isfinite(yb).all()
+                and rb.dot(rb) < rp.dot(rp)
+                and _inside(x + yb, lo, hi, inherited)
+            ):  # fmt: skip  (BVLS sees the box only)
                 return yb
         return yp
 
@@ -1000,6 +1006,9 @@ def _active_multipliers(lev: LevelProblem, x: np.ndarray, Z: np.ndarray | None, 
     nothing is active) and the norm of what the normals leave of ``gy``."""
     lo, hi, inherited = bounds
     g = lev.A.T.dot(lev.A.dot(x) - lev.b)
+    if lev.C.shape[0]:  # the slack of the level's violated inequality rows is its objective too
+        Cx = lev.C.dot(x)
+        g = g + lev.C.T.dot(np.maximum(Cx - lev.upper, 0.0) - np.maximum(lev.lower - Cx, 0.0))
     gy = g if Z is None else Z.T.dot(g)
     gnorm = math.sqrt(gy.dot(gy))
     low, up = x <= lo + act, x >= hi - act

@@ -224,6 +224,7 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
         StackProblem([L0, L1], np.full(1, -1000.0), np.full(1, 1000.0), np.ones(1), {})
     )
     assert ("L0", "above") not in r.infeasible and r.u[0] == pytest.approx(400.0, abs=1e-6)
+    assert r.status == SolverStatus.OK  # the level above, not the box, holds L1 (was INFEASIBLE)
     # (2) an inequality level above objectives: the bounded least squares (BVLS) of the
     # objectives' level ignored the inherited row and violated it by 0.66
     C = np.array([[1.0351879907581838, -0.7756413745956193, 1.6667497504903537]])
@@ -250,3 +251,31 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
         .u
     )
     assert np.linalg.norm(L1.A @ u - L1.b) == pytest.approx(1.941162, abs=1e-5)
+
+
+@pytest.mark.parametrize("engine", ["daqp", "proxsuite", "osqp"])
+def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
+    """(1) A lower level repeating the top task (nothing left to move) whose minimum-norm step
+    leaves the box: its QP had a Hessian of 3e-41 and daqp's answer broke the top level
+    (residual 1.8 where 0 is met). (2) One ill-conditioned level (condition 5e5): every
+    engine stopped 3.7 % above the bounded least squares (BVLS ran out of iterations)."""
+    row = np.array([[-0.15, -0.47, -1.0]])
+    none = (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    levels = [LevelProblem("L0", row, np.array([-3.5]), *none, {"t0": slice(0, 1)}, {}),
+              LevelProblem("L1", 1.2 * row, np.array([4.77]), *none, {"t1": slice(0, 1)}, {})]  # fmt: skip
+    box = np.array([-1.0, -np.inf, -1.0]), np.array([1.0, np.inf, 1.0])
+    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+        StackProblem(levels, *box, np.ones(3), {})
+    )
+    assert r.level_residuals[0] < 1e-6 and ("L0", "t0") not in r.infeasible
+    A = np.array([[0.7432992844579642, 1.3956691799968912, -1.6596900207256087],
+                  [-2.857295096361623, -5.371464595273765, 6.373232673829478],
+                  [1.3417655506407502, 2.5330469464517904, -2.9822336150290942]])  # fmt: skip
+    b = np.array([0.04744111040380759, 0.02734634733457533, -0.5447686686658867])
+    lo = np.array([-112.4481878597328, -200.88631992778832, -5.382834797819274])
+    hi = np.array([209.79712291742493, 238.5391295942699, 10.781618844429781])
+    level = LevelProblem("L0", A, b, *none, {"t": slice(0, 3)}, {})
+    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+        StackProblem([level], lo, hi, np.ones(3), {})
+    )
+    assert np.linalg.norm(A @ r.u - b) == pytest.approx(0.0261061, abs=1e-6)

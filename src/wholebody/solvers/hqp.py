@@ -412,6 +412,11 @@ class HierarchicalQPSolver(Solver):
                 p == 0 or _rows_inside(C.dot(xc), lev.lower, lev.upper, self.tolerance)
             ):
                 x = xc
+            elif m and rank == 0 and p == 0:
+                # rows with nothing left to move (round-off in the free directions, or a task
+                # the levels above fix): only the minimum-norm step left the box, and a QP of
+                # rows this small is degenerate; the final tie-break makes that choice
+                any_qp = True
             else:
                 report.qp = any_qp = True
                 if smax is None:  # certified full rank: |R_00| only now needed
@@ -423,7 +428,9 @@ class HierarchicalQPSolver(Solver):
                         xn = self._native(problem, k)
                     if xn is not None:
                         if m:
-                            report.limited = self._bound_limited(lev, A.dot(xn) - b, A.dot(xc) - b)
+                            report.limited = self._bound_limited(
+                                lev, A.dot(xn) - b, A.dot(xc) - b, _on_box(xn, lb, ub)
+                            )
                         if p:
                             report.limited += _violated(lev, C.dot(xn), self.tolerance)[1]
                         if report.limited and self._native_spoiled(
@@ -452,7 +459,9 @@ class HierarchicalQPSolver(Solver):
                                     f"({self.engine_name}); level left unsolved")  # fmt: skip
                     continue
                 if m:
-                    report.limited = self._bound_limited(lev, A.dot(xq) - b, A.dot(xc) - b)
+                    report.limited = self._bound_limited(
+                        lev, A.dot(xq) - b, A.dot(xc) - b, _on_box(xq, lb, ub)
+                    )
                 x = xq
             # The level's optimal set: fix its rows (and the constraints the level's optimum
             # presses on), keep its inequality rows.
@@ -700,7 +709,14 @@ class HierarchicalQPSolver(Solver):
         if free is not None and math.sqrt(rp.dot(rp)) > self.tolerance * (
             1.0 + math.sqrt(c.dot(c))
         ):
-            fit = lsq_linear(M, c, bounds=(lo - x, hi - x), method="bvls", tol=1e-13)
+            fit = lsq_linear(
+                M,
+                c,
+                bounds=(lo - x, hi - x),
+                method="bvls",
+                tol=1e-13,
+                max_iter=20 * M.shape[1] + 20,
+            )  # (scipy's default: n)
             yb = np.minimum(np.maximum(fit.x, lo - x), hi - x)
             rb = c - M.dot(yb)
             if (
@@ -897,8 +913,13 @@ class HierarchicalQPSolver(Solver):
         pin = mu > max(1e-6 * gnorm, floor) / max(1.0, float(np.abs(Ny).max()))
         return N[pin] if np.any(pin) else None
 
-    def _bound_limited(self, lev: LevelProblem, res: np.ndarray, res_free: np.ndarray) -> list[str]:
-        """Tasks whose residual the hard constraints raised above the box-free optimum."""
+    def _bound_limited(self, lev: LevelProblem, res: np.ndarray, res_free: np.ndarray,
+                       on_box: bool = True) -> list[str]:  # fmt: skip
+        """Tasks whose residual the hard constraints raised above the box-free optimum (none
+        when no entry is on the box, ``on_box`` False: then the levels above, not the box,
+        set the residual)."""
+        if not on_box:
+            return []
         tol = self.tolerance
         return [name for (name, r, _, b), (_, r0, _, _)
                 in zip(lev.task_residuals(res), lev.task_residuals(res_free), strict=True)
@@ -1032,6 +1053,11 @@ def _active_multipliers(lev: LevelProblem, x: np.ndarray, Z: np.ndarray | None, 
         return gnorm, N, None, gnorm
     res = Ny.T.dot(mu) - gy
     return gnorm, N, mu, math.sqrt(res.dot(res))
+
+
+def _on_box(x: np.ndarray, lb: np.ndarray, ub: np.ndarray, act: float = 1e-7) -> bool:
+    """Whether some entry of ``x`` is on (within ``act`` of) the box ``[lb, ub]``."""
+    return _any((x <= lb + act) | (x >= ub - act))
 
 
 def _level_objective(lev: LevelProblem, x: np.ndarray) -> float:

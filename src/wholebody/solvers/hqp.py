@@ -53,8 +53,9 @@ equals the projection backend's ``J+ v + (I - J+ J) u0``. Then ``Z <- Z Q_2``.
     two-row example), not the level's least squares. Each level's optimum is then exact up to
     about ``rho_soft |x|^2`` in its objective (KKT residuals 1e-11 to 1e-8 on the tests'
     problems). If daqp fails, the cascade below solves the step. Where the box costs the level
-    daqp starts from something, daqp's answer is checked against that level's own QP (one
-    cascade QP), and the cascade takes over if daqp missed it: the soft weights can let a
+    daqp starts from something, daqp's answer is checked against that level's optimality
+    conditions and, where those do not certify it, against the level's own QP (one cascade
+    QP); the cascade takes over if daqp missed it: the soft weights can let a
     lower level pull a higher one off its optimum (2 in 5000 random stacks, fuzzed against an
     exact reference). The levels below that one are not checked: on rare stacks daqp misses
     a lower level's optimum (a 3-variable case with a level between is known: residual 0.5
@@ -72,7 +73,8 @@ equals the projection backend's ``J+ v + (I - J+ J) u0``. Then ``Z <- Z Q_2``.
     re-solving the level's least squares exactly on the face of the constraints active at
     the QP's answer (kept if it stays feasible; the level's inequality rows at or beyond a
     bound join the least squares, kept if the level's objective is lower), and where the
-    residual stays above the tolerance by up to ``proximal_steps`` (3) proximal-point QPs,
+    answer still fails the level's optimality conditions and its residual is above the
+    tolerance, by up to ``proximal_steps`` (3) proximal-point QPs,
     the Tikhonov term centred on the last answer, which walk off a face the term alone
     would hold the answer on (a 2.7e-5 residual found in fuzzing). Constraints the
     level's own optimum presses on (positive multipliers of its least squares) are fixed for
@@ -298,8 +300,8 @@ class HierarchicalQPSolver(Solver):
         self.regularization = float(regularization)
         self.bound_relaxation = float(bound_relaxation)
         self.proximal_steps = 3
-        """Most proximal-point QPs after a level's QP whose residual is above the tolerance
-        (see :meth:`_level_qp`)."""
+        """Most proximal-point QPs after a level's QP whose answer fails the level's
+        optimality conditions (see :meth:`_level_qp`)."""
         self.active_tolerance = 1e-7
         """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
         self._engines: list[QPEngine] = []
@@ -743,7 +745,9 @@ class HierarchicalQPSolver(Solver):
     ) -> bool:
         """Whether daqp's hierarchical answer ``xn`` misses level ``k``'s own optimum: checked
         where the box cost that level something (else ``xn`` is at least as good as the
-        box-free candidate, hence optimal), against the level's QP alone (one cascade QP).
+        box-free candidate, hence optimal): by the level's optimality conditions
+        (:func:`_optimal`) and, where they do not certify it, against the level's QP alone
+        (one cascade QP).
         daqp's soft-weighted levels can let a lower level pull a higher one off its optimum
         (measured on random stacks: 2 in 5000, the top level's residual 8 % worse)."""
         if not lev.C.shape[0] and _optimal(

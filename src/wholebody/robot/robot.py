@@ -624,37 +624,33 @@ class RobotState:
 
     def _data(self) -> pin.Data:
         if self._version != self.robot._version:
-            _stale()
+            raise WholebodyError(
+                "this RobotState is stale: Robot.update() was called again since it was "
+                "made; keep using the newest state"
+            )
         return self.robot.data
-
-    def _placements(self) -> pin.StdVec_SE3:
-        """The robot's frame placements (``data.oMf``), checked fresh."""
-        robot = self.robot
-        if self._version != robot._version:
-            _stale()
-        return robot.data.oMf
 
     def placement(self, frame: Frame) -> pin.SE3:
         """The frame's world placement as a ``pinocchio.SE3`` (a copy)."""
-        return pin.SE3(self._placements()[frame.index])
+        return pin.SE3(self._data().oMf[frame.index])
 
     def pose(self, frame: Frame) -> np.ndarray:
         """4x4 world pose of ``frame``."""
-        return self._placements()[frame.index].homogeneous
+        return self._data().oMf[frame.index].homogeneous
 
     def position(self, frame: Frame) -> np.ndarray:
         """World position (m) of the frame origin."""
-        return self._placements()[frame.index].translation.copy()
+        return self._data().oMf[frame.index].translation.copy()
 
     def rotation(self, frame: Frame) -> np.ndarray:
         """3x3 world orientation of the frame."""
-        return self._placements()[frame.index].rotation.copy()
+        return self._data().oMf[frame.index].rotation.copy()
 
     def rotation_translation(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """The frame's world rotation (3x3) and position (3,) **without a copy**: views of the
         robot's data, overwritten by the next :meth:`Robot.update`; read, never write, them
         (for the control loop; :meth:`rotation` and :meth:`position` return copies)."""
-        M = self._placements()[frame.index]
+        M = self._data().oMf[frame.index]
         return M.rotation, M.translation
 
     def jacobian(self, frame: Frame) -> np.ndarray:
@@ -750,13 +746,13 @@ class RobotState:
 
     def com_position(self, body: Body) -> np.ndarray:
         """World position (m) of the body's centre of mass."""
-        M = self._placements()[body.frame.index]
+        M = self._data().oMf[body.frame.index]
         return M.translation + M.rotation @ body.com
 
     def com_jacobian(self, body: Body) -> np.ndarray:
         """3 x nu Jacobian of the body's centre of mass (world axes)."""
         J = self.jacobian(body.frame)
-        rx, ry, rz = self._placements()[body.frame.index].rotation @ body.com
+        rx, ry, rz = self._data().oMf[body.frame.index].rotation @ body.com
         # v_com = v_o + w x r = v_o - [r]x w
         return J[:3] - np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ J[3:]
 
@@ -780,13 +776,6 @@ class RobotState:
 
 
 # ---------------------------------------------------------------------- helpers
-def _stale() -> None:
-    raise WholebodyError(
-        "this RobotState is stale: Robot.update() was called again since it was made; keep "
-        "using the newest state"
-    )
-
-
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
     """``idx`` as an equivalent slice when it is an arithmetic run (step >= 1), else itself."""
     k = idx.tolist()

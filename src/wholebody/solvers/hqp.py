@@ -1160,11 +1160,15 @@ def _cod(
 
     A tall ``M`` (``m > r``) that is certified to have full column rank under the rule (see
     :func:`_full_column_rank`) skips the pivoted QR: then ``|R_00|`` is returned as None (the
-    caller computes it with :func:`_pivot_norm` when it needs it).
+    caller computes it with :func:`_pivot_norm` when it needs it). A well-conditioned one is
+    solved by its normal equations (:func:`_normal_solve`), otherwise by ``dgels``.
     """
     m, r = M.shape
     tall: np.ndarray | None = None  # M's least-squares solution when M is tall (m > r)
     if m > r > 0:
+        y = _normal_solve(M, c, rtol, floor)
+        if y is not None:
+            return r, y, None, None
         lqr, z, info = _gels(M, c)
         if info == 0:
             tall = z[:r]
@@ -1218,8 +1222,47 @@ def _cod(
     return rank, y, Q2, smax
 
 
-_trtri = _lapack.dtrtri
+_trtri, _potrf = _lapack.dtrtri, _lapack.dpotrf
 _CERTIFY_MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
+_NORMAL_KAPPA = 1e4  # largest condition bound kappa_F solved by the normal equations
+_REFINE_KAPPA = 1e3  # above it, one step of iterative refinement
+
+
+def _normal_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float = 0.0
+                  ) -> np.ndarray | None:  # fmt: skip
+    """The least-squares solution of a tall ``M`` (m x r, m > r) by its normal equations,
+    where they are accurate and the rank rule of :func:`_cod` certainly finds full column
+    rank; None otherwise (the caller then uses a QR of ``M``).
+
+    Cholesky ``M^T M = U^T U`` (U is the R of ``M = Q R`` up to the signs of its rows) and
+    ``U^-1``; ``kappa_F = ||U^-1||_F ||M||_F`` bounds the condition number of ``M`` from
+    above. Certified as in :func:`_full_column_rank` (the same bound with ``U`` for ``R``),
+    and used only when ``kappa_F <= 1e4``. ``y = U^-1 U^-T M^T c``, relative error at most
+    about ``kappa^2 eps`` (1e-10 at ``kappa_F = 1e3``); above that, one step of iterative
+    refinement brings it back to about 1e-12. Six small products where ``dgels`` spends its
+    time in per-column BLAS calls: 17 us against 35 us with the certificate, on the 35 x 23
+    level of the peers benchmark.
+    """
+    U, info = _potrf(M.T.dot(M))
+    if info != 0:
+        return None
+    Ui, info = _trtri(U, lower=0)
+    if info != 0:
+        return None
+    fi = Ui.ravel(order="K")
+    fm = M.ravel(order="K")
+    inv2 = fi.dot(fi)  # ||U^-1||_F^2 >= 1 / sigma_min^2
+    k2 = inv2 * fm.dot(fm)  # kappa_F^2
+    m = M.shape[0]
+    margin = _CERTIFY_MARGIN * rtol
+    if not (k2 <= _NORMAL_KAPPA * _NORMAL_KAPPA and k2 * m * margin * margin < 1.0
+            and inv2 * m * floor * floor < 1.0):  # fmt: skip
+        return None
+    Mt, Uit = M.T, Ui.T
+    y = Ui.dot(Uit.dot(Mt.dot(c)))
+    if k2 > _REFINE_KAPPA * _REFINE_KAPPA:
+        y += Ui.dot(Uit.dot(Mt.dot(c - M.dot(y))))
+    return y
 
 
 def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float, floor: float = 0.0) -> bool:

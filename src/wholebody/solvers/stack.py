@@ -116,8 +116,7 @@ class LevelProblem:
     """Per row of ``A``, ``1 / sqrt(w)`` of its task's weight (0 where ``w = 0``), to report
     unweighted task residuals; None: the rows are not weighted."""
     _names: list[str] = field(init=False, repr=False)
-    _starts: np.ndarray = field(init=False, repr=False)
-    _rows: int = field(init=False, repr=False)
+    _sums: np.ndarray = field(init=False, repr=False)
     _work: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -125,12 +124,16 @@ class LevelProblem:
         rows = sorted((sl.start, sl.stop, nm) for nm, sl in self.task_rows.items()
                       if nm != OBJECTIVES and sl.stop > sl.start)  # fmt: skip
         self._names = [nm for _, _, nm in rows]
-        self._starts = np.array([start for start, _, _ in rows], dtype=np.intp)
-        self._rows = rows[-1][1] if rows else 0
         ends = [0, *(stop for _, stop, _ in rows)][: len(rows)]
         if any(start != end for (start, _, _), end in zip(rows, ends, strict=True)):
             raise WholebodyError(f"{self.name}: the tasks' rows must tile the top of A")
-        self._work = np.empty((3, self._rows))
+        k = self.A.shape[0]
+        # column i sums the rows of task i, the last column every row
+        self._sums = np.zeros((k, len(rows) + 1))
+        for i, (start, stop, _) in enumerate(rows):
+            self._sums[start:stop, i] = 1.0
+        self._sums[:, -1] = 1.0
+        self._work = np.empty((3, k))
 
     @property
     def has_equalities(self) -> bool:
@@ -139,20 +142,32 @@ class LevelProblem:
     def task_residuals(self, r: np.ndarray) -> list[tuple[str, float, float, float]]:
         """``(task, ||r_t||, ||r_t|| unweighted, ||b_t||)`` of each equality task (the
         objectives' rows left out) for the residual ``r = A u~ - b`` of this level."""
-        names, n, work = self._names, self._rows, self._work
-        if not names:
-            return []
-        work[0] = r[:n]
+        self._work[0] = r
+        return self._report()[1]
+
+    def residual_report(self, x: np.ndarray) -> tuple[float, list[tuple[str, float, float, float]]]:
+        """``||A x - b||`` and :meth:`task_residuals` of ``r = A x - b``."""
+        r = self._work[0]
+        np.dot(self.A, x, out=r)
+        r -= self.b
+        return self._report()
+
+    def _report(self) -> tuple[float, list[tuple[str, float, float, float]]]:
+        """From ``r`` in the first row of the work array: the squared norms of ``r``, of the
+        unweighted ``r`` and of ``b`` per task (and of ``r`` over all rows) in one product."""
+        work = self._work
         if self.unweight is None:
-            work[1] = r[:n]
+            work[1] = work[0]
         else:
-            np.multiply(r[:n], self.unweight[:n], out=work[1])
-        work[2] = self.b[:n]
+            np.multiply(work[0], self.unweight, out=work[1])
+        work[2] = self.b
         work *= work
-        weighted, plain, b = np.add.reduceat(work, self._starts, axis=1).tolist()
+        weighted, plain, b = work.dot(self._sums).tolist()
         sqrt = math.sqrt
-        return [(name, sqrt(w), sqrt(p), sqrt(bb))
-                for name, w, p, bb in zip(names, weighted, plain, b, strict=True)]  # fmt: skip
+        return sqrt(weighted[-1]), [
+            (name, sqrt(w), sqrt(p), sqrt(bb))
+            for name, w, p, bb in zip(self._names, weighted, plain, b)  # noqa: B905 (sums: +1)
+        ]
 
 
 @dataclass
@@ -182,11 +197,9 @@ class StackProblem:
         for i, lev in enumerate(levels):
             if not lev.A.shape[0]:
                 continue
-            r = lev.A.dot(u_scaled)
-            r -= lev.b
-            level_res[i] = math.sqrt(r.dot(r))
+            level_res[i], tasks = lev.residual_report(u_scaled)
             skipped = i in failed
-            for name, weighted, plain, b in lev.task_residuals(r):
+            for name, weighted, plain, b in tasks:
                 task_res[name] = plain
                 if skipped or weighted > tol * (1.0 + b):
                     infeasible.append((lev.name, name))

@@ -334,9 +334,13 @@ def test_infeasible_level_is_named_and_the_answer_is_the_best_feasible(humanoid,
 
 
 class BrokenTask(Task):
-    """Rows that turn NaN (a task evaluated at a singular point, say)."""
+    """Rows that turn NaN (a task evaluated at a singular point, say), or an infinite
+    target, or a NaN Jacobian with a finite target."""
 
     name, weight = "broken", 1.0
+
+    def __init__(self, kind: str = "nan") -> None:
+        self.kind = kind
 
     @property
     def dim(self) -> int:
@@ -344,21 +348,33 @@ class BrokenTask(Task):
 
     def compute(self, state):
         J = np.zeros((2, state.robot.nu))
-        J[0, 5] = np.nan
-        return TaskRows(J, np.array([np.nan, 0.0]), np.ones(2))
+        J[:, 6] = 1.0
+        v = np.array([0.1, 0.0])
+        if self.kind in ("nan", "nan_jacobian"):
+            J[0, 5] = np.nan
+        if self.kind == "nan":
+            v[0] = np.nan
+        if self.kind == "inf_target":
+            v[0] = np.inf
+        return TaskRows(J, v, np.ones(2))
 
 
+@pytest.mark.parametrize("kind", ["nan", "inf_target", "nan_jacobian"])
 @pytest.mark.parametrize("method", METHODS)
-def test_non_finite_level_is_reported_and_skipped(humanoid, rng, method):
+def test_non_finite_level_is_reported_and_skipped(humanoid, rng, method, kind):
     L, R = hands(humanoid)
-    stack = Stack(humanoid, [[L, R], [BrokenTask()], [PostureTask(humanoid)]], limits(humanoid))
     state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
     set_targets(state, (L, R), rng, 0.01)
-    result = HierarchicalQPSolver(method=method).solve(stack, state, DT)
-    assert result.status == SolverStatus.FAILED
-    assert ("level 1", "broken") in result.infeasible and "broken" in result.message
-    assert np.all(np.isfinite(result.u))
-    assert result.level_residuals[0] < 1e-8  # the levels above were still solved
+    for levels, name in (([[L, R], [BrokenTask(kind)], [PostureTask(humanoid)]], "level 1"),
+                         ([[BrokenTask(kind)], [L, R]], "level 0")):  # fmt: skip
+        stack = Stack(humanoid, levels, limits(humanoid))
+        result = HierarchicalQPSolver(method=method).solve(stack, state, DT)
+        assert result.status == SolverStatus.FAILED
+        assert (name, "broken") in result.infeasible and "broken" in result.message
+        assert "non-finite rows" in result.message
+        assert np.all(np.isfinite(result.u))
+        good = 0 if name == "level 1" else 1
+        assert result.level_residuals[good] < 1e-8  # the other levels were still solved
 
 
 @pytest.mark.parametrize("method", METHODS)

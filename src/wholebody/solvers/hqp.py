@@ -365,6 +365,7 @@ class HierarchicalQPSolver(Solver):
         inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         native_tried = False
         any_qp = False
+        exact = True  # x is in the exact box (the unconstrained candidates' case)
         last = len(problem.levels) - 1
         for k, lev in enumerate(problem.levels):
             report = self.levels[k]
@@ -373,14 +374,13 @@ class HierarchicalQPSolver(Solver):
                 if lev.C.shape[0]:
                     report.limited = _violated(lev, lev.C.dot(x), self.tolerance)[1]
                 continue
-            if not _finite_level(lev):
-                bad = _nonfinite_tasks(lev)
-                failures.append(f"{lev.name}: non-finite rows from {', '.join(bad)}; "
-                                "level skipped")  # fmt: skip
-                report.limited, report.failed = bad, True
-                continue
             A, b, C = lev.A, lev.b, lev.C
             m, p = A.shape[0], C.shape[0]
+            # Non-finite equality rows show in the step y (checked below, one product instead
+            # of a pass over A and b); the inequality rows are checked here.
+            if p and not _finite_level(lev):
+                self._skip_nonfinite(lev, report, failures)
+                continue
             t = x if Z is None else Z.T.dot(x)  # current point in the free coordinates
             null: np.ndarray | None = None  # the level's own null space in the free coordinates
             smax = 0.0
@@ -402,18 +402,34 @@ class HierarchicalQPSolver(Solver):
                         )
                         rank, y, null, smax = _cod(M, c, t, self.rank_tolerance, floor)
                     except (np.linalg.LinAlgError, ValueError) as exc:
-                        failures.append(f"{lev.name}: decomposition failed ({exc}); level skipped")
-                        report.failed = True
+                        if not _finite_level(lev):
+                            self._skip_nonfinite(lev, report, failures)
+                        else:
+                            failures.append(f"{lev.name}: decomposition failed ({exc}); "
+                                            "level skipped")  # fmt: skip
+                            report.failed = True
                         continue
             else:
                 c = M = None
                 y = -t
+            if m and (rank == 0 or not _finite(y)) and not _finite_level(lev):
+                # (NaN or inf rows give a non-finite step, or no rank: a NaN pivot is no pivot)
+                self._skip_nonfinite(lev, report, failures)
+                continue
+            if not _finite(y):  # finite rows, yet the decomposition overflowed
+                failures.append(f"{lev.name}: decomposition failed (non-finite step); "
+                                "level skipped")  # fmt: skip
+                report.failed = True
+                continue
             report.rank = rank
             xc = x + (y if Z is None else Z.dot(y))
-            if _inside(xc, lo, hi, inherited) and (
-                p == 0 or _rows_inside(C.dot(xc), lev.lower, lev.upper, self.tolerance)
+            in_box = _all(xc >= lb) and _all(xc <= ub)  # (then no clip is needed at the end)
+            if (
+                (in_box or (_all(xc >= lo) and _all(xc <= hi)))
+                and _inside_rows(xc, inherited)
+                and (p == 0 or _rows_inside(C.dot(xc), lev.lower, lev.upper, self.tolerance))
             ):
-                x = xc
+                x, exact = xc, in_box
             elif m and rank == 0 and p == 0:
                 # rows with nothing left to move (round-off in the free directions, or a task
                 # the levels above fix): only the minimum-norm step left the box, and a QP of
@@ -513,6 +529,8 @@ class HierarchicalQPSolver(Solver):
                 np.maximum(hi, x, out=hi)
         if r and any_qp:
             x = self._tie_break(x, Z, lo, hi, inherited, failures)
+        elif exact and not any_qp:
+            return x, failures, 0.0
         xc = np.minimum(np.maximum(x, lb), ub)
         d = xc - x
         clip = float(np.maximum.reduce(np.abs(d))) if d.dot(d) != 0.0 else 0.0
@@ -898,6 +916,12 @@ class HierarchicalQPSolver(Solver):
         pin = mu > max(1e-6 * gnorm, floor) / max(1.0, float(np.abs(Ny).max()))
         return N[pin] if np.any(pin) else None
 
+    @staticmethod
+    def _skip_nonfinite(lev: LevelProblem, report: LevelReport, failures: list[str]) -> None:
+        bad = _nonfinite_tasks(lev)
+        failures.append(f"{lev.name}: non-finite rows from {', '.join(bad)}; level skipped")
+        report.limited, report.failed = bad, True
+
     def _bound_limited(self, lev: LevelProblem, res: np.ndarray, res_free: np.ndarray,
                        on_box: bool = True) -> list[str]:  # fmt: skip
         """Tasks whose residual the hard constraints raised above the box-free optimum (none
@@ -1085,8 +1109,11 @@ def _nonfinite_tasks(lev: LevelProblem) -> list[str]:
 
 def _inside(x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> bool:  # fmt: skip
-    if not (_all(x >= lo) and _all(x <= hi)):
-        return False
+    return _all(x >= lo) and _all(x <= hi) and _inside_rows(x, inherited)
+
+
+def _inside_rows(x: np.ndarray,
+                 inherited: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> bool:  # fmt: skip
     for G, glo, ghi in inherited:
         Gx = G.dot(x)
         if not (_all(Gx >= glo) and _all(Gx <= ghi)):

@@ -8,6 +8,7 @@ import pytest
 from test_tasks import configurations
 
 from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
+from wholebody.solvers.stack import LevelProblem, StackProblem
 from wholebody.tasks import (
     ArmPotentialEnergy,
     Bounds,
@@ -230,6 +231,64 @@ def test_level_with_more_rows_than_columns_is_plain_least_squares(humanoid, rng)
         expected = problem.to_u(np.linalg.lstsq(A, b, rcond=None)[0])
         result = ProjectionSolver().solve(stack, state, DT)
         np.testing.assert_allclose(result.u, expected, atol=1e-9 * (1 + np.abs(expected).max()))
+
+
+class _Evaluated:
+    """A stack whose evaluation is a given problem (test helper)."""
+
+    def __init__(self, problem: StackProblem) -> None:
+        self.problem = problem
+
+    def evaluate(self, state, dt):
+        return self.problem
+
+
+@pytest.mark.parametrize("kappa", [1.0, 3e2, 3e3, 3e4, 1e7])
+def test_a_tall_level_is_its_least_squares_solution_at_every_condition_number(rng, kappa):
+    # Singular values from 0.03 kappa down to 0.03 (> singular_threshold: no damping): the
+    # well-conditioned levels go through the normal equations (refined above kappa 1e3), the
+    # others through the eigen-decomposition; a second level has no freedom left.
+    m, n = 30, 12
+    worst = 0.0
+    for _ in range(20):
+        U, _ = np.linalg.qr(rng.normal(size=(m, n)))
+        V, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        A = (U * (0.03 * np.logspace(np.log10(kappa), 0, n))) @ V.T
+        for b in (A @ rng.normal(size=n), rng.normal(size=m)):  # consistent, then not
+            levels = [LevelProblem("tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
+                                   {"t": slice(0, m)}),
+                      LevelProblem("rest", np.eye(n), rng.normal(size=n), np.zeros((0, n)),
+                                   np.zeros(0), np.zeros(0), {"objectives": slice(0, n)}, {},
+                                   1.0)]  # fmt: skip
+            box = np.full(n, 1e12)
+            problem = StackProblem(levels, -box, box, np.ones(n), {})
+            u = ProjectionSolver().solve(_Evaluated(problem), None, DT).u
+            exact = np.linalg.lstsq(A, b, rcond=None)[0]
+            worst = max(worst, np.linalg.norm(u - exact) / np.linalg.norm(exact))
+    assert worst <= 1e-10 * max(1.0, kappa / 1e4)
+
+
+def test_round_off_of_a_computed_projector_does_not_damp_a_tall_level_below(rng):
+    # A nearly singular first level (singular values 220 to 0.004, two zero): its projector,
+    # from M M^T, is accurate to about kappa^2 eps (3e-7), which leaves singular values of
+    # that size in the tall level below where 0 is exact. Counted as directions, they would
+    # damp the whole level (found by fuzzing): it must stay optimal on what level 0 leaves.
+    n = 23
+    for _ in range(10):
+        U, _ = np.linalg.qr(rng.normal(size=(9, 9)))
+        V, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        A0 = (U * [220, 207, 161, 1.3, 1.2, 0.56, 0.004, 0, 0]) @ V[:, :9].T
+        A1, b1 = rng.normal(size=(46, n)), rng.normal(size=46)
+        levels = [LevelProblem("L0", A0, rng.normal(size=9), np.zeros((0, n)), np.zeros(0),
+                               np.zeros(0), {"t0": slice(0, 9)}),
+                  LevelProblem("L1", A1, b1, np.zeros((0, n)), np.zeros(0), np.zeros(0),
+                               {"t1": slice(0, 46)})]  # fmt: skip
+        box = np.full(n, 1e12)
+        u = ProjectionSolver().solve(_Evaluated(StackProblem(levels, -box, box, np.ones(n), {})),
+                                     None, DT).u  # fmt: skip
+        N = np.linalg.svd(A0)[2][7:].T  # what level 0 leaves free, exactly
+        gradient = N.T @ A1.T @ (A1 @ u - b1)
+        assert np.linalg.norm(gradient) <= 1e-5 * np.linalg.norm(N.T @ A1.T @ b1)
 
 
 class _Box(Constraint):

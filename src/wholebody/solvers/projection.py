@@ -16,10 +16,15 @@ objectives, ``u = J+ v + N u0 = J+ v - k (I - J+ J) grad H``: the paper's
 law. The plain pseudo-inverse is the same solver on a stack without the objective level.
 
 Linear algebra: the Gram matrix ``G = M M^T`` is factored by Cholesky, ``G = L L^T``. When
-``trace(G^-1) = ||L^-1||_F^2 <= 1 / eps^2`` its smallest eigenvalue is at least ``eps^2``: no
-damping applies and every direction counts, so ``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M``
-exactly, from ``W = L^-1 M``. Otherwise (near a singularity) the eigen-decomposition (fast path)
-or the SVD (saturation) decides damping and rank as described below.
+``trace(G^-1) = ||L^-1||_F^2 <= 1 / eps^2``, or else when ``G - eps^2 I`` has a Cholesky
+factor too (exact up to rounding, where the damping below is 0 anyway), the smallest
+eigenvalue of G is at least ``eps^2``: no damping applies
+and every direction counts, so ``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M`` exactly, from
+``W = L^-1 M``. A level with more rows than columns (a weighted sum of tasks) uses
+``G = M^T M`` the same way: then ``M^+ r = G^-1 M^T r`` and ``M^+ M = I``, provided also that
+``trace(G) trace(G^-1) <= 1e8`` (its normal equations lose ``kappa^2 eps``; refined once above
+1e6). Otherwise (near a singularity) the eigen-decomposition (fast path) or the SVD
+(saturation) decides damping and rank as described below.
 
 Singularity robustness: the pseudo-inverse is damped near singularities with the variable
 damping of Chiaverini / Maciejewski, ``lambda^2 = (1 - (s_min/eps)^2) lambda_max^2`` when the
@@ -75,6 +80,8 @@ _INSIDE_TOL = 1e-10
 _EPS = float(np.finfo(float).eps)
 _WIDEN = np.array([[-_INSIDE_TOL], [_INSIDE_TOL]])
 _FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
+_NORMAL_KAPPA = 1e4  # a tall level's normal equations: largest condition bound kappa_F
+_REFINE_KAPPA = 1e3  # above it, one step of iterative refinement
 
 
 @dataclass
@@ -132,20 +139,35 @@ class _Box:
 
 
 class _Gram:
-    """``G = B B^T`` of a level's rows restricted to its free directions, certified well
-    conditioned (see the module docstring); ``W = L^-1 B``, ``Linv = L^-1``."""
+    """The Gram matrix ``G`` of a level's rows restricted to its free directions, ``B``
+    (m x n), certified well conditioned (see the module docstring): ``G = B B^T`` when
+    ``m <= n`` (``W = L^-1 B``), ``G = B^T B`` when B is tall (``m > n``, full column rank;
+    ``W`` None); ``L`` its Cholesky factor, ``Linv = L^-1``; ``rank`` = min(m, n)."""
 
-    __slots__ = ("B", "Linv", "W")
+    __slots__ = ("B", "Linv", "W", "rank", "refine")
 
-    def __init__(self, B: np.ndarray, Linv: np.ndarray, W: np.ndarray) -> None:
-        self.B, self.Linv, self.W = B, Linv, W
+    def __init__(self, B: np.ndarray, Linv: np.ndarray, W: np.ndarray | None,
+                 refine: bool = False) -> None:  # fmt: skip
+        self.B, self.Linv, self.W, self.refine = B, Linv, W, refine
+        self.rank = min(B.shape)
 
     def solve(self, r: np.ndarray) -> np.ndarray:
-        """``B^T G^-1 r`` (r: (m,) or (m, k))."""
-        return self.W.T.dot(self.Linv.dot(r))
+        """``B^+ r`` (r: (m,) or (m, k)): ``B^T G^-1 r``, or for a tall B its least-squares
+        solution ``G^-1 B^T r`` (refined once where ``kappa_F > 1e3``, see
+        :data:`_REFINE_KAPPA`)."""
+        if self.W is not None:
+            return self.W.T.dot(self.Linv.dot(r))
+        B, Li = self.B, self.Linv
+        y = Li.T.dot(Li.dot(B.T.dot(r)))
+        if self.refine:
+            y += Li.T.dot(Li.dot(B.T.dot(r - B.dot(y))))
+        return y
 
     def used(self) -> np.ndarray:
-        """``B^T G^-1 B``: the projector onto the directions the level uses."""
+        """``B^+ B``: the projector onto the directions the level uses (all of them when B is
+        tall)."""
+        if self.W is None:
+            return _eye(self.B.shape[1])
         return self.W.T.dot(self.W)
 
 
@@ -189,13 +211,24 @@ class ProjectionSolver(Solver):
 
     # ------------------------------------------------------------------ linear algebra
     def _certified(self, B: np.ndarray) -> _Gram | None:
-        """The Cholesky route for ``B`` (m x n) when ``B B^T`` is certified to need neither
-        damping nor a rank decision (all singular values >= eps; see the module docstring),
-        else None."""
-        m = B.shape[0]
-        if m == 0 or m > B.shape[1]:
+        """The Cholesky route for ``B`` (m x n) when its Gram matrix ``G`` (``B B^T``, or
+        ``B^T B`` for a tall B) is certified to need neither damping nor a rank decision,
+        else None: ``lambda_min(G) >= eps^2`` because ``trace(G^-1) <= 1 / eps^2`` or, where
+        that bound is too loose, because ``G - eps^2 I`` has a Cholesky factor too (see the
+        module docstring). A tall B must also have
+        ``kappa_F = sqrt(trace(G) trace(G^-1)) <= 1e4`` (its normal equations lose
+        ``kappa^2 eps``; refined once above 1e3)."""
+        m, n = B.shape
+        if m == 0:
             return None
-        G = B.dot(B.T)
+        tall = m > n
+        G = B.T.dot(B) if tall else B.dot(B.T)
+        top = float(G.trace())
+        eps = self.singular_threshold
+        # every eigenvalue is kept as a rank (rule: lambda > (rank_tolerance max(1, s_max))^2,
+        # s_max^2 <= trace(G))
+        if eps * eps <= (self.rank_tolerance**2) * max(1.0, top):
+            return None
         L, info = dpotrf(G, lower=1, clean=1)
         if info != 0:
             return None
@@ -203,15 +236,26 @@ class ProjectionSolver(Solver):
         if info != 0:
             return None
         flat = Linv.ravel()
-        eps = self.singular_threshold
-        # lambda_min(G) >= 1 / trace(G^-1) >= eps^2; and every eigenvalue is kept as a rank
-        # (old rule: lambda > (rank_tolerance * max(1, s_max))^2, s_max^2 <= trace(G)).
-        if float(flat.dot(flat)) * eps * eps > 1.0:
-            return None
-        top = float(G.trace())
-        if eps * eps <= (self.rank_tolerance**2) * max(1.0, top):
-            return None
+        inv = float(flat.dot(flat))  # trace(G^-1) >= 1 / lambda_min(G)
+        if inv * eps * eps > 1.0:  # the bound does not settle it: the exact test
+            G -= self._shift(G.shape[0])  # G - eps^2 I (G is not needed any more)
+            if dpotrf(G, lower=1, clean=0, overwrite_a=1)[1] != 0:  # lambda_min(G) < eps^2
+                return None
+        if tall:
+            k2 = inv * top  # kappa_F^2 = trace(G^-1) trace(G)
+            if k2 > _NORMAL_KAPPA * _NORMAL_KAPPA:
+                return None
+            return _Gram(B, Linv, None, k2 > _REFINE_KAPPA * _REFINE_KAPPA)
         return _Gram(B, Linv, Linv.dot(B))
+
+    def _shift(self, k: int) -> np.ndarray:
+        """``eps^2 I`` (k x k), cached per size and threshold."""
+        key = (k, self.singular_threshold)
+        shift = _SHIFTS.get(key)
+        if shift is None:
+            shift = _SHIFTS[key] = self.singular_threshold**2 * np.eye(k)
+            shift.setflags(write=False)
+        return shift
 
     def _solve_ls(self, M: np.ndarray, r: np.ndarray,
                   damped: bool = True) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
@@ -232,14 +276,38 @@ class ProjectionSolver(Solver):
         y = Vt[:rank].T @ (inv[:, None] * c if c.ndim == 2 else inv * c)
         return y, Vt[rank:].T, rank
 
-    def _gram_step(self, M: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _gram_step(self, M: np.ndarray, r: np.ndarray,
+                   exact: bool = False) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """``M^+_damped r`` and the exact projector ``M^+ M`` (from the eigen-decomposition
-        of ``M M^T``).
+        of ``M M^T``, or the SVD of a tall M).
 
         An eigenvalue of ``M M^T`` counts as zero below the rank tolerance or below the
         eigen-solver's round-off, ``10 m eps_mach lambda_max``, whichever is larger: a level
         with more rows than columns (``m > n``) has ``m - n`` exact zeros that come out as
-        +-1e-16, and counting them as directions would damp the whole level."""
+        +-1e-16, and counting them as directions would damp the whole level.
+
+        A tall M goes through its own SVD instead (n x n work, not m x m), with the same
+        rule on ``s^2``; except where ``exact`` says that M's columns are the level's rows
+        themselves (no computed projector of the levels above): there only the rank tolerance
+        applies, because ``M M^T`` squares the condition number and the round-off floor would
+        drop genuine directions (at ``kappa = 1e7`` a level lost its smallest directions and
+        missed its least squares by 100 %). Below a computed projector the floor stays: its
+        round-off leaves tiny singular values in M (4e-7 where 0 is exact, on a fuzzed
+        stack) that would otherwise count as directions and damp the whole level."""
+        m, n = M.shape
+        eps = self.singular_threshold
+        if m > n:
+            U, sv, Vt = np.linalg.svd(M, full_matrices=False)
+            top = float(sv[0]) ** 2 if n else 0.0
+            floor = (self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2
+            if not exact:
+                floor = max(floor, 10.0 * m * _EPS * top)
+            keep = sv * sv > floor
+            s_r = sv[keep]
+            smin = float(s_r[-1]) if s_r.size else 0.0
+            mu = 0.0 if smin >= eps else (1.0 - (smin / eps) ** 2) * self.damping**2
+            V_r = Vt[keep].T
+            return V_r.dot((U[:, keep].T.dot(r)) * (s_r / (s_r * s_r + mu))), V_r.dot(V_r.T)
         lam, U = np.linalg.eigh(M @ M.T)
         top = max(float(lam[-1]), 0.0) if lam.size else 0.0
         floor = max((self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2,
@@ -247,7 +315,6 @@ class ProjectionSolver(Solver):
         keep = lam > floor
         lam_r, U_r = lam[keep], U[:, keep]
         smin = np.sqrt(lam_r[0]) if lam_r.size else 0.0
-        eps = self.singular_threshold
         mu = 0.0 if smin >= eps else (1.0 - (smin / eps) ** 2) * self.damping**2
         MtU = M.T @ U_r
         y = MtU @ ((U_r.T @ r) / (lam_r + mu))
@@ -279,7 +346,7 @@ class ProjectionSolver(Solver):
                 if need_next:
                     Pn = prev.projector() - gram.used()
             else:
-                y, used = self._gram_step(B, r)
+                y, used = self._gram_step(B, r, prev.P is None)
                 u, Pn = u0 + y, prev.projector() - used
             nxt = _Level(u, Pn, 1.0, prev.saturated)
         if not saturate or box.inside(u):
@@ -310,7 +377,7 @@ class ProjectionSolver(Solver):
             gram = self._certified(free.restrict(A))
             if gram is not None:
                 Y = gram.solve(R)
-                a, rest, rank, null = Y[:, 0], base + Y[:, 1], A.shape[0], gram
+                a, rest, rank, null = Y[:, 0], base + Y[:, 1], gram.rank, gram
             else:  # near a singularity or out of directions: the SVD decides
                 Zf = free.basis()
                 Yz, Nf, rank = self._solve_ls(A.dot(Zf), R)
@@ -528,17 +595,22 @@ def _null_projector(free: _Free, null: object) -> np.ndarray:
 
 
 _EYES: dict[int, np.ndarray] = {}
+_SHIFTS: dict[tuple[int, float], np.ndarray] = {}
+
+
+def _eye(n: int) -> np.ndarray:
+    """The identity (n x n), cached, read-only."""
+    eye = _EYES.get(n)
+    if eye is None:
+        eye = _EYES[n] = np.eye(n)
+        eye.setflags(write=False)
+    return eye
 
 
 def _diag(mask: np.ndarray) -> np.ndarray:
     """``diag(mask)`` as floats (a fresh array): the identity times the 0/1 mask, column by
     column (exact: every entry is 1 * m_j or 0 * m_j)."""
-    n = mask.size
-    eye = _EYES.get(n)
-    if eye is None:
-        eye = _EYES[n] = np.eye(n)
-        eye.setflags(write=False)
-    return eye * mask
+    return _eye(mask.size) * mask
 
 
 def _none(n: int, null: np.ndarray | None) -> np.ndarray | None:

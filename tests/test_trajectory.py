@@ -59,6 +59,20 @@ def test_slerp_is_a_geodesic_with_the_returned_axis() -> None:
         assert np.allclose(step, axis / 10, atol=1e-12)
 
 
+def test_slerp_equals_the_exponential_form(rng: np.random.Generator) -> None:
+    # R0 Exp(sigma Log(R0^T R1)), outside [0, 1] too, for no rotation, tiny ones and near pi
+    sig = np.linspace(-0.2, 1.2, 8)
+    for angle in (0.0, 1e-9, 1e-4, 0.7, 3.0, np.pi - 1e-6):
+        R0 = exp_so3(rng.normal(size=3))
+        axis = rng.normal(size=3)
+        R1 = R0 @ exp_so3(angle * axis / np.linalg.norm(axis))
+        phi = log_so3(R0.T @ R1)
+        R, world = slerp(R0, R1, sig)
+        expected = np.array([R0 @ exp_so3(s * phi) for s in sig])
+        np.testing.assert_allclose(R, expected, atol=1e-14)
+        np.testing.assert_allclose(world, R0 @ phi, atol=1e-15)
+
+
 def test_minimum_jerk_endpoints_and_rest(mj: MinimumJerkTrajectory) -> None:
     a, b = mj.sample(0.0), mj.sample(mj.duration)
     assert np.allclose(a.pose, mj.start_pose, atol=1e-14)
@@ -128,6 +142,9 @@ def test_sequence_concatenates_and_checks_joins(mj: MinimumJerkTrajectory) -> No
     vmax = np.max(np.linalg.norm(dense.linear_velocities, axis=1))
     assert np.max(np.linalg.norm(np.diff(dense.positions, axis=0), axis=1)) <= vmax * tt[1] * 1.001
     assert np.allclose(seq.start_pose, mj.start_pose) and np.allclose(seq.end_pose, mj.start_pose)
+    one = seq.sample_many([0.7, 0.9])  # both in the first segment
+    assert np.allclose(one.poses, [mj.sample(0.7).pose, mj.sample(0.9).pose])
+    assert np.allclose(one.twists, [mj.sample(0.7).twist, mj.sample(0.9).twist])
     nested = TrajectorySequence([seq, HoldTrajectory(seq.end_pose, 1.0)])
     assert np.allclose(nested.sample(0.7).pose, mj.sample(0.7).pose)
 

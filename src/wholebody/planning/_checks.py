@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError
 
 __all__ = [
@@ -40,7 +41,7 @@ def as_array(value: object, shape: tuple[int | None, ...], name: str) -> np.ndar
         names = iter("NMLPQR")  # one letter per free dimension
         spec = "(" + ", ".join(next(names) if s is None else str(s) for s in shape) + ")"
         raise DimensionError(f"{name}: expected shape {spec}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if _count_nonzero(np.isfinite(arr)) != arr.size:
         raise DimensionError(f"{name}: contains NaN or infinite values")
     return arr
 

@@ -77,7 +77,7 @@ from scipy.signal import lfilter
 from wholebody.errors import DimensionError
 from wholebody.planning._checks import as_array, as_pose, as_positive, as_vector
 from wholebody.planning.obstacles import PointForce, Potential, make_point_force
-from wholebody.planning.rotations import slerp
+from wholebody.planning.rotations import Slerp
 from wholebody.planning.trajectory import Trajectory, TrajectoryArrays, minimum_jerk_scaling
 
 __all__ = [
@@ -950,6 +950,7 @@ class DMPTrajectory(Trajectory):
                                    obstacles=obstacles)  # fmt: skip
         self._duration = T
         self._R0, self._R1 = T0[:3, :3].copy(), T1[:3, :3].copy()
+        self._slerp = Slerp(self._R0, self._R1)
         # Quintic Hermite coefficients per interval, in u = (t - t_k) / h.
         r = self.rollout
         h = T / (n - 1)
@@ -969,6 +970,14 @@ class DMPTrajectory(Trajectory):
             ],
             axis=1,
         )  # (n-1, 6, 3)
+        # (6, 18): [u^j] -> [u^j | d/dt | d2/dt2] of the polynomial's basis, t = t_k + u h
+        self._shift = np.zeros((6, 18))
+        for j in range(6):
+            self._shift[j, j] = 1.0
+            if j + 1 < 6:
+                self._shift[j, 6 + j + 1] = (j + 1) / h
+            if j + 2 < 6:
+                self._shift[j, 12 + j + 2] = (j + 2) * (j + 1) / (h * h)
 
     @property
     def duration(self) -> float:
@@ -988,28 +997,28 @@ class DMPTrajectory(Trajectory):
 
     def _evaluate(self, times: np.ndarray) -> TrajectoryArrays:
         h, T = self._h, self._duration
-        k = np.clip((times / h).astype(int), 0, self._coef.shape[0] - 1)
-        u = (times - k * h) / h
-        c = self._coef[k]  # (N, 6, 3)
-        uu = u[:, None]
-        pos = c[:, 0] + uu * (
-            c[:, 1] + uu * (c[:, 2] + uu * (c[:, 3] + uu * (c[:, 4] + uu * c[:, 5])))
-        )
-        vel = c[:, 1] + uu * (
-            2.0 * c[:, 2] + uu * (3.0 * c[:, 3] + uu * (4.0 * c[:, 4] + uu * 5.0 * c[:, 5]))
-        )
-        acc = 2.0 * c[:, 2] + uu * (6.0 * c[:, 3] + uu * (12.0 * c[:, 4] + uu * 20.0 * c[:, 5]))
+        x = times / h
+        k = x.astype(np.intp)  # the interval (times are in [0, T])
+        np.minimum(k, self._coef.shape[0] - 1, out=k)
+        u = x - k
+        # rows [u^j], [j u^(j-1) / h], [j (j-1) u^(j-2) / h^2] in one product with the constant
+        # shift-and-scale matrix, then all three against the interval's coefficients
+        weights = (u[:, None] ** _POWERS).dot(self._shift).reshape(-1, 3, 6)
+        pva = np.matmul(weights, self._coef[k])  # (N, 3, 3): position, velocity, acceleration
         sig, dsig, ddsig = minimum_jerk_scaling(times / T)
-        R, axis = slerp(self._R0, self._R1, sig)
+        R, axis = self._slerp(sig)
         return TrajectoryArrays(
             times=times,
-            positions=pos,
+            positions=pva[:, 0],
             rotations=R,
-            linear_velocities=vel / h,
+            linear_velocities=pva[:, 1],
             angular_velocities=(dsig / T)[:, None] * axis,
-            linear_accelerations=acc / h**2,
+            linear_accelerations=pva[:, 2],
             angular_accelerations=(ddsig / T**2)[:, None] * axis,
         )
+
+
+_POWERS = np.arange(6.0)
 
 
 @lru_cache(maxsize=32)

@@ -37,6 +37,14 @@ def _inverse(T: np.ndarray) -> np.ndarray:
     return Ti
 
 
+_NEXT, _PREV = [1, 2, 0], [2, 0, 1]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise ``a x b`` of (N, 3) arrays (np.cross costs several times more on a few rows)."""
+    return a[:, _NEXT] * b[:, _PREV] - a[:, _PREV] * b[:, _NEXT]
+
+
 def secondary_pose(
     primary_pose: np.ndarray, T_primary_object: np.ndarray, T_secondary_object: np.ndarray
 ) -> np.ndarray:
@@ -90,14 +98,14 @@ class CoordinatedTrajectory(Trajectory):
         R_PS, p_PS = self.T_primary_secondary[:3, :3], self.T_primary_secondary[:3, 3]
         r = P.rotations @ p_PS  # (N, 3) world
         w, alpha = P.angular_velocities, P.angular_accelerations
-        w_x_r = np.cross(w, r)
+        w_x_r = _cross(w, r)
         return TrajectoryArrays(
             times=times,
             positions=P.positions + r,
             rotations=P.rotations @ R_PS,
             linear_velocities=P.linear_velocities + w_x_r,
             angular_velocities=w.copy(),
-            linear_accelerations=P.linear_accelerations + np.cross(alpha, r) + np.cross(w, w_x_r),
+            linear_accelerations=P.linear_accelerations + _cross(alpha, r) + _cross(w, w_x_r),
             angular_accelerations=alpha.copy(),
         )
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["exp_so3", "hat", "log_so3", "slerp"]
+__all__ = ["Slerp", "exp_so3", "hat", "log_so3", "slerp"]
 
 
 def hat(w: np.ndarray) -> np.ndarray:
@@ -98,6 +98,38 @@ def slerp(R0: np.ndarray, R1: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray
         The world rotation vector ``R0 Log(R0^T R1)`` (3,) (rad): the angular velocity is
         ``sigma'(t) * axis`` and the angular acceleration ``sigma''(t) * axis``.
     """
-    phi = log_so3(R0.T @ R1)
-    sigma = np.asarray(sigma, dtype=float)
-    return R0 @ exp_so3(sigma[:, None] * phi), R0 @ phi
+    return Slerp(R0, R1)(np.asarray(sigma, dtype=float))
+
+
+class Slerp:
+    """The geodesic from ``R0`` to ``R1`` (see :func:`slerp`), with ``phi = Log(R0^T R1)``
+    worked out once, for trajectories sampled every control step.
+
+    With ``theta = |phi|`` and ``K = [phi / theta]x``, Rodrigues' formula gives
+    ``R0 Exp(sigma phi) = R0 + sin(sigma theta) R0 K + (1 - cos(sigma theta)) R0 K^2``: two
+    constant matrices and two sines per sample (``K = 0`` when ``R0 = R1``).
+
+    Attributes
+    ----------
+    axis
+        The world rotation vector ``R0 phi`` (3,) (rad).
+    """
+
+    __slots__ = ("_R0", "_R0K", "_R0K2", "angle", "axis")
+
+    def __init__(self, R0: np.ndarray, R1: np.ndarray) -> None:
+        R0 = np.array(R0, dtype=float)
+        phi = log_so3(R0.T @ np.asarray(R1, dtype=float))
+        self.angle = float(np.linalg.norm(phi))
+        K = hat(phi / self.angle) if self.angle > 0.0 else np.zeros((3, 3))
+        self._R0 = R0
+        self._R0K = R0 @ K
+        self._R0K2 = self._R0K @ K
+        self.axis = R0 @ phi
+
+    def __call__(self, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(rotations (N, 3, 3), axis (3,))`` at the progress values ``sigma`` (N,)."""
+        a = sigma * self.angle
+        sin = np.sin(a)[:, None, None]
+        vers = (1.0 - np.cos(a))[:, None, None]
+        return self._R0 + sin * self._R0K + vers * self._R0K2, self.axis

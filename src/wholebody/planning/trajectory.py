@@ -21,9 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import WholebodyError
 from wholebody.planning._checks import as_pose, as_positive, as_times
-from wholebody.planning.rotations import slerp
+from wholebody.planning.rotations import Slerp
 
 __all__ = [
     "HoldTrajectory",
@@ -178,9 +179,9 @@ class Trajectory(abc.ABC):
         """Samples at ``times`` (N,) s; outside ``[0, duration]`` the held end pose, at rest."""
         t = as_times(times, "times")
         T = self.duration
-        out = self._evaluate(np.clip(t, 0.0, T))
+        out = self._evaluate(np.minimum(np.maximum(t, 0.0), T))
         outside = (t < 0.0) | (t > T)
-        if outside.any():
+        if _count_nonzero(outside):
             for arr in (
                 out.linear_velocities,
                 out.angular_velocities,
@@ -249,6 +250,7 @@ class MinimumJerkTrajectory(Trajectory):
         self._start = as_pose(start_pose, "MinimumJerkTrajectory: start_pose").copy()
         self._goal = as_pose(goal_pose, "MinimumJerkTrajectory: goal_pose").copy()
         self._duration = as_positive(duration, "MinimumJerkTrajectory: duration")
+        self._slerp = Slerp(self._start[:3, :3], self._goal[:3, :3])
 
     @property
     def duration(self) -> float:
@@ -266,7 +268,7 @@ class MinimumJerkTrajectory(Trajectory):
         T = self._duration
         s, ds, dds = minimum_jerk_scaling(times / T)
         dp = self._goal[:3, 3] - self._start[:3, 3]
-        R, axis = slerp(self._start[:3, :3], self._goal[:3, :3], s)
+        R, axis = self._slerp(s)
         return TrajectoryArrays(
             times=times,
             positions=self._start[:3, 3] + s[:, None] * dp,
@@ -354,6 +356,19 @@ class TrajectorySequence(Trajectory):
 
     def _evaluate(self, times: np.ndarray) -> TrajectoryArrays:
         index = np.searchsorted(self._starts[1:], times, side="right")
+        k = int(index[0]) if index.size else 0
+        if not _count_nonzero(index != k):  # one segment (a control step's samples): no copies
+            local = np.minimum(np.maximum(times - self._starts[k], 0.0), self._durations[k])
+            part = self.segments[k]._evaluate(local)
+            return TrajectoryArrays(
+                times,
+                part.positions,
+                part.rotations,
+                part.linear_velocities,
+                part.angular_velocities,
+                part.linear_accelerations,
+                part.angular_accelerations,
+            )
         n = times.shape[0]
         P, V, W, A, B = (np.empty((n, 3)) for _ in range(5))
         R = np.empty((n, 3, 3))

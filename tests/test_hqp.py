@@ -200,16 +200,20 @@ def test_without_active_bounds_it_is_the_recursive_pseudo_inverse(rng, method):
 @pytest.mark.parametrize("kappa", [1.0, 3e2, 3e3, 3e4, 1e7])
 def test_a_tall_level_is_solved_accurately_at_every_condition_number(rng, kappa):
     # A full-column-rank level with more rows than unknowns, unconstrained in effect: the
-    # well-conditioned ones are solved by their normal equations (refined above kappa 1e3),
-    # the others by a QR; both must match an SVD's least squares to 1e-10 relative (the
-    # normal equations unrefined: 1e-9 at kappa 3e3, 1e-7 at 3e4).
-    m, n = 30, 12
+    # well-conditioned ones are solved by their normal equations (refined above 1e3), the others
+    # by a QR; both must match an SVD's least squares to 1e-10 relative (the normal equations
+    # unrefined: 1e-10 at kappa 900 with one small singular value, 1e-9 at 3e3, 1e-7 at 3e4).
     solver = HierarchicalQPSolver()
     worst = 0.0
-    for _ in range(20):
+    for trial in range(40):
+        m, n = (30, 12) if trial % 2 else (4, 2)
         U, _ = np.linalg.qr(rng.normal(size=(m, n)))
         V, _ = np.linalg.qr(rng.normal(size=(n, n)))
-        A = (U * np.logspace(0, -np.log10(kappa), n)) @ V.T
+        if trial % 4 < 2:  # singular values spread evenly, or one small one
+            spread = np.logspace(0, -np.log10(kappa), n)
+        else:
+            spread = np.r_[np.ones(n - 1), 1.0 / kappa]
+        A = (U * spread) @ V.T
         for b in (A @ rng.normal(size=n), rng.normal(size=m)):  # consistent, then not
             level = LevelProblem("tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
                                  {"t": slice(0, m)})  # fmt: skip

@@ -279,3 +279,75 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
         StackProblem([level], lo, hi, np.ones(3), {})
     )
     assert np.linalg.norm(A @ r.u - b) == pytest.approx(0.0261061, abs=1e-6)
+
+
+def test_a_skipped_non_finite_level_above_the_box_does_not_crash_daqps_hierarchy():
+    """A level with a NaN row above the level where the box bites: daqp's hierarchical mode
+    was handed the NaN row and crashed the interpreter (segmentation fault). The rows of a
+    level skipped as non-finite are now inert rows for daqp, as they are for the cascade."""
+    nan = np.nan
+    A0 = np.array(
+        [
+            [0.0, -0.02061451360305048, -0.5617523805824108],
+            [nan, 1.1081409761263175, 0.7097628465866269],
+        ]
+    )
+    A1 = np.array(
+        [
+            [-0.5216332373487103, 2.8065705664572045, 1.2863515893997708],
+            [0.38238251521982985, 0.6243504721410483, -0.5335848232646581],
+            [1.1121140414174382, -0.4699411842889205, 0.13076835453805727],
+            [0.4157167037590058, -0.7570211712261788, -0.8590386030961711],
+            [-1.0432664746974205, 5.613141132914409, 2.5727031787995416],
+        ]
+    )
+    b1 = np.array(
+        [
+            -0.01188243700543709,
+            -0.4380092039163905,
+            -1.3401647525622187,
+            0.8541465887273845,
+            1.3946269048150957,
+        ]
+    )
+    A2 = np.array(
+        [
+            [-0.06672551314376893, -0.25665992769349466, 0.4634593001228585],
+            [-0.8290025489061839, -0.5894225737338709, 2.404494189059856],
+            [-0.5231392114562813, 0.42278887012683747, 1.050042085947754],
+            [-0.3861482113660763, -0.17184191207864485, -1.0595741911736751],
+            [1.7739648041982747, 0.2713555635785586, -0.11738104074371104],
+            [-0.7946390555859278, -1.378933999928254, -1.3178410785173642],
+        ]
+    )
+    b2 = np.array(
+        [
+            -1.1418066915503562,
+            0.63358668168871679,
+            -1.1045924837067844,
+            0.13517070965908234,
+            4.2032863576706294e-04,
+            -0.17816489776400191,
+        ]
+    )
+    none = (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    levels = [
+        LevelProblem(
+            "level 0",
+            A0,
+            np.array([-0.18684829560143262, 0.06817893402286822]),
+            *none,
+            {"t2": slice(0, 2)},
+        ),
+        LevelProblem("level 1", A1, b1, *none, {"t1": slice(0, 2), "t2": slice(2, 5)}),
+        LevelProblem("level 2", A2, b2, *none, {"t1": slice(0, 2), "t2": slice(2, 6)}),
+    ]
+    lower = np.array([-0.2597349005370813, -0.19271378763852473, -0.06332819674228664])
+    upper = np.array([0.26197943146421515, 0.15254391681296, 0.2081913430327174])
+    problem = StackProblem(levels, lower, upper, np.ones(3), {})
+    native = HierarchicalQPSolver(method="native").solve_problem(problem)
+    cascade = HierarchicalQPSolver(method="cascade").solve_problem(problem)
+    for result in (native, cascade):
+        assert result.status == SolverStatus.FAILED and "non-finite rows from t2" in result.message
+        assert np.all(result.u >= lower) and np.all(result.u <= upper)
+    assert objective(levels[1], native.u) <= objective(levels[1], cascade.u) + 1e-6

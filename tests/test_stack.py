@@ -9,6 +9,7 @@ import pytest
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.solvers.stack import LevelProblem, StackProblem
 from wholebody.tasks import (
     ArmPotentialEnergy,
     Bounds,
@@ -159,3 +160,18 @@ def test_objective_weight_and_task_weights_are_checked(humanoid):
         stack = Stack(humanoid, [[PostureTask(humanoid, weight=bad)]])
         with pytest.raises(DimensionError, match="posture: weight"):
             stack.evaluate(state, DT)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e300])
+def test_a_non_finite_task_leaves_the_other_tasks_residuals_alone(bad):
+    # one product sums every task's squares: a NaN or inf row must not spill into the others
+    A = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+    b = np.array([1.0, 1.0, bad])
+    level = LevelProblem("level", A, b, np.zeros((0, 2)), np.zeros(0), np.zeros(0),
+                         {"good": slice(0, 2), "bad": slice(2, 3)})  # fmt: skip
+    x = np.array([0.5, -0.5])
+    problem = StackProblem([level], -np.ones(2), np.ones(2), np.ones(2), {})
+    with np.errstate(over="ignore", invalid="ignore"):
+        _, residuals, _ = problem.residuals(x, 1e-6)
+    assert residuals["good"] == pytest.approx(np.linalg.norm(A[:2] @ x - b[:2]), rel=1e-15)
+    assert not np.isfinite(residuals["bad"])

@@ -107,12 +107,12 @@ class Slerp:
 
     With ``theta = |phi|`` and ``K = [phi / theta]x``, Rodrigues' formula gives
     ``R0 Exp(sigma phi) = R0 + sin(sigma theta) R0 K + (1 - cos(sigma theta)) R0 K^2``: two
-    constant matrices and two sines per sample (``K = 0`` when ``R0 = R1``).
+    constant matrices, a sine and a cosine per sample (``K = 0`` when ``R0 = R1``).
 
     Attributes
     ----------
     axis
-        The world rotation vector ``R0 phi`` (3,) (rad).
+        The world rotation vector ``R0 phi`` (3,) (rad), read-only.
     """
 
     __slots__ = ("_R0", "_R0K", "_R0K2", "angle", "axis")
@@ -126,6 +126,7 @@ class Slerp:
         self._R0K = R0 @ K
         self._R0K2 = self._R0K @ K
         self.axis = R0 @ phi
+        self.axis.setflags(write=False)  # returned by every call: shared, so read-only
 
     def __call__(self, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(rotations (N, 3, 3), axis (3,))`` at the progress values ``sigma`` (N,)."""

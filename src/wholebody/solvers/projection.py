@@ -18,13 +18,13 @@ law. The plain pseudo-inverse is the same solver on a stack without the objectiv
 Linear algebra: the Gram matrix ``G = M M^T`` is factored by Cholesky, ``G = L L^T``. When
 ``trace(G^-1) = ||L^-1||_F^2 <= 1 / eps^2``, or else when ``G - eps^2 I`` has a Cholesky
 factor too (exact up to rounding, where the damping below is 0 anyway), the smallest
-eigenvalue of G is at least ``eps^2``: no damping applies
-and every direction counts, so ``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M`` exactly, from
-``W = L^-1 M``. A level with more rows than columns (a weighted sum of tasks) uses
-``G = M^T M`` the same way: then ``M^+ r = G^-1 M^T r`` and ``M^+ M = I``, provided also that
-``trace(G) trace(G^-1) <= 1e8`` (its normal equations lose ``kappa^2 eps``; refined once above
-1e6). Otherwise (near a singularity) the eigen-decomposition (fast path) or the SVD
-(saturation) decides damping and rank as described below.
+eigenvalue of G is at least ``eps^2``: no damping applies and every direction counts, so
+``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M`` exactly, from ``W = L^-1 M``. A level with
+more rows than columns (a weighted sum of tasks) uses ``G = M^T M`` the same way: then
+``M^+ r = G^-1 M^T r`` and ``M^+ M = I``, provided also that ``trace(G) trace(G^-1) <= 1e8``
+(its normal equations lose ``kappa^2 eps``; refined once above 1e3). Otherwise (near a
+singularity) the eigen-decomposition (fast path) or the SVD (saturation) decides damping and
+rank as described below.
 
 Singularity robustness: the pseudo-inverse is damped near singularities with the variable
 damping of Chiaverini / Maciejewski, ``lambda^2 = (1 - (s_min/eps)^2) lambda_max^2`` when the
@@ -153,8 +153,8 @@ class _Gram:
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         """``B^+ r`` (r: (m,) or (m, k)): ``B^T G^-1 r``, or for a tall B its least-squares
-        solution ``G^-1 B^T r`` (refined once where ``kappa_F > 1e3``, see
-        :data:`_REFINE_KAPPA`)."""
+        solution ``G^-1 B^T r``, refined once where ``kappa_F > 1e3`` (the accuracy of
+        :func:`~wholebody.solvers.hqp._normal_solve`)."""
         if self.W is not None:
             return self.W.T.dot(self.Linv.dot(r))
         B, Li = self.B, self.Linv

@@ -117,6 +117,7 @@ class LevelProblem:
     unweighted task residuals; None: the rows are not weighted."""
     _names: list[str] = field(init=False, repr=False)
     _sums: np.ndarray = field(init=False, repr=False)
+    _starts: np.ndarray = field(init=False, repr=False)
     _work: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -133,6 +134,7 @@ class LevelProblem:
         for i, (start, stop, _) in enumerate(rows):
             self._sums[start:stop, i] = 1.0
         self._sums[:, -1] = 1.0
+        self._starts = np.array([start for start, _, _ in rows], dtype=np.intp)
         self._work = np.empty((3, k))
 
     @property
@@ -153,8 +155,9 @@ class LevelProblem:
         return self._report()
 
     def _report(self) -> tuple[float, list[tuple[str, float, float, float]]]:
-        """From ``r`` in the first row of the work array: the squared norms of ``r``, of the
-        unweighted ``r`` and of ``b`` per task (and of ``r`` over all rows) in one product."""
+        """From ``r`` in the first row of the work array: the norms of ``r`` over all rows and,
+        per task, of ``r``, of the unweighted ``r`` and of ``b`` (their squares summed in one
+        product with the task-sum matrix)."""
         work = self._work
         if self.unweight is None:
             work[1] = work[0]
@@ -163,6 +166,13 @@ class LevelProblem:
         work[2] = self.b
         work *= work
         weighted, plain, b = work.dot(self._sums).tolist()
+        if not math.isfinite(weighted[-1] + plain[-1] + b[-1]) and self._names:
+            # a NaN or inf row: 0 * inf in the product would spill it into every task; sum
+            # each task's own rows instead
+            n = int(self._sums[:, :-1].sum())  # the task rows (the objectives' come last)
+            totals = (weighted[-1], plain[-1], b[-1])
+            parts = np.add.reduceat(work[:, :n], self._starts, axis=1).tolist()
+            weighted, plain, b = ([*row, t] for row, t in zip(parts, totals, strict=True))
         sqrt = math.sqrt
         return sqrt(weighted[-1]), [
             (name, sqrt(w), sqrt(p), sqrt(bb))

@@ -351,3 +351,31 @@ def test_a_skipped_non_finite_level_above_the_box_does_not_crash_daqps_hierarchy
         assert result.status == SolverStatus.FAILED and "non-finite rows from t2" in result.message
         assert np.all(result.u >= lower) and np.all(result.u <= upper)
     assert objective(levels[1], native.u) <= objective(levels[1], cascade.u) + 1e-6
+
+
+@pytest.mark.parametrize("method", ["native", "cascade"])
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+def test_a_non_finite_level_with_no_freedom_left_is_reported(method, value):
+    """A level below one that fixes every direction moves nothing, but its NaN or inf rows
+    are still named (they were not: status INFEASIBLE, the task not even listed, as NaN
+    compares false with the tolerance)."""
+    rng = np.random.default_rng(5)
+    n = 4
+    A1 = rng.normal(size=(5, n))
+    A1[3] = value
+    none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
+    levels = [
+        LevelProblem(
+            "full", rng.normal(size=(n, n)), rng.normal(size=n), *none, {"t0": slice(0, n)}
+        ),
+        LevelProblem(
+            "below", A1, rng.normal(size=5), *none, {"t1": slice(0, 2), "t2": slice(2, 5)}
+        ),
+    ]
+    box = np.full(n, 1e12)
+    problem = StackProblem(levels, -box, box, np.ones(n), {})
+    with np.errstate(invalid="ignore", over="ignore"):  # (the residuals of the inf rows)
+        result = HierarchicalQPSolver(method=method).solve_problem(problem)
+    assert result.status == SolverStatus.FAILED
+    assert "below: non-finite rows from t2" in result.message
+    assert ("below", "t2") in result.infeasible and np.all(np.isfinite(result.u))

@@ -371,7 +371,9 @@ class HierarchicalQPSolver(Solver):
             report = self.levels[k]
             report.free = r
             if r == 0:  # nothing left to move: report the inequality rows x leaves violated
-                if lev.C.shape[0]:
+                if not _finite_level(lev):  # (and NaN or inf rows, as at any level)
+                    self._skip_nonfinite(lev, report, failures)
+                elif lev.C.shape[0]:
                     report.limited = _violated(lev, lev.C.dot(x), self.tolerance)[1]
                 continue
             A, b, C = lev.A, lev.b, lev.C

@@ -211,7 +211,7 @@ class StackProblem:
             skipped = i in failed
             for name, weighted, plain, b in tasks:
                 task_res[name] = plain
-                if skipped or weighted > tol * (1.0 + b):
+                if skipped or not weighted <= tol * (1.0 + b):  # (a NaN residual too)
                     infeasible.append((lev.name, name))
         return level_res, task_res, infeasible
 

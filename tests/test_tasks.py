@@ -14,6 +14,7 @@ import pytest
 
 from wholebody import DimensionError
 from wholebody.tasks import FrameTask, PostureTask, RelativeFrameTask
+from wholebody.tasks.frame import pose_error
 
 
 def error_rate_fd(robot, q, task, eps=1e-6):
@@ -131,6 +132,52 @@ def test_integral_anti_windup(humanoid):
     task.integral[0] = -0.001
     task.advance(state, 0.02, saturated=True)
     assert task.integral[0] == 0.0  # down to 0, not past it (its size would grow)
+
+
+@pytest.mark.parametrize("kind", ["frame", "relative"])
+def test_the_integral_advances_with_the_error_at_that_state_and_target(humanoid, rng, kind):
+    # advance() reuses the error the rows were written with when the state and the target
+    # are those of the rows; a target set in between, or another state, is used as given
+    def task_and_error():
+        if kind == "frame":
+            task = FrameTask(humanoid, "right_tool", kp=10.0, ki=5.0)
+
+            def error(state, T):
+                return pose_error(state.position(task.frame), state.rotation(task.frame), T)[0]
+
+            def pose(state):
+                return state.pose(task.frame)
+        else:
+            task = RelativeFrameTask(humanoid, "left_tool", "right_tool", kp=10.0, ki=5.0)
+
+            def error(state, T):
+                rel = task.relative_pose(state)
+                return pose_error(rel[:3, 3], rel[:3, :3], T)[0]
+
+            def pose(state):
+                return task.relative_pose(state)
+
+        return task, error, pose
+
+    task, error, pose = task_and_error()
+    states = [humanoid.update(humanoid.random_configuration(rng, margin=0.1))]
+    T = pose(states[0]).copy()
+    T[:3, 3] += [0.01, -0.02, 0.005]
+    task.set_target(T)
+    task.write_rows(states[0], np.empty((6, humanoid.nu)), np.empty(6))
+    task.advance(states[0], 0.01)
+    np.testing.assert_allclose(task.integral, 0.01 * error(states[0], T), atol=1e-15)
+    T2 = T.copy()
+    T2[:3, 3] += 0.01
+    task.set_target(T2)
+    before = task.integral.copy()
+    task.advance(states[0], 0.01)
+    np.testing.assert_allclose(task.integral - before, 0.01 * error(states[0], T2), atol=1e-15)
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
+    before = task.integral.copy()
+    task.advance(state, 0.01)
+    expected = np.clip(before + 0.01 * error(state, T2), -0.05, 0.05)
+    np.testing.assert_allclose(task.integral, expected, atol=1e-15)
 
 
 @pytest.mark.parametrize("kind", ["frame", "relative"])

@@ -12,8 +12,9 @@ One step at time ``t_k = k dt``:
 4. the tasks' integrators advance (anti-windup when the solver hit a limit);
 5. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold).
 
-``step_time`` is the wall time of the control computation of a step: kinematics, targets,
-stack evaluation, solve and integration, without the log's own monitoring.
+``step_time`` is the wall time of the control computation of a step: targets (reference
+sampling), kinematics, stack evaluation, solve, the integrators' advance and the integration,
+without the log's own recording and monitoring.
 """
 
 from __future__ import annotations
@@ -142,8 +143,8 @@ class Controller:
             result = self.solver.solve(self.stack, state, self.dt)
             compute = time.perf_counter() - start
             log.record(k, t, q, state, result)  # before the next update invalidates state
-            self.stack.advance(state, self.dt, saturated=result.limit_hit)
             start = time.perf_counter()
+            self.stack.advance(state, self.dt, saturated=result.limit_hit)
             q = robot.integrate(q, result.u, self.dt)
             log.step_time[k] = compute + (time.perf_counter() - start)
             if callback is not None:

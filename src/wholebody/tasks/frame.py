@@ -250,6 +250,7 @@ class FrameTask(Task):
         self.integral = np.zeros(6)
         self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
+        self._error_of: tuple[RobotState, np.ndarray] | None = None
 
     @property
     def dim(self) -> int:
@@ -279,6 +280,7 @@ class FrameTask(Task):
         target = self.target if self.target is not None else self._target(state)
         self._rows.write(self.rows, state.jacobian(self.frame), p, R, target, self.target_twist,
                          self.kp, self.ki, self.integral, J, v)  # fmt: skip
+        self._error_of = (state, target)  # self._rows.e is the error at this state and target
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -294,9 +296,16 @@ class FrameTask(Task):
         ki = self.ki
         if not (_count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
             return
-        e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
-                                   self._target(state))  # fmt: skip
-        integrate_error(self.integral, e, dt, saturated, self.integral_limit)
+        integrate_error(self.integral, self._error(state), dt, saturated, self.integral_limit)
+
+    def _error(self, state: RobotState) -> np.ndarray:
+        """The full (6,) error at ``state``: the rows' own when they were written at this state
+        and target (the usual solve, then advance), else computed."""
+        of = self._error_of
+        if of is not None and of[0] is state and of[1] is self.target:
+            return self._rows.e
+        return pose_error(state.position(self.frame), state.rotation(self.frame),
+                          self._target(state))[0]  # fmt: skip
 
     def reset(self) -> None:
         """Zero the integral; a target captured at first use (none was set) is forgotten."""
@@ -317,4 +326,5 @@ def integrate_error(integral: np.ndarray, e: np.ndarray, dt: float, saturated: b
         size = np.abs(integral)
         step = np.where(step * integral < 0, np.clip(step, -size, size), 0.0)
     integral += step
-    np.clip(integral, -limit, limit, out=integral)
+    np.minimum(integral, limit, out=integral)  # np.clip without its Python wrapper
+    np.maximum(integral, -limit, out=integral)

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
+from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 from wholebody.tasks.frame import (
@@ -68,6 +69,7 @@ class RelativeFrameTask(Task):
         self.integral = np.zeros(6)
         self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
+        self._error_of: tuple[RobotState, np.ndarray] | None = None
 
     @property
     def dim(self) -> int:
@@ -116,6 +118,7 @@ class RelativeFrameTask(Task):
         p, R, target = self._relative(state)
         self._rows.write(self.rows, self.relative_jacobian(state), p, R, target,
                          self.target_twist, self.kp, self.ki, self.integral, J, v)  # fmt: skip
+        self._error_of = (state, target)  # self._rows.e is the error at this state and target
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -127,9 +130,14 @@ class RelativeFrameTask(Task):
         return e[self.rows]
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        if np.any(self.ki):
+        if not _count_nonzero(self.ki):
+            return
+        of = self._error_of  # the rows' own error when written at this state and target
+        if of is not None and of[0] is state and of[1] is self.target:
+            e = self._rows.e
+        else:
             e, _ = pose_error(*self._relative(state))
-            integrate_error(self.integral, e, dt, saturated, self.integral_limit)
+        integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 
     def reset(self) -> None:
         """Zero the integral; a target captured at first use (none was set) is forgotten."""

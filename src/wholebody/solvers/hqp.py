@@ -168,6 +168,7 @@ import numpy as np
 from scipy.linalg import lapack as _lapack
 from scipy.optimize import lsq_linear
 
+from wholebody._numeric import NORMAL_KAPPA, normal_solve
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
@@ -1257,8 +1258,6 @@ def _cod(
 
 _trtri, _potrf = _lapack.dtrtri, _lapack.dpotrf
 _CERTIFY_MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
-_NORMAL_KAPPA = 1e4  # largest condition bound kappa_F solved by the normal equations
-_REFINE_KAPPA = 1e3  # above it, one step of iterative refinement
 
 
 def _normal_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float = 0.0
@@ -1269,14 +1268,11 @@ def _normal_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float = 0.0
 
     Cholesky ``M^T M = U^T U`` (U is the R of ``M = Q R`` up to the signs of its rows) and
     ``U^-1``; ``kappa_F = ||U^-1||_F ||M||_F`` bounds the condition number of ``M`` from
-    above. Certified as in :func:`_full_column_rank` (the same bound with ``U`` for ``R``),
-    and used only when ``kappa_F <= 1e4``. ``y = U^-1 U^-T M^T c`` has a relative error of up
-    to about ``kappa_F^2 eps``: below 2.2e-10 where ``kappa_F <= 1e3`` (1.2e-10 measured at
-    kappa 900 with one small singular value); above that, one step of iterative refinement
-    brings it to a few 1e-11 at worst (3e-11 measured at kappa 3000 with a large residual; a
-    QR reaches 1e-13). Both far below the solver's tolerances (1e-8 and up). A few small
-    products where ``dgels`` spends its time in per-column BLAS calls (17 us against 35 us on
-    the 35 x 23 level of the peers benchmark).
+    above. Certified by :func:`_rank_certificate` (with ``U`` for ``R``), used only when
+    ``kappa_F <= NORMAL_KAPPA`` (1e4) and solved by :func:`~wholebody._numeric.normal_solve`
+    (its accuracy is documented there, far below the solver's tolerances of 1e-8 and up):
+    17 us against 35 us for ``dgels`` with its certificate on the 35 x 23 level of the peers
+    benchmark.
     """
     U, info = _potrf(M.T.dot(M))
     if info != 0:
@@ -1284,26 +1280,26 @@ def _normal_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float = 0.0
     Ui, info = _trtri(U, lower=0)
     if info != 0:
         return None
-    fi = Ui.ravel(order="K")
-    fm = M.ravel(order="K")
-    inv2 = fi.dot(fi)  # ||U^-1||_F^2 >= 1 / sigma_min^2
-    k2 = inv2 * fm.dot(fm)  # kappa_F^2
-    m = M.shape[0]
-    margin = _CERTIFY_MARGIN * rtol
-    if not (k2 <= _NORMAL_KAPPA * _NORMAL_KAPPA and k2 * m * margin * margin < 1.0
-            and inv2 * m * floor * floor < 1.0):  # fmt: skip
+    k2 = _rank_certificate(M, Ui, rtol, floor)
+    if k2 is None or not k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
         return None
-    Mt, Uit = M.T, Ui.T
-    y = Ui.dot(Uit.dot(Mt.dot(c)))
-    if k2 > _REFINE_KAPPA * _REFINE_KAPPA:  # one step of iterative refinement
-        y += Ui.dot(Uit.dot(Mt.dot(c - M.dot(y))))
-    return y
+    return normal_solve(M, Ui.T, c, k2)  # (M^T M)^-1 = U^-1 U^-T
 
 
 def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float, floor: float = 0.0) -> bool:
-    """Whether the rank rule of :func:`_cod` (``|R_ii| > rtol |R_00|`` in the pivoted QR of
-    ``M^T``) is certain to find full column rank, from the unpivoted QR ``M = Q R`` in ``lqr``
-    (``dgels``'s output) of a tall ``M`` (m x r, m > r).
+    """Whether the rank rule of :func:`_cod` is certain to find full column rank, from the
+    unpivoted QR ``M = Q R`` in ``lqr`` (``dgels``'s output) of a tall ``M`` (m x r, m > r);
+    see :func:`_rank_certificate`."""
+    r = M.shape[1]
+    Rinv, info = _trtri(lqr[:r, :r], lower=0)
+    return info == 0 and _rank_certificate(M, Rinv, rtol, floor) is not None
+
+
+def _rank_certificate(M: np.ndarray, Rinv: np.ndarray, rtol: float,
+                      floor: float = 0.0) -> float | None:  # fmt: skip
+    """``kappa_F^2 = ||R^-1||_F^2 ||M||_F^2`` when the rank rule of :func:`_cod`
+    (``|R_ii| > rtol |R_00|`` in the pivoted QR of ``M^T``) is certain to find full column
+    rank for a tall ``M`` (m x r, m > r) with ``M^T M = R^T R`` (``Rinv = R^-1``), else None.
 
     In the pivoted QR of ``M^T`` (columns: the m rows of M), ``|R_ii|`` is the largest column
     norm of the trailing block, whose 2-norm is at least ``sigma_r(M)`` (a rank-i matrix is at
@@ -1312,15 +1308,15 @@ def _full_column_rank(M: np.ndarray, lqr: np.ndarray, rtol: float, floor: float 
     rank when ``||R^-1||_F ||M||_F sqrt(m) rtol < 1``, here with a margin of 1e3; and every
     ``|R_ii| > floor`` when ``||R^-1||_F sqrt(m) floor < 1``.
     """
-    r = M.shape[1]
-    Rinv, info = _trtri(lqr[:r, :r], lower=0)
-    if info != 0:
-        return False
     fi = Rinv.ravel(order="K")
     fm = M.ravel(order="K")
+    inv2 = fi.dot(fi)  # >= 1 / sigma_r^2
+    k2 = inv2 * fm.dot(fm)
+    m = M.shape[0]  # (m inv2 >= 1 / |R_ii|^2 for every pivot of the rule)
     margin = _CERTIFY_MARGIN * rtol
-    inv2 = fi.dot(fi) * M.shape[0]  # >= 1 / |R_ii|^2 for every pivot of the rule
-    return bool(inv2 * fm.dot(fm) * margin * margin < 1.0 and inv2 * floor * floor < 1.0)
+    if k2 * m * margin * margin < 1.0 and inv2 * m * floor * floor < 1.0:
+        return k2
+    return None
 
 
 def _pivot_norm(M: np.ndarray) -> float:

@@ -67,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dtrtri
 
+from wholebody._numeric import NORMAL_KAPPA, normal_solve
 from wholebody._numeric import count_nonzero as _count
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
@@ -80,8 +81,6 @@ _INSIDE_TOL = 1e-10
 _EPS = float(np.finfo(float).eps)
 _WIDEN = np.array([[-_INSIDE_TOL], [_INSIDE_TOL]])
 _FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
-_NORMAL_KAPPA = 1e4  # a tall level's normal equations: largest condition bound kappa_F
-_REFINE_KAPPA = 1e3  # above it, one step of iterative refinement
 
 
 @dataclass
@@ -144,24 +143,19 @@ class _Gram:
     ``m <= n`` (``W = L^-1 B``), ``G = B^T B`` when B is tall (``m > n``, full column rank;
     ``W`` None); ``L`` its Cholesky factor, ``Linv = L^-1``; ``rank`` = min(m, n)."""
 
-    __slots__ = ("B", "Linv", "W", "rank", "refine")
+    __slots__ = ("B", "Linv", "W", "kappa2", "rank")
 
     def __init__(self, B: np.ndarray, Linv: np.ndarray, W: np.ndarray | None,
-                 refine: bool = False) -> None:  # fmt: skip
-        self.B, self.Linv, self.W, self.refine = B, Linv, W, refine
+                 kappa2: float = 0.0) -> None:  # fmt: skip
+        self.B, self.Linv, self.W, self.kappa2 = B, Linv, W, kappa2
         self.rank = min(B.shape)
 
     def solve(self, r: np.ndarray) -> np.ndarray:
         """``B^+ r`` (r: (m,) or (m, k)): ``B^T G^-1 r``, or for a tall B its least-squares
-        solution ``G^-1 B^T r``, refined once where ``kappa_F > 1e3`` (the accuracy of
-        :func:`~wholebody.solvers.hqp._normal_solve`)."""
+        solution ``G^-1 B^T r`` (:func:`~wholebody._numeric.normal_solve`)."""
         if self.W is not None:
             return self.W.T.dot(self.Linv.dot(r))
-        B, Li = self.B, self.Linv
-        y = Li.T.dot(Li.dot(B.T.dot(r)))
-        if self.refine:
-            y += Li.T.dot(Li.dot(B.T.dot(r - B.dot(y))))
-        return y
+        return normal_solve(self.B, self.Linv, r, self.kappa2)
 
     def used(self) -> np.ndarray:
         """``B^+ B``: the projector onto the directions the level uses (all of them when B is
@@ -243,9 +237,9 @@ class ProjectionSolver(Solver):
                 return None
         if tall:
             k2 = inv * top  # kappa_F^2 = trace(G^-1) trace(G)
-            if k2 > _NORMAL_KAPPA * _NORMAL_KAPPA:
+            if k2 > NORMAL_KAPPA * NORMAL_KAPPA:
                 return None
-            return _Gram(B, Linv, None, k2 > _REFINE_KAPPA * _REFINE_KAPPA)
+            return _Gram(B, Linv, None, k2)
         return _Gram(B, Linv, Linv.dot(B))
 
     def _shift(self, k: int) -> np.ndarray:

@@ -129,7 +129,7 @@ class PoseRows:
     ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
     """
 
-    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "e", "ff")
+    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "_written", "e", "ff")
 
     def __init__(self) -> None:
         self.K = np.eye(6)
@@ -141,6 +141,7 @@ class PoseRows:
         self._eo = self.e[3:]
         self._target: np.ndarray | None = None
         self._Rd = self._pd = None
+        self._written: tuple[object, np.ndarray] | None = None  # (state, target) of self.e
 
     def __call__(
         self,
@@ -176,8 +177,15 @@ class PoseRows:
             v += ki * integral
         return e
 
+    def error_at(self, state: object, target: np.ndarray | None) -> np.ndarray | None:
+        """The full (6,) error of the last :meth:`write` if it was at ``state`` and
+        ``target`` (a task's advance after its solve), else None."""
+        w = self._written
+        return self.e if w is not None and w[0] is state and w[1] is target else None
+
     def write(
         self,
+        state: object,
         rows: np.ndarray,
         J: np.ndarray,
         p: np.ndarray,
@@ -190,8 +198,10 @@ class PoseRows:
         A: np.ndarray,
         v: np.ndarray,
     ) -> None:
-        """:meth:`__call__` keeping only the rows ``rows`` (indices among the 6), written into
-        ``A`` (len(rows) x nu) and ``v``: straight into them when all 6 are kept."""
+        """:meth:`__call__` at ``state`` keeping only the rows ``rows`` (indices among the 6),
+        written into ``A`` (len(rows) x nu) and ``v``: straight into them when all 6 are
+        kept. The full error stays available to :meth:`error_at`."""
+        self._written = (state, target)
         if rows.size == 6:
             self(J, p, R, target, twist, kp, ki, integral, A, v)
             return
@@ -250,7 +260,6 @@ class FrameTask(Task):
         self.integral = np.zeros(6)
         self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
-        self._error_of: tuple[RobotState, np.ndarray] | None = None
 
     @property
     def dim(self) -> int:
@@ -278,9 +287,8 @@ class FrameTask(Task):
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         R, p = state.rotation_translation(self.frame)
         target = self.target if self.target is not None else self._target(state)
-        self._rows.write(self.rows, state.jacobian(self.frame), p, R, target, self.target_twist,
-                         self.kp, self.ki, self.integral, J, v)  # fmt: skip
-        self._error_of = (state, target)  # self._rows.e is the error at this state and target
+        self._rows.write(state, self.rows, state.jacobian(self.frame), p, R, target,
+                         self.target_twist, self.kp, self.ki, self.integral, J, v)  # fmt: skip
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -296,16 +304,11 @@ class FrameTask(Task):
         ki = self.ki
         if not (_count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
             return
-        integrate_error(self.integral, self._error(state), dt, saturated, self.integral_limit)
-
-    def _error(self, state: RobotState) -> np.ndarray:
-        """The full (6,) error at ``state``: the rows' own when they were written at this state
-        and target (the usual solve, then advance), else computed."""
-        of = self._error_of
-        if of is not None and of[0] is state and of[1] is self.target:
-            return self._rows.e
-        return pose_error(state.position(self.frame), state.rotation(self.frame),
-                          self._target(state))[0]  # fmt: skip
+        e = self._rows.error_at(state, self.target)  # the rows' own, after the usual solve
+        if e is None:
+            e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
+                              self._target(state))  # fmt: skip
+        integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 
     def reset(self) -> None:
         """Zero the integral; a target captured at first use (none was set) is forgotten."""

@@ -69,7 +69,6 @@ class RelativeFrameTask(Task):
         self.integral = np.zeros(6)
         self._held = False  # the target is the pose captured at first use (reset forgets it)
         self._rows = PoseRows()
-        self._error_of: tuple[RobotState, np.ndarray] | None = None
 
     @property
     def dim(self) -> int:
@@ -116,9 +115,8 @@ class RelativeFrameTask(Task):
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         p, R, target = self._relative(state)
-        self._rows.write(self.rows, self.relative_jacobian(state), p, R, target,
+        self._rows.write(state, self.rows, self.relative_jacobian(state), p, R, target,
                          self.target_twist, self.kp, self.ki, self.integral, J, v)  # fmt: skip
-        self._error_of = (state, target)  # self._rows.e is the error at this state and target
         return self.weight
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -132,10 +130,8 @@ class RelativeFrameTask(Task):
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         if not _count_nonzero(self.ki):
             return
-        of = self._error_of  # the rows' own error when written at this state and target
-        if of is not None and of[0] is state and of[1] is self.target:
-            e = self._rows.e
-        else:
+        e = self._rows.error_at(state, self.target)  # the rows' own, after the usual solve
+        if e is None:
             e, _ = pose_error(*self._relative(state))
         integrate_error(self.integral, e, dt, saturated, self.integral_limit)
 

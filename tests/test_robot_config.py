@@ -218,6 +218,54 @@ CASES = [
         ModelError,
         ["robot.urdf", "'head_mount' has 6 DOF", "1-DOF joints"],
     ),
+    (
+        "mimic joint",
+        "robot.urdf",
+        '<joint name="right_wrist_rotation" type="revolute">',
+        '<joint name="right_wrist_rotation" type="revolute"><mimic joint="right_wrist_flexion"/>',
+        ModelError,
+        ["robot.urdf", "mimic joints are not supported", "'right_wrist_rotation'"],
+    ),
+    (
+        "arm group not a string",
+        "robot.toml",
+        'group = "left_arm"',
+        'group = ["left_arm"]',
+        ConfigError,
+        ["[arms.left.group]", "expected a non-empty string"],
+    ),
+    (
+        "arm elbow on the other arm",
+        "robot.toml",
+        'elbow = "left_elbow_centre"',
+        'elbow = "right_elbow_centre"',
+        ConfigError,
+        ["[arms.left.elbow]", "not below the shoulder", "one kinematic chain"],
+    ),
+    (
+        "arm group of the other arm",
+        "robot.toml",
+        'group = "left_arm"',
+        'group = "right_arm"',
+        ConfigError,
+        ["[arms.left.group]", "do not move the tool 'left_tool'", "'right_clavicle'"],
+    ),
+    (
+        "upper arm body outside its segment",
+        "robot.toml",
+        'upper_arm = "left_upper_arm"',
+        'upper_arm = "left_hand"',
+        ConfigError,
+        ["[arms.left.upper_arm]", "'left_hand' is not on the chain between the shoulder"],
+    ),
+    (
+        "shoulder frame off the joint centre",
+        "robot.toml",
+        'shoulder = "left_shoulder_centre"',
+        'shoulder = "left_clavicle"',
+        ConfigError,
+        ["[arms.left.elbow]", "shoulder-elbow distance changes with the posture"],
+    ),
 ]
 
 
@@ -520,3 +568,31 @@ def test_a_stiffness_read_back_from_a_file_is_a_number(humanoid):
 
     energy = ArmPotentialEnergy(humanoid, "right", np.array(0.1))  # a 0-d array, as from .npz
     assert energy.stiffness.k == pytest.approx(0.1)
+
+
+def test_a_link_and_a_joint_with_one_name_resolve_to_the_link(humanoid):
+    """URDF allows it (the bundled robot has a link and a joint ``left_clavicle``); Pinocchio
+    refuses an untyped lookup of such a name."""
+    import pinocchio as pin
+
+    frame = humanoid.frame("left_clavicle")
+    assert humanoid.model.frames[frame.index].type == pin.FrameType.BODY
+    assert humanoid.body("left_clavicle").mass > 0
+
+
+def test_a_directory_without_robot_toml_does_not_hide_a_bundled_robot(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mobile_humanoid").mkdir()  # e.g. a scenario's output directory
+    assert wholebody.load_robot("mobile_humanoid").nu == 23
+    with pytest.raises(ConfigError, match=r"robot directory has no robot\.toml"):
+        wholebody.load_robot(tmp_path / "mobile_humanoid")
+    own = copy_robot(tmp_path / "mine")  # a directory with one is loaded, by path or by name
+    monkeypatch.chdir(own.parent)
+    assert wholebody.load_robot("mobile_humanoid").config.path.resolve() == own / "robot.toml"
+
+
+def test_jacobian_derivatives_of_a_frame_on_a_wheel_are_refused(humanoid):
+    from wholebody.tasks import Manipulability
+
+    with pytest.raises(DimensionError, match="on the wheel 'wheel_front_left'"):
+        Manipulability(humanoid, ["wheel_front_left_link"])

@@ -36,6 +36,9 @@ def available_robots() -> list[str]:
 def load_robot(name_or_path: str | Path) -> Robot:
     """Load a robot by bundled name (``"mobile_humanoid"``), robot directory or ``robot.toml``.
 
+    A directory holding a ``robot.toml`` is loaded even where a bundled robot has its name;
+    a bare name whose directory has none (or does not exist) is the bundled robot.
+
     Raises
     ------
     ConfigError
@@ -46,14 +49,16 @@ def load_robot(name_or_path: str | Path) -> Robot:
     path = Path(name_or_path)
     if path.suffix == ".toml":
         return Robot(read_robot_config(path))
-    if path.is_dir():
-        toml = path / "robot.toml"
-        if not toml.is_file():
-            raise ConfigError(f"{path}: robot directory has no robot.toml")
+    toml = path / "robot.toml"
+    if toml.is_file():
         return Robot(read_robot_config(toml))
     bundled = robots_dir() / path.name / "robot.toml"
     if len(path.parts) == 1 and bundled.is_file():  # a name, as a str or a one-part Path
+        # (a directory of that name without a robot.toml, e.g. a scenario's output, does not
+        # hide the bundled robot)
         return Robot(read_robot_config(bundled))
+    if path.is_dir():
+        raise ConfigError(f"{path}: robot directory has no robot.toml")
     raise ConfigError(
         f"no robot {str(name_or_path)!r}: expected a bundled robot name "
         f"({', '.join(available_robots()) or 'none installed'}), a robot directory or a "

@@ -150,7 +150,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         if not isinstance(table, dict):
             raise r.fail(where, f"expected a table, got {type(table).__name__}")
         r.only(table, where, ("side", "group", *ARM_FRAME_KEYS, *ARM_BODY_KEYS))
-        group = table.get("group")
+        group = r.string(table, "group", where) if "group" in table else None
         if group is not None and group not in groups:
             raise r.fail(
                 f"{where}.group",

@@ -22,16 +22,23 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from wholebody.errors import DimensionError
 from wholebody.robot.robot import LWA, Frame, Robot, RobotState
 
-__all__ = ["JacobianDerivativeContraction", "actuated_support_mask", "frame_hessian"]
+__all__ = [
+    "JacobianDerivativeContraction",
+    "actuated_support_mask",
+    "check_off_wheels",
+    "frame_hessian",
+]
 
 
 def actuated_support_mask(robot: Robot) -> np.ndarray:
     """(nu, nu) boolean ``M[l, k]``: actuated column l's joints support column k's joints.
 
     A column's joints are those its actuation column ``A[:, k]`` drives; a wheel drives the
-    planar root (which supports every joint) and its own joint (which moves no frame).
+    planar root (which supports every joint) and its own joint, which moves only the frames
+    on its wheel: the mask is exact for every other frame (see :func:`check_off_wheels`).
     """
     model = robot.model
     joint_of = np.empty(model.nv, dtype=int)
@@ -48,10 +55,26 @@ def actuated_support_mask(robot: Robot) -> np.ndarray:
     return M
 
 
+def check_off_wheels(robot: Robot, frames: list[Frame]) -> None:
+    """Raise :class:`~wholebody.errors.DimensionError` for a frame on a wheel (moved by a
+    wheel's own joint): one boolean per pair of columns cannot say that a wheel column
+    supports such a frame through the root but not through the wheel's spin."""
+    model = robot.model
+    wheels = {model.getJointId(j): j for j in robot.base.wheel_joints}
+    for f in frames:
+        on = [name for jid, name in wheels.items() if jid in model.supports[f.joint]]
+        if on:
+            raise DimensionError(
+                f"frame {f.name!r} is on the wheel {on[0]!r}: its Jacobian derivatives are not "
+                "supported (choose a frame of the body or the arms)"
+            )
+
+
 def frame_hessian(state: RobotState, frame: Frame, mask: np.ndarray) -> np.ndarray:
     """(6, nu, nu): ``H[:, k, l] = d J[:, k] / d u_l`` of the frame's actuated Jacobian.
 
     Dense; for tests and analysis (:class:`JacobianDerivativeContraction` is the fast path).
+    Not for a frame on a wheel (:func:`check_off_wheels`).
     """
     J = state.jacobian(frame)
     v, w = J[:3].T, J[3:].T  # (nu, 3)
@@ -88,6 +111,7 @@ class JacobianDerivativeContraction:
     """
 
     def __init__(self, robot: Robot, frames: list[Frame]) -> None:
+        check_off_wheels(robot, frames)
         self.frames = list(frames)
         mask = actuated_support_mask(robot)
         q = robot.random_configuration(np.random.default_rng(0))

@@ -96,7 +96,7 @@ class ArmChain:
 
     @property
     def upper_arm_length(self) -> float:
-        """Shoulder-to-elbow distance (m); constant for a rigid arm, read at any state."""
+        """Shoulder-to-elbow distance (m), the same at every posture (checked on loading)."""
         return float(self._lengths[0])
 
     @property
@@ -105,6 +105,16 @@ class ArmChain:
         return float(self._lengths[1])
 
     _lengths: tuple[float, float] = (0.0, 0.0)
+
+
+_FRAME_PREFERENCE = (
+    pin.FrameType.BODY,
+    pin.FrameType.OP_FRAME,
+    pin.FrameType.FIXED_JOINT,
+    pin.FrameType.JOINT,
+    pin.FrameType.SENSOR,
+)
+"""The frame kinds :meth:`Robot.frame` looks a name up in, in this order."""
 
 
 class Robot:
@@ -351,21 +361,8 @@ class Robot:
                 )
             bodies[key] = Body(name, self.frame(name), mass, com)
         group = self.groups[cfg.group] if cfg.group else None
-        state = self.update(self.neutral())
-        lengths = (
-            float(
-                np.linalg.norm(state.position(frames["elbow"]) - state.position(frames["shoulder"]))
-            ),
-            float(
-                np.linalg.norm(state.position(frames["wrist"]) - state.position(frames["elbow"]))
-            ),
-        )
-        if min(lengths) < 1e-3:
-            raise self.config.error(
-                where,
-                f"upper-arm/forearm lengths {lengths} m: the shoulder, elbow and wrist "
-                "frames must be distinct points",
-            )
+        self._check_chain(cfg, frames, bodies, group)
+        lengths = self._arm_lengths(cfg, frames)
         return ArmChain(
             cfg.name,
             cfg.side,
@@ -379,16 +376,93 @@ class Robot:
             lengths,
         )
 
+    def _check_chain(self, cfg: ArmConfig, frames: dict[str, Frame], bodies: dict[str, Body],
+                     group: JointGroup | None) -> None:  # fmt: skip
+        """Shoulder, elbow, wrist and tool one below the other on one kinematic chain, the
+        upper arm between shoulder and elbow, the forearm between elbow and wrist, and the
+        arm's group made of joints of that chain."""
+        supports = self.model.supports
+        where = f"arms.{cfg.name}"
+
+        def below(upper: Frame, lower: Frame) -> bool:  # every joint moving upper moves lower
+            return upper.joint in supports[lower.joint]
+
+        order = (("shoulder", "elbow"), ("elbow", "wrist"), ("wrist", "tool"))
+        for a, b in order:
+            if not below(frames[a], frames[b]):
+                raise self.config.error(
+                    f"{where}.{b}",
+                    f"{frames[b].name!r} is not below the {a} {frames[a].name!r} on one "
+                    "kinematic chain: expected shoulder, elbow, wrist and tool in that order "
+                    "along the arm",
+                )
+        for key, (a, b) in (("upper_arm", ("shoulder", "elbow")),
+                            ("forearm", ("elbow", "wrist"))):  # fmt: skip
+            body = bodies[key].frame
+            if not (below(frames[a], body) and below(body, frames[b])):
+                raise self.config.error(
+                    f"{where}.{key}",
+                    f"link {body.name!r} is not on the chain between the {a} "
+                    f"{frames[a].name!r} and the {b} {frames[b].name!r}",
+                )
+        if group is not None:
+            chain = set(supports[frames["tool"].joint])
+            joint_ids = {self.model.getJointId(j) for j in group.joints}
+            off = [j for j, i in zip(group.joints, joint_ids, strict=True) if i not in chain]
+            if off:
+                raise self.config.error(
+                    f"{where}.group",
+                    f"group {group.name!r} has joints that do not move the tool "
+                    f"{frames['tool'].name!r}: {', '.join(map(repr, off))}",
+                )
+
+    def _arm_lengths(self, cfg: ArmConfig, frames: dict[str, Frame]) -> tuple[float, float]:
+        """Shoulder-elbow and elbow-wrist distances (m), checked to be the same (to 0.1 mm) at
+        the neutral posture and at 20 random ones: the arm geometry (arm angle, posture
+        mapping) takes the three frames as joint centres."""
+        rng = np.random.default_rng(0)
+        configurations = [self.neutral()] + [self.random_configuration(rng) for _ in range(20)]
+        pairs = (("shoulder", "elbow"), ("elbow", "wrist"))
+        d = np.empty((len(configurations), 2))
+        for i, q in enumerate(configurations):
+            state = self.update(q)
+            for k, (a, b) in enumerate(pairs):
+                d[i, k] = np.linalg.norm(state.position(frames[b]) - state.position(frames[a]))
+        where = f"arms.{cfg.name}"
+        if d[0].min() < 1e-3:
+            raise self.config.error(
+                where,
+                f"upper-arm/forearm lengths {tuple(d[0].tolist())} m: the shoulder, elbow and "
+                "wrist frames must be distinct points",
+            )
+        spread = d.max(axis=0) - d.min(axis=0)
+        for k, (a, b) in enumerate(pairs):
+            if spread[k] > 1e-4:
+                raise self.config.error(
+                    f"{where}.{b}",
+                    f"the {a}-{b} distance changes with the posture ({d[:, k].min():.4f} to "
+                    f"{d[:, k].max():.4f} m): the shoulder, elbow and wrist frames must be joint "
+                    "centres (on the axes of the joints between them)",
+                )
+        return float(d[0, 0]), float(d[0, 1])
+
     # ------------------------------------------------------------------ names
     def frame(self, name: str | Frame) -> Frame:
-        """The frame called ``name`` (link, joint or fixed frame of the URDF)."""
+        """The frame called ``name`` (link, joint or fixed frame of the URDF).
+
+        URDF lets a link and a joint share a name (the bundled ``mobile_humanoid`` has a link
+        and a joint ``left_clavicle``): the link's frame is taken, then an operational frame,
+        a fixed joint's, a joint's.
+        """
         if isinstance(name, Frame):
             return name
-        if not isinstance(name, str) or not self.model.existFrame(name):
-            names = [f.name for f in self.model.frames]
-            raise FrameError(f"robot {self.name!r} has no frame {name!r}" + _suggest(name, names))
-        fid = self.model.getFrameId(name)
-        return Frame(name, fid, int(self.model.frames[fid].parentJoint))
+        if isinstance(name, str):
+            for kind in _FRAME_PREFERENCE:
+                if self.model.existFrame(name, kind):
+                    fid = self.model.getFrameId(name, kind)
+                    return Frame(name, fid, int(self.model.frames[fid].parentJoint))
+        names = list(dict.fromkeys(f.name for f in self.model.frames))
+        raise FrameError(f"robot {self.name!r} has no frame {name!r}" + _suggest(name, names))
 
     def body(self, name: str) -> Body:
         """The link ``name`` with its mass and centre of mass (from the URDF)."""
@@ -808,13 +882,23 @@ def _suggest(name: object, candidates) -> str:
 
 
 def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], str]:
-    """Mass and centre of mass (link frame) of every link of a URDF, and the root link."""
+    """Mass and centre of mass (link frame) of every link of a URDF, and the root link.
+
+    Mimic joints are refused: Pinocchio would load each as an independent joint, a velocity
+    of its own that moves without its leader.
+    """
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ModelError(f"{path}: not well-formed XML: {exc}") from exc
     if root.tag != "robot":
         raise ModelError(f"{path}: root element is <{root.tag}>; expected <robot>")
+    mimic = [j.get("name") for j in root.iter("joint") if j.find("mimic") is not None]
+    if mimic:
+        raise ModelError(
+            f"{path}: mimic joints are not supported ({', '.join(map(repr, mimic))}): each "
+            "would be an independent joint; make them fixed or drop their <mimic>"
+        )
     links: dict[str, tuple[float, np.ndarray]] = {}
     for link in root.iter("link"):
         name = link.get("name")

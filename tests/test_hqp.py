@@ -144,7 +144,18 @@ def test_unknown_engine_is_a_clear_error():
     with pytest.raises(SolverError, match="'native' with engine 'daqp'"):
         HierarchicalQPSolver("osqp", method="native")
     assert HierarchicalQPSolver("proxsuite").method == "cascade"
-    assert HierarchicalQPSolver().method == "native"
+    assert HierarchicalQPSolver().method == "cascade"  # native is opt-in (module docstring)
+
+
+@pytest.mark.parametrize(("engine", "good"), [("daqp", "primal_tol"), ("proxsuite", "eps_abs"),
+                                              ("osqp", "eps_abs")])  # fmt: skip
+def test_a_misspelt_engine_setting_is_refused_on_construction(engine, good):
+    """It was accepted, then daqp ignored it, osqp failed every solve and proxsuite raised
+    out of solve()."""
+    pytest.importorskip(engine)
+    HierarchicalQPSolver(engine, engine_settings={good: 1e-8})
+    with pytest.raises(SolverError, match=f"{engine}: unknown setting.s. {good}s; known: "):
+        HierarchicalQPSolver(engine, engine_settings={good + "s": 1e-8})
 
 
 # ---------------------------------------------------------------------- lexicographic optimum

@@ -330,3 +330,84 @@ def test_no_saturation_when_the_whole_stack_fits_the_box(humanoid, rng):
         assert result.status == SolverStatus.OK
         found += 1
     assert found >= 5
+
+
+def _hands_problem(robot, seed=5):
+    q = robot.random_configuration(np.random.default_rng(seed), margin=0.15)
+    state = robot.update(q)
+    L, R = hands(robot)
+    near_targets(robot, state, (L, R), np.random.default_rng(seed + 1))
+    J = np.vstack([t.compute(state).J for t in (L, R)])
+    v = np.concatenate([t.compute(state).v for t in (L, R)])
+    return state, (L, R), J, v
+
+
+def test_a_weight_common_to_a_level_or_a_uniform_metric_changes_nothing(humanoid):
+    """The damping is decided on the rows divided by sqrt(largest task weight / largest
+    metric entry): far from a singularity (smallest singular value 0.08 here) both are the
+    plain pseudo-inverse, however small the weights or large the metric (they damped 54 % of
+    the task away at weight 1e-2 and at a metric of 100 I)."""
+    state, (L, R), J, v = _hands_problem(humanoid)
+    assert np.linalg.svd(J, compute_uv=False)[-1] > 0.05
+    exact = np.linalg.pinv(J) @ v
+    for w, c in ((1.0, 1.0), (1e-2, 1.0), (1e-4, 1.0), (1.0, 100.0), (1e-3, 1e4)):
+        L.weight = R.weight = w
+        stack = Stack(humanoid, [Level([L, R])], [], metric=np.full(humanoid.nu, c))
+        u = ProjectionSolver().solve(stack, state, DT).u
+        assert np.linalg.norm(u - exact) < 1e-9 * np.linalg.norm(exact), (w, c)
+
+
+@pytest.mark.parametrize("w_posture", [4e-4, 1e-4, 1e-5])
+def test_a_low_weight_regulariser_does_not_pull_the_hands_off(humanoid, w_posture):
+    """Hands and a posture regulariser in one level: only the directions the level barely
+    moves (singular value below eps, here the posture's) are damped, so the hands track as in
+    the weighted least squares (before, the whole level was damped and the hands missed by
+    more as the posture's weight went down: 3.7e-2 against 3.2e-4 at 1e-5)."""
+    state, (L, R), J, v = _hands_problem(humanoid)
+    posture = PostureTask(humanoid, kp=1.0, weight=w_posture)
+    posture.set_target(humanoid.joint_positions(
+        humanoid.random_configuration(np.random.default_rng(7), margin=0.2)))  # fmt: skip
+    stack = Stack(humanoid, [Level([L, R, posture])], [])
+    p = stack.evaluate(state, DT)
+    lstsq = p.to_u(np.linalg.lstsq(p.levels[0].A, p.levels[0].b, rcond=None)[0])
+    u = ProjectionSolver().solve(stack, state, DT).u
+    best = np.linalg.norm(J @ lstsq - v)
+    assert np.linalg.norm(J @ u - v) <= 1.05 * best + 1e-12
+
+
+def test_the_unsaturated_solution_starts_from_zero_when_the_box_excludes_it(humanoid):
+    """A joint 0.1 mrad past its limit: the box excludes u = 0. The plain pseudo-inverse J+ v
+    fits the box, so it is the answer (it was J+ v + (I - J+ J) clip(0, box))."""
+    rng = np.random.default_rng(1)
+    hi = humanoid.position_limits[1]
+    j = humanoid.index("left_shoulder_flexion")
+    iq = humanoid.model.joints[humanoid.model.getJointId("left_shoulder_flexion")].idx_q
+    tested = 0
+    for _ in range(50):
+        q = humanoid.random_configuration(rng, margin=0.2)
+        q[iq] = hi[j] + 1e-4
+        state = humanoid.update(q)
+        L, R = hands(humanoid)
+        near_targets(humanoid, state, (L, R), rng)
+        stack = Stack(humanoid, [Level([L, R])],
+                      [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+        blo, bhi = box(stack, state)
+        assert not blo[j] <= 0.0 <= bhi[j]
+        J = np.vstack([t.compute(state).J for t in (L, R)])
+        v = np.concatenate([t.compute(state).v for t in (L, R)])
+        exact = np.linalg.pinv(J) @ v
+        inside = np.all(exact >= blo) and np.all(exact <= bhi)
+        if not inside or np.linalg.svd(J, compute_uv=False)[-1] < 0.05:
+            continue
+        for solver in (ProjectionSolver(), ProjectionSolver(saturate=False)):
+            assert np.linalg.norm(solver.solve(stack, state, DT).u - exact) < 1e-9
+        tested += 1
+    assert tested >= 3
+
+
+@pytest.mark.parametrize("name", ["damping", "singular_threshold", "rank_tolerance", "tolerance"])
+def test_non_finite_parameters_are_refused(name):
+    from wholebody.errors import SolverError
+
+    with pytest.raises(SolverError, match=f"{name}=nan"):
+        ProjectionSolver(**{name: float("nan")})

@@ -26,10 +26,19 @@ more rows than columns (a weighted sum of tasks) uses ``G = M^T M`` the same way
 singularity) the eigen-decomposition (fast path) or the SVD (saturation) decides damping and
 rank as described below.
 
-Singularity robustness: the pseudo-inverse is damped near singularities with the variable
-damping of Chiaverini / Maciejewski, ``lambda^2 = (1 - (s_min/eps)^2) lambda_max^2`` when the
-smallest singular value ``s_min < eps`` (else no damping), so away from singularities the
-solution is the exact pseudo-inverse.
+Singularity robustness: each singular direction of a level whose singular value ``s_i`` is
+below ``eps`` is damped with the variable damping ``lambda_i^2 = (1 - (s_i/eps)^2)
+lambda_max^2`` (Chiaverini's variable factor, applied direction by direction as in the
+numerical filtering of Maciejewski and Klein), the others not at all: away from singularities
+the solution is the exact pseudo-inverse, and near one only the nearly singular directions
+are damped. Damping every direction by the smallest singular value's factor would also damp
+a level's well-conditioned tasks whenever it holds a low-weight regulariser, whose singular
+values are small by its weight, not by the kinematics (the hands then missed by 3.7e-2
+instead of 3.2e-4 beside a posture task of weight 1e-5). The singular values are those of the
+level's rows divided by ``reference_scale = sqrt(w_max / W_max)`` (the level's largest task
+weight, the metric's largest entry; :class:`~wholebody.solvers.stack.LevelProblem`), so that
+``eps`` is in the units of the top-weight task per unit of velocity and a weight common to the
+level, or a uniform metric, changes nothing.
 
 Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
 inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
@@ -173,7 +182,8 @@ class ProjectionSolver(Solver):
     damping
         ``lambda_max``: the largest damping, reached at a singularity.
     singular_threshold
-        ``eps``: damping starts when the smallest singular value falls below it.
+        ``eps``: a singular direction is damped when its singular value is below it (in the
+        units of the level's top-weight task, see the module docstring).
     rank_tolerance
         Singular values below ``rank_tolerance * max(1, s_max)`` count as zero for null
         spaces and ranks.
@@ -195,8 +205,14 @@ class ProjectionSolver(Solver):
         tolerance: float = 1e-6,
         saturate: bool = True,
     ) -> None:
-        if damping < 0 or singular_threshold <= 0 or rank_tolerance <= 0 or tolerance <= 0:
-            raise SolverError("ProjectionSolver: damping >= 0 and positive thresholds required")
+        values = (damping, singular_threshold, rank_tolerance, tolerance)
+        if not (all(math.isfinite(v) for v in values) and damping >= 0 and singular_threshold > 0
+                and rank_tolerance > 0 and tolerance > 0):  # fmt: skip
+            raise SolverError(
+                "ProjectionSolver: damping >= 0 and positive thresholds required, all finite; "
+                f"got damping={damping}, singular_threshold={singular_threshold}, "
+                f"rank_tolerance={rank_tolerance}, tolerance={tolerance}"
+            )
         self.damping = damping
         self.singular_threshold = singular_threshold
         self.rank_tolerance = rank_tolerance
@@ -251,6 +267,17 @@ class ProjectionSolver(Solver):
             shift.setflags(write=False)
         return shift
 
+    def _damping(self, s: np.ndarray) -> np.ndarray:
+        """The damping ``mu_i = (1 - (s_i / eps)^2) lambda_max^2`` of each direction whose
+        singular value ``s_i`` is below ``eps``, 0 for the others."""
+        eps = self.singular_threshold
+        x = s * (1.0 / eps)
+        x *= x
+        np.subtract(1.0, x, out=x)
+        np.maximum(x, 0.0, out=x)
+        x *= self.damping**2
+        return x
+
     def _solve_ls(self, M: np.ndarray, r: np.ndarray,
                   damped: bool = True) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
         """Damped least-squares ``y = M^+_damped r`` (r: (m,) or (m, k)), the null-space basis
@@ -261,11 +288,8 @@ class ProjectionSolver(Solver):
         U, s, Vt = np.linalg.svd(M, full_matrices=True)
         smax = s[0] if s.size else 0.0
         rank = int(np.sum(s > self.rank_tolerance * max(1.0, smax)))
-        smin = s[rank - 1] if rank else 0.0
-        eps = self.singular_threshold
-        lam2 = 0.0 if smin >= eps or not damped else (1.0 - (smin / eps) ** 2) * self.damping**2
         sr = s[:rank]
-        inv = sr / (sr * sr + lam2)
+        inv = sr / (sr * sr + self._damping(sr)) if damped else 1.0 / sr
         c = U[:, :rank].T @ r
         y = Vt[:rank].T @ (inv[:, None] * c if c.ndim == 2 else inv * c)
         return y, Vt[rank:].T, rank
@@ -278,7 +302,7 @@ class ProjectionSolver(Solver):
         An eigenvalue of ``M M^T`` counts as zero below the rank tolerance or below the
         eigen-solver's round-off, ``10 m eps_mach lambda_max``, whichever is larger: a level
         with more rows than columns (``m > n``) has ``m - n`` exact zeros that come out as
-        +-1e-16, and counting them as directions would damp the whole level.
+        +-1e-16, and counting them as directions would put round-off into the projector.
 
         A tall M goes through its own SVD instead (n x n work, not m x m), with the same
         rule on ``s^2``; except where ``exact`` says that M's columns are the level's rows
@@ -287,9 +311,8 @@ class ProjectionSolver(Solver):
         drop genuine directions (at ``kappa = 1e7`` a level lost its smallest directions and
         missed its least squares by 100 %). Below a computed projector the floor stays: its
         round-off leaves tiny singular values in M (4e-7 where 0 is exact, on a fuzzed
-        stack) that would otherwise count as directions and damp the whole level."""
+        stack) that would otherwise count as directions of the level."""
         m, n = M.shape
-        eps = self.singular_threshold
         if m > n:
             U, sv, Vt = np.linalg.svd(M, full_matrices=False)
             top = float(sv[0]) ** 2 if n else 0.0
@@ -298,20 +321,17 @@ class ProjectionSolver(Solver):
                 floor = max(floor, 10.0 * m * _EPS * top)
             keep = sv * sv > floor
             s_r = sv[keep]
-            smin = float(s_r[-1]) if s_r.size else 0.0
-            mu = 0.0 if smin >= eps else (1.0 - (smin / eps) ** 2) * self.damping**2
             V_r = Vt[keep].T
-            return V_r.dot((U[:, keep].T.dot(r)) * (s_r / (s_r * s_r + mu))), V_r.dot(V_r.T)
+            return (V_r.dot((U[:, keep].T.dot(r)) * (s_r / (s_r * s_r + self._damping(s_r)))),
+                    V_r.dot(V_r.T))  # fmt: skip
         lam, U = np.linalg.eigh(M @ M.T)
         top = max(float(lam[-1]), 0.0) if lam.size else 0.0
         floor = max((self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2,
                     10.0 * lam.size * _EPS * top)  # fmt: skip
         keep = lam > floor
         lam_r, U_r = lam[keep], U[:, keep]
-        smin = np.sqrt(lam_r[0]) if lam_r.size else 0.0
-        mu = 0.0 if smin >= eps else (1.0 - (smin / eps) ** 2) * self.damping**2
         MtU = M.T @ U_r
-        y = MtU @ ((U_r.T @ r) / (lam_r + mu))
+        y = MtU @ ((U_r.T @ r) / (lam_r + self._damping(np.sqrt(lam_r))))
         return y, (MtU / lam_r) @ MtU.T
 
     def _level(self, lp: LevelProblem, prev: _Level, box: _Box, need_next: bool,
@@ -320,6 +340,9 @@ class ProjectionSolver(Solver):
         u0 = prev.u
         if A.shape[0] == 0:
             return prev
+        if lp.reference_scale != 1.0:  # damping decided independently of a common scale
+            c = 1.0 / lp.reference_scale
+            A, b = A * c, b * c
         if lp.identity_scale > 0:
             if prev.P is None:
                 u = u0 + (b / lp.identity_scale - u0) * prev.free
@@ -448,7 +471,8 @@ class ProjectionSolver(Solver):
             message = "the box is empty or not a number (NaN bounds): u = 0"
             return self._result(problem, np.zeros(nu), np.ones(len(problem.levels)),
                                 time.perf_counter() - start, message, failed=True)  # fmt: skip
-        u_start = np.minimum(np.maximum(0.0, lo), hi)  # 0 unless the box excludes it
+        u_start = np.minimum(np.maximum(0.0, lo), hi)  # SNS starts here: 0 unless the box
+        # excludes it (the unsaturated solution starts from 0, the textbook u_0)
         box = _Box.of(lo, hi)
         levels = problem.levels
         scales = np.empty(len(levels))
@@ -459,7 +483,7 @@ class ProjectionSolver(Solver):
         # levels would have brought the sum back inside, would trade a higher level's
         # freedom for nothing and makes the motion chatter between the two solutions.
         free = np.zeros(nu, dtype=bool)
-        state_k = _Level(u_start, None, 1.0, free, ~free)
+        state_k = _Level(np.zeros(nu), None, 1.0, free, ~free)
         for i, lp in enumerate(levels):
             state_k = self._level(lp, state_k, box, i + 1 < len(levels), False)
         if self.saturate and not box.inside(state_k.u):

@@ -91,6 +91,9 @@ class QPSolution:
     message: str
 
 
+_KNOWN: dict[str, frozenset[str]] = {}  # QPEngine.known_settings per engine name, once
+
+
 class QPEngine(ABC):
     """One QP workspace of one engine (see the module docstring for the problem).
 
@@ -107,6 +110,13 @@ class QPEngine(ABC):
 
     def __init__(self, *, warm_start: bool = True, **settings: Any) -> None:
         self.warm_start = warm_start
+        known = _KNOWN.get(self.name)
+        if known is None:
+            known = _KNOWN[self.name] = frozenset(self.known_settings())
+        unknown = sorted(set(settings) - known)
+        if unknown:
+            raise SolverError(f"{self.name}: unknown setting(s) {', '.join(unknown)}; known: "
+                              f"{', '.join(sorted(known))}")  # fmt: skip
         self.settings = dict(self.default_settings())
         self.settings.update(settings)
         self._shape: tuple[int, int, bool] | None = None
@@ -116,6 +126,10 @@ class QPEngine(ABC):
     @staticmethod
     def default_settings() -> dict[str, Any]:
         return {}
+
+    @abstractmethod
+    def known_settings(self) -> set[str]:
+        """The setting names the engine accepts (checked on construction)."""
 
     def reset(self) -> None:
         """Forget the workspace (the next solve starts cold)."""
@@ -199,6 +213,9 @@ class DaqpEngine(QPEngine):
         self._daqp = daqp
         super().__init__(warm_start=warm_start, **settings)
 
+    def known_settings(self) -> set[str]:
+        return set(self._daqp.Model().settings)
+
     def _bounds(self, lower, upper, lb, ub) -> None:
         nb = 0 if lb is None else lb.shape[0]
         if lb is not None:
@@ -279,6 +296,9 @@ class ProxsuiteEngine(QPEngine):
         self.update_preconditioner = bool(settings.pop("update_preconditioner", True))
         super().__init__(warm_start=warm_start, **settings)
 
+    def known_settings(self) -> set[str]:
+        return {a for a in dir(self._proxqp.Settings()) if not a.startswith("_")}
+
     @staticmethod
     def _finite(v: np.ndarray | None) -> np.ndarray | None:
         return None if v is None else np.clip(v, -_BIG, _BIG)
@@ -351,6 +371,13 @@ class OsqpEngine(QPEngine):
         self._sparse = scipy.sparse
         self._errors = (osqp.OSQPException,)
         super().__init__(warm_start=warm_start, **settings)
+
+    def known_settings(self) -> set[str]:
+        # the attributes of a set-up workspace's settings (a 1 x 1 problem)
+        one = self._sparse.csc_matrix(np.ones((1, 1)))
+        probe = self._osqp.OSQP()
+        probe.setup(one, np.zeros(1), one, -np.ones(1), np.ones(1), verbose=False)
+        return {a for a in dir(probe.settings) if not a.startswith("_")}
 
     def _data(self, H, C, lower, upper, lb, ub) -> None:
         m = C.shape[0]

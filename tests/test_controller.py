@@ -176,3 +176,25 @@ def test_misused_arguments_say_what_is_expected(torso):
     dmp = DMP.fit(np.c_[t, t, t], t)
     with pytest.raises(WholebodyError, match=r"DynamicPotential\(cylinder"):
         dmp.rollout(obstacles=[cylinder(np.zeros(3), 0.04, 0.2)])
+
+
+def test_runs_with_different_periods_are_not_joined_and_an_empty_log_has_no_metrics(torso):
+    """The metrics read one dt from a log's metadata: joining runs at 0.01 and 0.002 s gave a
+    wrong joint travel and duration. A log without steps has no metrics to give."""
+    from wholebody.errors import DataError
+    from wholebody.tasks import PostureTask
+
+    posture = PostureTask(torso, kp=2.0)
+    stack = paper_stack(torso, [posture], stiffness=0.1)
+    q0 = torso.neutral()
+    a = Controller(torso, stack, ProjectionSolver(), dt=0.01).run(q0, 0.05)
+    b = Controller(torso, stack, ProjectionSolver(), dt=0.002).run(q0, 0.01)
+    with pytest.raises(DataError, match="different control periods"):
+        concatenate([a, b])
+    assert len(concatenate([a, a])) == 2 * len(a)
+    nq, nu = a.q.shape[1], a.u.shape[1]
+    empty = RunLog(np.zeros(0), np.zeros((0, nq)), np.zeros((0, nu)), np.zeros((0, nu)),
+                   np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool),
+                   np.zeros((0, 1)), meta=dict(a.meta))  # fmt: skip
+    with pytest.raises(DataError, match="no steps"):
+        summary(empty)

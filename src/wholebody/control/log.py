@@ -188,6 +188,10 @@ def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
     """
     if not logs:
         raise DataError("nothing to concatenate")
+    periods = {log.dt for log in logs}
+    if len(periods) > 1:  # the metrics read one dt from the metadata
+        raise DataError(f"cannot concatenate runs with different control periods: dt = "
+                        f"{sorted(periods)} s")  # fmt: skip
     t, offset = [], 0.0
     for log in logs:
         t.append(log.t + offset)

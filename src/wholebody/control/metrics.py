@@ -78,7 +78,10 @@ def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -
 
 
 def summary(log: RunLog) -> dict:
-    """The metrics of a run as a JSON-ready dictionary."""
+    """The metrics of a run as a JSON-ready dictionary (a :class:`DataError` for a log
+    without steps)."""
+    if not len(log):
+        raise DataError("run log has no steps: no metrics")
     dt = log.dt
     out: dict = {
         "steps": len(log),

@@ -245,6 +245,12 @@ def test_invalid_arguments() -> None:
         DMPConfig(phase_end=1.5)
     with pytest.raises(DimensionError, match="3-D"):
         DMP.fit(X[:, :2], t).rollout(obstacles=[DynamicPotential(cylinder([0, 0, 0], 1, 1))])
+    for ridge in (float("nan"), -1.0, float("inf")):
+        with pytest.raises(DimensionError, match="regularization must be a finite number"):
+            DMP.fit(X, t, regularization=ridge)
+    stepper = dmp.stepper()
+    with pytest.raises(DimensionError, match=r"state must hold x and v of shape \(3,\)"):
+        stepper.step(DMPState(np.zeros(1), np.zeros(1)), 0.01)
 
 
 def test_dmp_trajectory(dmp: DMP) -> None:
@@ -294,3 +300,30 @@ def test_savitzky_golay_equals_scipy(n, window, polyorder):
     for k, mine in enumerate(ours):
         ref = savgol_filter(X, window, polyorder, deriv=k, delta=h, axis=0, mode="interp")
         np.testing.assert_allclose(mine, ref, rtol=0, atol=1e-10 * max(1.0, np.abs(ref).max()))
+
+
+@pytest.mark.parametrize("n", [400, 401, 3001])
+def test_savitzky_golay_of_long_signals_is_the_local_polynomial(n):
+    """Beyond 400 samples the filter is a set of FFT convolutions (memory O(N), not a
+    cached dense (3N, N) matrix: 20 000 samples asked for 9 GB); either way each sample is
+    the least-squares polynomial of its window, checked against numpy's polyfit in the
+    normalised offset (scipy's filter itself loses its interior at windows of ~1000)."""
+    import tracemalloc
+
+    from wholebody.planning.dmp import savitzky_golay
+
+    X = np.random.default_rng(n).normal(size=(n, 2)).cumsum(axis=0)
+    window, h = (n // 8) * 2 + 1, 0.01
+    m = window // 2
+    tracemalloc.start()
+    ours = savitzky_golay(X, window, 5, h)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 5e6 + 1000 * n  # bytes (a dense operator: 24 n^2, 216 MB at n = 3001)
+    for i in (0, m // 2, m, n // 2, n - m - 1, n - 1):
+        lo = min(max(i - m, 0), n - window)
+        x = (np.arange(lo, lo + window) - i) / m
+        c = np.polynomial.polynomial.polyfit(x, X[lo : lo + window], 5)
+        for k in range(3):
+            ref = c[k] * [1.0, 1.0, 2.0][k] / (m * h) ** k
+            np.testing.assert_allclose(ours[k][i], ref, rtol=1e-8, atol=1e-8 * np.abs(ref).max())

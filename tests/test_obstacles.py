@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wholebody.errors import DimensionError
+from wholebody.errors import DimensionError, IntegrationError
 from wholebody.planning import (
     DMP,
     DMPTrajectory,
@@ -192,7 +192,7 @@ def test_presets_enclose_their_solids_grown_by_the_margin(rng: np.random.Generat
 
 
 def test_invalid_obstacles_are_rejected() -> None:
-    with pytest.raises(DimensionError, match="exponent n must be >= 1"):
+    with pytest.raises(DimensionError, match=r"exponent n must be in \[1, 32\]"):
         Superquadric([0, 0, 0], np.eye(3), [1, 1, 1], n=0.5)
     with pytest.raises(DimensionError, match="m = 1 needs n = 1"):
         Superquadric([0, 0, 0], np.eye(3), [1, 1, 1], n=2.0, m=1.0)  # C not C2 on the axis
@@ -296,3 +296,43 @@ def test_the_step_control_spends_its_evaluations_near_the_obstacles(scene_dmp: D
     assert 4 * 159 < calls[0] < 1900  # one call of the first obstacle's force per evaluation
     ref = scene_dmp.rollout(160, obstacles=scene_potentials(), tolerance=1e-8, max_substeps=4096)
     assert np.max(np.linalg.norm(ref.positions - r.positions, axis=1)) < 1e-5
+
+
+def test_an_unresolved_obstacle_rollout_raises_instead_of_returning_a_wrong_path() -> None:
+    """A steep box (exponent 12) 1 cm off a straight reach: at the default tolerance a substep
+    jumped the box's shell unseen by the error estimate, and the next interval, out of
+    substeps, was accepted anyway: the path ended 2 km away. Now an interval whose estimate
+    stays above the tolerance at max_substeps raises; more substeps resolve the path, which
+    stalls outside the box."""
+    t = np.linspace(0.0, 1.0, 200)
+    s = minimum_jerk_scaling(t)[0]
+    dmp = DMP.fit(np.stack([0.8 * s, 0.01 + 0 * s, 0 * s], 1), t)
+    shape = box([0.5, 0.0, 0.0], [0.04, 0.04, 0.04], exponent=12)
+    pot = DynamicPotential(shape)
+    with pytest.raises(IntegrationError, match="lower the tolerance or raise max_substeps"):
+        dmp.rollout(160, obstacles=[pot])
+    path = dmp.rollout(160, obstacles=[pot], tolerance=1e-4, max_substeps=4096).positions
+    assert shape.isopotential(path).min() > 0.0
+    assert np.linalg.norm(path, axis=1).max() < 0.6
+
+
+def test_fixed_step_rk4_is_asked_for_by_an_infinite_tolerance(scene_dmp: DMP) -> None:
+    pots = scene_potentials()
+    fixed = scene_dmp.rollout(160, obstacles=pots, tolerance=np.inf, max_substeps=1)
+    with pytest.raises(IntegrationError):
+        scene_dmp.rollout(160, obstacles=pots, max_substeps=1)
+    ref = scene_dmp.rollout(160, obstacles=pots)
+    assert np.all(np.isfinite(fixed.positions))
+    assert np.max(np.linalg.norm(fixed.positions - ref.positions, axis=1)) > 0.01  # coarse
+
+
+@pytest.mark.parametrize("make", [
+    lambda e: cylinder([0, 0, 0], 0.04, 0.2, exponent=e),
+    lambda e: box([0, 0, 0], [0.1, 0.1, 0.1], exponent=e),
+    lambda e: Superquadric([0, 0, 0], np.eye(3), [0.1, 0.1, 0.1], e, e),
+])  # fmt: skip
+def test_exponents_beyond_32_are_refused(make) -> None:
+    """|u|^(2 * 100) overflows a metre away from a 4 cm cylinder: inf and NaN forces."""
+    make(32.0)
+    with pytest.raises(DimensionError, match=r"\[1, 32\]"):
+        make(33.0)

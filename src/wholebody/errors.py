@@ -35,5 +35,9 @@ class DataError(WholebodyError, ValueError):
     """A data file (recordings, dataset, weights) is malformed."""
 
 
+class IntegrationError(WholebodyError, ArithmeticError):
+    """A numerical integration could not meet its error tolerance."""
+
+
 class SolverError(WholebodyError):
     """A solver could not be set up (unknown engine, missing optional dependency)."""

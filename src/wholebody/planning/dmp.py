@@ -72,9 +72,9 @@ from functools import lru_cache
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.linalg.lapack import dposv as _posv
-from scipy.signal import lfilter
+from scipy.signal import fftconvolve, lfilter
 
-from wholebody.errors import DimensionError
+from wholebody.errors import DimensionError, IntegrationError
 from wholebody.planning._checks import as_array, as_pose, as_positive, as_vector
 from wholebody.planning.obstacles import PointForce, Potential, make_point_force
 from wholebody.planning.rotations import Slerp
@@ -374,7 +374,12 @@ class DMP:
         Phi = dmp.basis(s)
         A = Phi.T.dot(Phi)
         nb = cfg.n_basis
-        A.flat[:: nb + 1] += float(regularization) * A.trace() / nb
+        ridge = float(regularization)
+        if not (math.isfinite(ridge) and ridge >= 0.0):
+            raise DimensionError(
+                f"DMP.fit: regularization must be a finite number >= 0, got {regularization!r}"
+            )
+        A.flat[:: nb + 1] += ridge * A.trace() / nb
         rhs = Phi.T.dot(target)
         _, w, info = _posv(A, rhs)  # the ridge makes A positive definite: Cholesky
         dmp.weights = w if info == 0 else np.linalg.solve(A, rhs)
@@ -414,9 +419,17 @@ class DMP:
         tolerance
             With obstacles: tolerance (m) on the substeps' local error estimate (the embedded
             third-order estimate, on ``x`` and on ``v = tau x'``; conservative: the default
-            gives a global error near 1e-5 m in the paper's two-cylinder scene).
+            gives a global error near 1e-5 m in the paper's two-cylinder scene). ``inf``
+            turns the error control off: fixed-step RK4 with ``max_substeps`` substeps.
         max_substeps
             With obstacles: most substeps per sample interval.
+
+        Raises
+        ------
+        IntegrationError
+            With obstacles, when an interval's error estimate stays above ``tolerance`` with
+            ``max_substeps`` substeps (the path is not resolved there: a step may have
+            crossed a steep obstacle's surface); a tighter tolerance usually resolves it.
         """
         N = int(samples)
         if samples != N or N < 2:
@@ -485,6 +498,9 @@ def _linear_substeps(cfg: DMPConfig, r: float) -> int:
 
 
 def _tolerance(value: float) -> float:
+    """A positive tolerance (m); ``inf`` turns the error control off (fixed substeps)."""
+    if value == math.inf:
+        return math.inf
     return as_positive(value, "DMP: tolerance")
 
 
@@ -628,9 +644,17 @@ class _ObstacleIntegrator:
             # the estimate is the error of the embedded third-order solution, O(hs^4): the
             # substep that would just meet the tolerance, with a safety factor of 0.8
             scale = (err / tol) ** 0.25 / 0.8 if err > 0.0 else 0.0
-            if err <= tol or m >= top:
+            if err <= tol:
                 self.m = min(top, max(1, m // 2, math.ceil(m * scale)))
                 return y1, k1
+            if m >= top or not math.isfinite(err):
+                t0 = math.log(s0) / -self.rate if s0 > 0.0 else math.inf
+                raise IntegrationError(
+                    f"DMP obstacle rollout: local error {err:.3g} m above the tolerance "
+                    f"{tol:g} m with {m} substeps in the interval from t = {t0:.4g} s: the path "
+                    "is not resolved there (a step may have crossed an obstacle's surface); "
+                    "lower the tolerance or raise max_substeps"
+                )
             m = min(top, max(m + 1, math.ceil(m * scale)))
 
     def _substeps(
@@ -832,6 +856,13 @@ class DMPStepper:
         """Advance ``state`` by ``dt`` s (> 0); into ``out`` if given (may be ``state``)."""
         if not dt > 0.0:
             raise DimensionError(f"DMPStepper.step: dt must be > 0 s, got {dt}")
+        d = self.dmp.dim
+        for what, st in (("state", state), ("out", out)):
+            if st is not None and not (st.x.shape == st.v.shape == (d,)):
+                raise DimensionError(
+                    f"DMPStepper.step: {what} must hold x and v of shape ({d},), got "
+                    f"{st.x.shape} and {st.v.shape}"
+                )
         if out is None:
             out = DMPState(np.empty(self.dmp.dim), np.empty(self.dmp.dim))
         if dt != self._last_dt:
@@ -1022,28 +1053,52 @@ _POWERS = np.arange(6.0)
 
 
 @lru_cache(maxsize=32)
+def _savgol_fit(window: int, polyorder: int) -> tuple[np.ndarray, np.ndarray]:
+    """``x`` (w,), the window's offsets normalised to [-1, 1] (``x = (i - m) / m``,
+    ``window = 2m + 1``: ``V[i, j] = x_i^j`` stays well conditioned for wide windows), and
+    ``C = V^+`` (p + 1, w), which maps a window's samples to the coefficients of their
+    least-squares polynomial of degree ``polyorder`` in ``x``. Read-only, cached."""
+    m = window // 2
+    x = (np.arange(window, dtype=float) - m) / max(m, 1)
+    C = np.linalg.pinv(x[:, None] ** np.arange(polyorder + 1))
+    for a in (x, C):
+        a.setflags(write=False)
+    return x, C
+
+
+def _savgol_rows(x: np.ndarray, polyorder: int, m: int) -> np.ndarray:
+    """(3, len(x), p + 1): the value and the first and second derivatives per sample
+    (unit spacing, ``d/di = d/dx / m``) of the polynomial with given coefficients, at ``x``."""
+    powers = np.arange(polyorder + 1)
+    D = np.empty((3, x.size, polyorder + 1))
+    for k in range(3):
+        coef = np.array([math.perm(j, k) if j >= k else 0.0 for j in powers]) / max(m, 1) ** k
+        D[k] = coef * x[:, None] ** np.maximum(powers - k, 0)
+    return D
+
+
+_DENSE_SAVGOL = 400  # up to this many samples, the filter is one cached (3n, n) matrix
+
+
+@lru_cache(maxsize=16)
 def _savgol_operator(n: int, window: int, polyorder: int) -> np.ndarray:
     """The Savitzky-Golay filter of an ``n``-sample signal as one (3n, n) matrix (unit
     spacing): rows ``k n .. (k + 1) n`` give the value (k = 0) and the first and second
-    derivatives of the local least-squares polynomial of degree ``polyorder`` over an odd
-    ``window = 2m + 1``. ``C = V^+`` maps a window's samples to the polynomial's coefficients
-    in the offset ``x = i - m`` (``V[i, j] = x_i^j``); interior samples use the centre of
-    their own window, the first and last ``m`` samples the polynomial fitted to the first and
-    last window (scipy's ``mode="interp"``)."""
+    derivatives; interior samples use the centre of their own window, the first and last
+    ``m`` samples the polynomial fitted to the first and last window (scipy's
+    ``mode="interp"``). For ``n <= 400`` only (at most 3.8 MB each)."""
     m = window // 2
-    x = np.arange(window, dtype=float) - m
-    powers = np.arange(polyorder + 1)
-    C = np.linalg.pinv(x[:, None] ** powers)  # (p + 1, w)
+    x, C = _savgol_fit(window, polyorder)
+    E = _savgol_rows(x, polyorder, m).dot(C)  # (3, w, w): sample i of a window, from it
     S = np.zeros((3, n, n))
     for k in range(3):
-        # d^k/dx^k x^j = j!/(j-k)! x^(j-k), at every offset of the window: (w, p + 1)
-        coef = np.array([math.perm(j, k) if j >= k else 0.0 for j in powers])
-        E = (coef * x[:, None] ** np.maximum(powers - k, 0)).dot(C)  # (w, w)
         for i in range(m, n - m):
-            S[k, i, i - m : i + m + 1] = E[m]
-        S[k, :m, :window] = E[:m]
-        S[k, n - m :, n - window :] = E[m + 1 :]
-    return S.reshape(3 * n, n)
+            S[k, i, i - m : i + m + 1] = E[k, m]
+        S[k, :m, :window] = E[k, :m]
+        S[k, n - m :, n - window :] = E[k, m + 1 :]
+    S = S.reshape(3 * n, n)
+    S.setflags(write=False)
+    return S
 
 
 def savitzky_golay(
@@ -1053,8 +1108,19 @@ def savitzky_golay(
     seconds: the Savitzky-Golay filter (local least-squares polynomial of degree
     ``polyorder`` over ``window`` samples, odd, ``<= N``), the first and last ``window // 2``
     samples from the polynomial fitted to the first and last window. It equals scipy's
-    ``savgol_filter(..., mode="interp")`` to round-off, as one cached matrix product instead
-    of scipy's per-call overhead."""
-    N = X.shape[0]
-    out = _savgol_operator(N, window, polyorder).dot(X).reshape(3, N, X.shape[1])
+    ``savgol_filter(..., mode="interp")`` to round-off: up to 400 samples as one cached
+    matrix product (no per-call overhead), beyond as FFT convolutions (memory proportional
+    to ``N``, not to ``N window``)."""
+    N, d = X.shape
+    if N <= _DENSE_SAVGOL:
+        out = _savgol_operator(N, window, polyorder).dot(X).reshape(3, N, d)
+    else:
+        m = window // 2
+        x, C = _savgol_fit(window, polyorder)
+        out = np.empty((3, N, d))
+        centre = _savgol_rows(x[m : m + 1], polyorder, m)[:, 0].dot(C)  # (3, w)
+        for k in range(3):  # sample i: centre[k] . X[i - m : i + m + 1], a correlation
+            out[k, m : N - m] = fftconvolve(X, centre[k, ::-1, None], mode="valid", axes=0)
+        out[:, :m] = _savgol_rows(x[:m], polyorder, m).dot(C.dot(X[:window]))
+        out[:, N - m :] = _savgol_rows(x[m + 1 :], polyorder, m).dot(C.dot(X[N - window :]))
     return out[0], out[1] / h, out[2] / (h * h)

@@ -52,6 +52,9 @@ def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     assert "2026-11-22" in text and "SYN03" in text
     assert f"{scores['svr']['r2']:.3f}" in text
     assert "--test-participants SYN03" in text  # the card's command reproduces this split
+    # ... and the dataset's options: the card's dataset command rebuilds this dataset
+    assert ("wholebody stiffness dataset --robot mobile_humanoid --arm right --records 300 "
+            "--seed 0 --synthetic-participants 3 --no-real --out") in text  # fmt: skip
 
     rep = tmp_path / "rep"
     assert _run("report", "--model", str(net_path), "--dataset", str(ds_path), "--quiet",

@@ -115,6 +115,20 @@ def test_file_round_trip_and_errors(trained, tmp_path: Path, rng):
     np.savez(tmp_path / "fmt.npz", **{**arrays, "format": np.array("other")})
     with pytest.raises(DataError, match="format"):
         NetworkStiffness.load(tmp_path / "fmt.npz")
+    # every malformed file is a DataError naming the file (some were ValueError/TypeError, or
+    # loaded and failed later)
+    for name, change, fragment in (
+        ("x_mean", np.zeros(4), r"x_mean must have shape \(3,\)"),
+        ("k_mean", np.zeros(2), "k_mean must be a number"),
+        ("input_low", np.zeros(2), r"input_low must have shape \(3,\)"),
+        ("W9", np.zeros((1, 1)), "beyond n_layers"),
+        ("x_scale", np.array([object()]), "not a readable stiffness network"),
+    ):
+        bad_path = tmp_path / f"bad_{name}.npz"
+        np.savez(bad_path, **{**arrays, name: change})
+        with pytest.raises(DataError, match=fragment) as info:
+            NetworkStiffness.load(bad_path)
+        assert str(bad_path) in str(info.value)
     # a name without .npz: the path returned is the file written
     named = net.save(tmp_path / "model.weights")
     assert named.name == "model.weights.npz" and named.is_file()

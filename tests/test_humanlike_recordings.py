@@ -218,3 +218,23 @@ def test_malformed_npz_files(good: Path, tmp_path: Path):
     junk.write_bytes(b"not a zip file")
     with pytest.raises(DataError, match="not a readable"):
         load_recording(junk)
+
+
+def test_a_missing_sternum_sample_does_not_turn_the_facing_check_off(tmp_path: Path):
+    """One empty sternum cell left the sternum out and, with it, the facing check: the trial
+    stayed turned by 180 deg. The samples where the marker was seen decide."""
+    rows = list(csv.reader((real_recordings_dir() / "ADL009_forward_R1.csv").open()))
+    header, body = rows[0], rows[1:]
+    whole = load_recording(real_recordings_dir() / "ADL009_forward_R1.csv")
+    body[50][header.index("sternum_x")] = ""
+    gap = load_recording(_write(tmp_path / "ADL009_forward_R1.csv", body, header))
+    assert "turned 180" in gap.note and "sternum seen in" in gap.note
+    assert gap.sternum is None  # a recording's sternum is complete or absent
+    np.testing.assert_allclose(gap.wrist, whole.wrist)
+    for line in body:
+        for a in "xyz":
+            line[header.index(f"sternum_{a}")] = ""
+    blank = _write(tmp_path / "ADL009_forward_R2.csv", body, header)
+    with pytest.raises(DataError, match="no complete sample"):
+        load_recording(blank)
+    assert load_recording(blank, facing="as-is").sternum is None

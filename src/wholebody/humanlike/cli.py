@@ -108,6 +108,13 @@ def _dataset(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     ds.meta["created"] = datetime.date.today().isoformat()
+    ds.meta["dataset_options"] = {  # what a data card needs to rebuild this dataset
+        "robot": str(args.robot), "arm": args.arm, "records": args.records, "seed": args.seed,
+        "synthetic_participants": n_syn, "no_real": bool(args.no_real),
+        "calibrate": bool(args.calibrate),
+        "held_out": list(args.held_out) if args.held_out else None,
+        "recordings": None if args.recordings is None else str(args.recordings),
+    }  # fmt: skip
     out = ds.save(args.out)
     print(report.summary())
     if "calibration" in info:
@@ -188,11 +195,23 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
         + f" --out {args.out} --card {args.card}"
     )
     fit = f"wholebody stiffness fit --dataset data/stiffness/{dataset.name} "
-    cmds = [
-        f"wholebody stiffness dataset --robot {meta.get('robot', 'mobile_humanoid')} "
-        f"--records {meta.get('n_records', 5000)} --seed {meta.get('seed', 0)} "
-        f"--out data/stiffness/{dataset.name}",
-    ]
+    opts = meta.get("dataset_options")
+    if opts:  # every option the dataset was built with (datasets made by this version)
+        make = (
+            f"wholebody stiffness dataset --robot {opts['robot']} --arm {opts['arm']} "
+            f"--records {opts['records']} --seed {opts['seed']} "
+            f"--synthetic-participants {opts['synthetic_participants']}"
+            + (" --no-real" if opts["no_real"] else "")
+            + (" --calibrate" if opts["calibrate"] else "")
+            + (f" --held-out {','.join(opts['held_out'])}" if opts["held_out"] else "")
+            + (f" --recordings {opts['recordings']}" if opts["recordings"] else "")
+        )
+    else:  # an older dataset file: the options it records
+        make = (
+            f"wholebody stiffness dataset --robot {meta.get('robot', 'mobile_humanoid')} "
+            f"--records {meta.get('n_records', 5000)} --seed {meta.get('seed', 0)}"
+        )
+    cmds = [f"{make} --out data/stiffness/{dataset.name}"]
     wd = config.weight_decay  # type: ignore[attr-defined]
     if args.select_hidden or args.select_weight_decay:
         sel = ""

@@ -93,14 +93,14 @@ class NetworkStiffness(StiffnessModel):
             fan_in = w.shape[0]
         if fan_in != 1:
             raise DimensionError("NetworkStiffness: the output layer must have 1 unit")
-        self.x_mean = np.array(x_mean, dtype=float).reshape(3)
-        self.x_scale = np.array(x_scale, dtype=float).reshape(3)
-        self.k_mean, self.k_scale = float(k_mean), float(k_scale)
-        self.floor_beta = float(floor_beta)
+        self.x_mean = _vector3(x_mean, "x_mean")
+        self.x_scale = _vector3(x_scale, "x_scale")
+        self.k_mean, self.k_scale = _number(k_mean, "k_mean"), _number(k_scale, "k_scale")
+        self.floor_beta = _number(floor_beta, "floor_beta")
         if not (np.all(self.x_scale > 0) and self.k_scale > 0 and self.floor_beta > 0):
             raise DimensionError("NetworkStiffness: x_scale, k_scale and floor_beta must be > 0")
-        self.input_low = None if input_low is None else np.array(input_low, dtype=float)
-        self.input_high = None if input_high is None else np.array(input_high, dtype=float)
+        self.input_low = None if input_low is None else _vector3(input_low, "input_low")
+        self.input_high = None if input_high is None else _vector3(input_high, "input_high")
         self.meta = dict(meta or {})
         # Fold the normalisations into the first and last layers for the control loop:
         # W_1 z + b_1 = (W_1 / x_scale) p + (b_1 - (W_1 / x_scale) x_mean)
@@ -219,42 +219,69 @@ class NetworkStiffness(StiffnessModel):
             z = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
-        with z:
-            need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
-                    "floor_beta")  # fmt: skip
-            missing = [k for k in need if k not in z.files]
-            if missing:
-                raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
-            if str(z["format"]) != FORMAT:
-                raise DataError(f"{path}: format {str(z['format'])!r}, expected {FORMAT!r}")
-            if str(z["activation"]) != "tanh":
-                raise DataError(f"{path}: activation {str(z['activation'])!r} is not supported")
-            n = int(z["n_layers"])
-            keys = [f"{p}{i}" for i in range(n) for p in ("W", "b")]
-            missing = [k for k in keys if k not in z.files]
-            if missing:
-                raise DataError(f"{path}: missing layer key(s) {', '.join(missing)}")
-            lo = z["input_low"] if "input_low" in z.files else None
-            hi = z["input_high"] if "input_high" in z.files else None
-            try:
-                meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
-            except json.JSONDecodeError as exc:
-                raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
-            try:
-                return cls(
-                    [z[f"W{i}"] for i in range(n)],
-                    [z[f"b{i}"] for i in range(n)],
-                    z["x_mean"],
-                    z["x_scale"],
-                    float(z["k_mean"]),
-                    float(z["k_scale"]),
-                    float(z["floor_beta"]),
-                    lo,
-                    hi,
-                    meta,
-                )
-            except DimensionError as exc:
-                raise DataError(f"{path}: {exc}") from None
+        try:
+            with z:
+                return cls._read(path, z)
+        except DataError:
+            raise
+        except (ValueError, TypeError) as exc:  # e.g. an object array (never unpickled)
+            raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
+
+    @classmethod
+    def _read(cls, path: Path, z: np.lib.npyio.NpzFile) -> NetworkStiffness:
+        """The network in an open file (:meth:`load`)."""
+        need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
+                "floor_beta")  # fmt: skip
+        missing = [k for k in need if k not in z.files]
+        if missing:
+            raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
+        if str(z["format"]) != FORMAT:
+            raise DataError(f"{path}: format {str(z['format'])!r}, expected {FORMAT!r}")
+        if str(z["activation"]) != "tanh":
+            raise DataError(f"{path}: activation {str(z['activation'])!r} is not supported")
+        n = int(z["n_layers"])
+        keys = [f"{p}{i}" for i in range(n) for p in ("W", "b")]
+        missing = [k for k in keys if k not in z.files]
+        if missing:
+            raise DataError(f"{path}: missing layer key(s) {', '.join(missing)}")
+        extra = [k for k in z.files if k[:1] in "Wb" and k[1:].isdigit() and k not in keys]
+        if extra:
+            raise DataError(f"{path}: layer key(s) {', '.join(extra)} beyond n_layers = {n}")
+        lo = z["input_low"] if "input_low" in z.files else None
+        hi = z["input_high"] if "input_high" in z.files else None
+        try:
+            meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+        except json.JSONDecodeError as exc:
+            raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
+        try:
+            return cls(
+                [z[f"W{i}"] for i in range(n)],
+                [z[f"b{i}"] for i in range(n)],
+                z["x_mean"],
+                z["x_scale"],
+                z["k_mean"],
+                z["k_scale"],
+                z["floor_beta"],
+                lo,
+                hi,
+                meta,
+            )
+        except DimensionError as exc:
+            raise DataError(f"{path}: {exc}") from None
+
+
+def _vector3(value: object, name: str) -> np.ndarray:
+    a = np.array(value, dtype=float)
+    if a.shape != (3,):
+        raise DimensionError(f"NetworkStiffness: {name} must have shape (3,), got {a.shape}")
+    return a
+
+
+def _number(value: object, name: str) -> float:
+    a = np.asarray(value, dtype=float)
+    if a.size != 1:
+        raise DimensionError(f"NetworkStiffness: {name} must be a number, got shape {a.shape}")
+    return float(a.reshape(()))
 
 
 def stiffness_path(robot: object | str) -> Path:

@@ -36,7 +36,10 @@ sternum (``sternum_*`` columns or key) is checked: the sternum must lie medial o
 arm's shoulder (towards -x for a right arm, +x for a left one) on average. If it lies
 lateral, the participant faced -y (participant ADL009 of the bundled data), and the
 recording is turned by 180 deg about z (x and y negated; the arm angle does not change) and
-says so in its ``note``. ``facing="as-is"`` skips the check.
+says so in its ``note``. Samples where the sternum marker is missing (empty values) are left
+out of that mean, and the recording then keeps no sternum (its ``note`` says how many
+samples had it); with no complete sample the check is impossible and raises
+:class:`~wholebody.errors.DataError`. ``facing="as-is"`` skips the check.
 
 Validation
 ----------
@@ -296,14 +299,29 @@ def _recording(
     if sternum is not None:
         sternum = sternum * s
         medial = -1.0 if ident["side"] == "R" else 1.0
-        if facing == "auto" and float(np.mean(sternum[:, 0] - P["shoulder"][:, 0])) * medial < 0:
-            turn = np.array([-1.0, -1.0, 1.0])
-            P = {k: v * turn for k, v in P.items()}
-            sternum = sternum * turn
-            note = (note + "; " if note else "") + (
-                "turned 180 deg about z: the sternum lay lateral of the shoulder, so the "
-                "participant faced -y"
-            )
+        whole = np.isfinite(sternum).all(axis=1)  # samples with the marker seen
+        if facing == "auto":
+            if not whole.any():
+                raise DataError(
+                    f"{path}: the sternum columns have no complete sample, so the facing "
+                    "cannot be checked; pass facing='as-is' to skip the check"
+                )
+            lateral = sternum[whole, 0] - P["shoulder"][whole, 0]
+            if float(np.mean(lateral)) * medial < 0:
+                turn = np.array([-1.0, -1.0, 1.0])
+                P = {k: v * turn for k, v in P.items()}
+                sternum = sternum * turn
+                note = (note + "; " if note else "") + (
+                    "turned 180 deg about z: the sternum lay lateral of the shoulder, so the "
+                    "participant faced -y"
+                )
+        if not whole.all():  # a Recording's sternum is complete or absent
+            if facing == "auto":
+                note = (note + "; " if note else "") + (
+                    f"sternum seen in {int(whole.sum())} of {len(t)} samples: used for the "
+                    "facing check only"
+                )
+            sternum = None
     return Recording(
         t.copy(),
         P["shoulder"],
@@ -396,13 +414,20 @@ def load_csv_recording(
     P = {j: A[:, 1 + 3 * k : 4 + 3 * k] for k, j in enumerate(JOINTS)}
     sternum = None
     st_cols = [f"sternum_{a}" for a in "xyz"]
-    if all(c in header for c in st_cols):
-        try:
-            st = np.array([[line[header.index(c)] for c in st_cols] for line in body], dtype=float)
-        except ValueError:
-            st = None  # an optional column that does not parse is ignored
-        if st is not None and np.isfinite(st).all():
-            sternum = st
+    if all(c in header for c in st_cols):  # optional; an empty value is a missing sample
+        cols = [header.index(c) for c in st_cols]
+        sternum = np.full((len(body), 3), np.nan)
+        for r, line in enumerate(body):
+            for k, c in enumerate(cols):
+                v = line[c].strip() if c < len(line) else ""
+                if not v:
+                    continue
+                try:
+                    sternum[r, k] = float(v)
+                except ValueError:
+                    raise DataError(
+                        f"{path}: row {r + 1}, column {st_cols[k]!r}: {v!r} is not a number"
+                    ) from None
     return _recording(path, t, P, units, ident, source, "", sternum, facing)
 
 

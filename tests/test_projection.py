@@ -342,19 +342,30 @@ def _hands_problem(robot, seed=5):
     return state, (L, R), J, v
 
 
-def test_a_weight_common_to_a_level_or_a_uniform_metric_changes_nothing(humanoid):
-    """The damping is decided on the rows divided by sqrt(largest task weight / largest
-    metric entry): far from a singularity (smallest singular value 0.08 here) both are the
-    plain pseudo-inverse, however small the weights or large the metric (they damped 54 % of
-    the task away at weight 1e-2 and at a metric of 100 I)."""
+def test_a_weight_common_to_a_level_changes_nothing(humanoid):
+    """The damping is decided on the rows divided by sqrt(lightest task weight): far from a
+    singularity (smallest singular value 0.08 here) the answer is the plain pseudo-inverse
+    however small the level's common weight (weight 1e-2 damped 54 % of the task away)."""
     state, (L, R), J, v = _hands_problem(humanoid)
     assert np.linalg.svd(J, compute_uv=False)[-1] > 0.05
     exact = np.linalg.pinv(J) @ v
-    for w, c in ((1.0, 1.0), (1e-2, 1.0), (1e-4, 1.0), (1.0, 100.0), (1e-3, 1e4)):
+    for w in (1.0, 1e-2, 1e-4):
         L.weight = R.weight = w
-        stack = Stack(humanoid, [Level([L, R])], [], metric=np.full(humanoid.nu, c))
-        u = ProjectionSolver().solve(stack, state, DT).u
-        assert np.linalg.norm(u - exact) < 1e-9 * np.linalg.norm(exact), (w, c)
+        u = ProjectionSolver().solve(Stack(humanoid, [Level([L, R])], []), state, DT).u
+        assert np.linalg.norm(u - exact) < 1e-9 * np.linalg.norm(exact), w
+
+
+@pytest.mark.parametrize("w_waist", [1.0, 10.0, 100.0])
+def test_a_heavier_task_does_not_make_a_lighter_one_singular(humanoid, w_waist):
+    """The hands beside a task holding the waist, 100 times heavier: a consistent level, so
+    the weighted least squares meets the hands exactly; judged in the heavy task's units, the
+    hands' directions would fall below eps and lose half of the task."""
+    state, (L, R), J, v = _hands_problem(humanoid)
+    waist = PostureTask(humanoid, "waist", kp=1.0, weight=w_waist)
+    waist.set_target(state.joint_positions()[humanoid.group("waist").indices])
+    stack = Stack(humanoid, [Level([L, R, waist])], [])
+    u = ProjectionSolver().solve(stack, state, DT).u
+    assert np.linalg.norm(J @ u - v) < 1e-9 * np.linalg.norm(v)
 
 
 @pytest.mark.parametrize("w_posture", [4e-4, 1e-4, 1e-5])

@@ -262,7 +262,8 @@ class HierarchicalQPSolver(Solver):
         own hierarchical mode for the whole stack (see the module docstring); if daqp fails,
         the cascade. The default is the cascade: native's answer is not checked below the
         level it starts at, and on a robot stack with inequality tasks at lower levels it
-        missed a lower level's optimum in 8 to 16 % of the states where it ran.
+        missed a lower level's optimum in 8 to 16 % of the states where it ran (``"auto"``
+        is the default too).
     rho_soft
         daqp's soft-constraint weight in native mode (uniform on every row, so that each level
         minimises its true least squares): a level's optimum is exact up to about
@@ -296,6 +297,8 @@ class HierarchicalQPSolver(Solver):
         self.warm_start = bool(warm_start)
         make_engine(self.engine_name, warm_start=self.warm_start, **self.engine_settings)
         method = str(method).lower()
+        if method == "auto":  # the default, by its former name
+            method = "cascade"
         if method not in ("cascade", "native") or (method == "native"
                                                     and self.engine_name != "daqp"):  # fmt: skip
             raise SolverError(

@@ -34,11 +34,20 @@ the solution is the exact pseudo-inverse, and near one only the nearly singular 
 are damped. Damping every direction by the smallest singular value's factor would also damp
 a level's well-conditioned tasks whenever it holds a low-weight regulariser, whose singular
 values are small by its weight, not by the kinematics (the hands then missed by 3.7e-2
-instead of 3.2e-4 beside a posture task of weight 1e-5). The singular values are those of the
-level's rows divided by ``reference_scale = sqrt(w_max / W_max)`` (the level's largest task
-weight, the metric's largest entry; :class:`~wholebody.solvers.stack.LevelProblem`), so that
-``eps`` is in the units of the top-weight task per unit of velocity and a weight common to the
-level, or a uniform metric, changes nothing.
+instead of 3.2e-4 beside a posture task of weight 1e-5).
+
+Units of ``eps``: the singular values are those of the level's rows divided by
+``reference_scale = sqrt(w_min)``, the smallest positive task weight of the level
+(:class:`~wholebody.solvers.stack.LevelProblem`), in the metric's scaled velocities ``u~``.
+So a weight common to a level's tasks changes nothing (weight 1e-2 on both hands damped 54 %
+of a far-from-singular task away before), and a heavier task never makes a lighter one
+count as singular. The price: in a level that also holds a light regulariser (a posture task
+of weight 1e-5 beside the hands), a task's singular directions are measured against that
+regulariser, and it is the regulariser, as in any weighted least squares, that bounds the
+velocity near the task's singularity; put singular-prone tasks in a level of their own, as the
+paper's stack does, for the damping proper. The metric is not normalised: ``eps`` is in the
+units of ``u~ = W^(1/2) u``, and a uniform metric ``c I`` moves the threshold on the task's
+own singular values to ``eps sqrt(c)`` (the damping of a weighted norm, like ``lambda``).
 
 Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
 inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
@@ -183,7 +192,8 @@ class ProjectionSolver(Solver):
         ``lambda_max``: the largest damping, reached at a singularity.
     singular_threshold
         ``eps``: a singular direction is damped when its singular value is below it (in the
-        units of the level's top-weight task, see the module docstring).
+        units of the level's lightest task and the metric's scaled velocities, see the module
+        docstring).
     rank_tolerance
         Singular values below ``rank_tolerance * max(1, s_max)`` count as zero for null
         spaces and ranks.

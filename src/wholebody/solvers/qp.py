@@ -110,13 +110,7 @@ class QPEngine(ABC):
 
     def __init__(self, *, warm_start: bool = True, **settings: Any) -> None:
         self.warm_start = warm_start
-        known = _KNOWN.get(self.name)
-        if known is None:
-            known = _KNOWN[self.name] = frozenset(self.known_settings())
-        unknown = sorted(set(settings) - known)
-        if unknown:
-            raise SolverError(f"{self.name}: unknown setting(s) {', '.join(unknown)}; known: "
-                              f"{', '.join(sorted(known))}")  # fmt: skip
+        self._check_settings(settings)
         self.settings = dict(self.default_settings())
         self.settings.update(settings)
         self._shape: tuple[int, int, bool] | None = None
@@ -127,9 +121,20 @@ class QPEngine(ABC):
     def default_settings() -> dict[str, Any]:
         return {}
 
-    @abstractmethod
+    def _check_settings(self, settings: dict[str, Any]) -> None:
+        """Raise :class:`SolverError` for a setting the engine does not know (on
+        construction, not at the first solve)."""
+        known = _KNOWN.get(self.name)
+        if known is None:
+            known = _KNOWN[self.name] = frozenset(self.known_settings())
+        unknown = sorted(set(settings) - known)
+        if unknown:
+            raise SolverError(f"{self.name}: unknown setting(s) {', '.join(unknown)}; known: "
+                              f"{', '.join(sorted(known))}")  # fmt: skip
+
     def known_settings(self) -> set[str]:
-        """The setting names the engine accepts (checked on construction)."""
+        """The setting names the engine accepts."""
+        raise NotImplementedError
 
     def reset(self) -> None:
         """Forget the workspace (the next solve starts cold)."""
@@ -372,12 +377,18 @@ class OsqpEngine(QPEngine):
         self._errors = (osqp.OSQPException,)
         super().__init__(warm_start=warm_start, **settings)
 
-    def known_settings(self) -> set[str]:
-        # the attributes of a set-up workspace's settings (a 1 x 1 problem)
+    def _check_settings(self, settings: dict[str, Any]) -> None:
+        # osqp lists no names (it takes aliases and deprecated ones): a 1 x 1 setup says
+        if "warm_starting" in settings:
+            raise SolverError("osqp: warm_starting is set by the engine's warm_start argument")
+        if not settings:
+            return
         one = self._sparse.csc_matrix(np.ones((1, 1)))
-        probe = self._osqp.OSQP()
-        probe.setup(one, np.zeros(1), one, -np.ones(1), np.ones(1), verbose=False)
-        return {a for a in dir(probe.settings) if not a.startswith("_")}
+        try:
+            self._osqp.OSQP().setup(one, np.zeros(1), one, -np.ones(1), np.ones(1),
+                                    **{"verbose": False, **settings})  # fmt: skip
+        except (ValueError, TypeError) as exc:
+            raise SolverError(f"osqp: {exc}") from None
 
     def _data(self, H, C, lower, upper, lb, ub) -> None:
         m = C.shape[0]

@@ -116,10 +116,10 @@ class LevelProblem:
     """Per row of ``A``, ``1 / sqrt(w)`` of its task's weight (0 where ``w = 0``), to report
     unweighted task residuals; None: the rows are not weighted."""
     reference_scale: float = 1.0
-    """``sqrt(w_max / W_max)``: ``w_max`` the largest weight of the level's task rows (1
-    without any), ``W_max`` the metric's largest entry. A scale-dependent decision (the
-    projection's damping threshold) is taken on ``A / reference_scale``, so that a weight
-    common to the level's tasks, or a uniform metric, changes nothing."""
+    """``sqrt(w_min)``, the smallest positive weight of the level's task rows (1 without
+    any): a scale-dependent decision (the projection's damping threshold) is taken on
+    ``A / reference_scale``, so that a weight common to the level's tasks changes nothing and
+    a task is never judged in the units of a heavier one."""
     _names: list[str] = field(init=False, repr=False)
     _sums: np.ndarray = field(init=False, repr=False)
     _starts: np.ndarray = field(init=False, repr=False)
@@ -515,15 +515,11 @@ class _LevelPlan:
         np.multiply(sw[:, None], D, out=self.factor[sl])
         self.row_scale[sl] = sw
         self.buffer.unweight[sl] = np.divide(1.0, sw, out=np.zeros_like(sw), where=sw > 0)
-        self._set_reference(D)
-
-    def _set_reference(self, D: np.ndarray) -> None:
-        top = float(self.row_scale.max()) if self.row_scale.size else 0.0
-        self.buffer.reference_scale = (top if top > 0.0 else 1.0) * float(D.min())
+        weighted = self.row_scale[self.row_scale > 0.0]
+        self.buffer.reference_scale = float(weighted.min()) if weighted.size else 1.0
 
     def rescale(self, D: np.ndarray, version: int) -> None:
         """The metric changed: rebuild the factor from the cached sqrt-weights."""
         for sl, sw in zip(self.slices, self.sqrt_weights, strict=True):
             np.multiply(sw[:, None], D, out=self.factor[sl])
-        self._set_reference(D)
         self.scale_version = version

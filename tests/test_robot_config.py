@@ -596,3 +596,25 @@ def test_jacobian_derivatives_of_a_frame_on_a_wheel_are_refused(humanoid):
 
     with pytest.raises(DimensionError, match="on the wheel 'wheel_front_left'"):
         Manipulability(humanoid, ["wheel_front_left_link"])
+
+
+def test_a_robot_with_unbounded_joint_limits_loads_and_samples_finite_configurations(tmp_path):
+    """Limits of +-1e308 are no limits: loading (which checks the arm lengths at random arm
+    postures) overflowed in random_configuration."""
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    edit(d / "robot.urdf", '<limit lower="-1.0" upper="3.0" effort="20.0" velocity="2.0"/>',
+         '<limit lower="-1e308" upper="1e308" effort="20.0" velocity="2.0"/>')  # fmt: skip
+    robot = wholebody.load_robot(d)
+    q = robot.random_configuration(np.random.default_rng(0))
+    assert np.all(np.isfinite(q))
+    j = robot.index("left_shoulder_pitch")
+    assert -np.pi <= robot.joint_positions(q)[j] <= np.pi
+
+
+def test_an_arm_group_with_a_joint_of_the_other_arm_names_that_joint(tmp_path):
+    d = copy_robot(tmp_path, "dual_arm_torso")
+    edit(d / "robot.toml", '"left_shoulder_yaw", "left_elbow",', '"left_shoulder_yaw",')
+    edit(d / "robot.toml", '"right_shoulder_yaw", "right_elbow",',
+         '"right_shoulder_yaw", "right_elbow", "left_elbow",')  # fmt: skip
+    with pytest.raises(ConfigError, match=r"\[arms.right.group\].*: 'left_elbow'$"):
+        wholebody.load_robot(d)

@@ -407,8 +407,10 @@ class Robot:
                 )
         if group is not None:
             chain = set(supports[frames["tool"].joint])
-            joint_ids = {self.model.getJointId(j) for j in group.joints}
-            off = [j for j, i in zip(group.joints, joint_ids, strict=True) if i not in chain]
+            # the base's actuators (wheels, a planar base's virtual joints) move every frame
+            base = set(self.base.wheel_joints)
+            off = [j for j in group.joints if j not in base and self.model.existJointName(j)
+                   and self.model.getJointId(j) not in chain]  # fmt: skip
             if off:
                 raise self.config.error(
                     f"{where}.group",
@@ -418,10 +420,22 @@ class Robot:
 
     def _arm_lengths(self, cfg: ArmConfig, frames: dict[str, Frame]) -> tuple[float, float]:
         """Shoulder-elbow and elbow-wrist distances (m), checked to be the same (to 0.1 mm) at
-        the neutral posture and at 20 random ones: the arm geometry (arm angle, posture
-        mapping) takes the three frames as joint centres."""
+        the neutral posture and with the arm's joints (those between shoulder and wrist) at 20
+        random positions: the arm geometry (arm angle, posture mapping) takes the three
+        frames as joint centres."""
+        # only the joints between shoulder and wrist move, the others stay at neutral
+        supports, neutral = self.model.supports, self.neutral()
+        above = set(supports[frames["shoulder"].joint])
+        moving = [self.model.joints[j] for j in supports[frames["wrist"].joint]
+                  if j not in above]  # fmt: skip
+        idx = np.concatenate([np.arange(jm.idx_q, jm.idx_q + jm.nq) for jm in moving]
+                             or [np.zeros(0, dtype=int)])  # fmt: skip
         rng = np.random.default_rng(0)
-        configurations = [self.neutral()] + [self.random_configuration(rng) for _ in range(20)]
+        configurations = [neutral]
+        for _ in range(20):
+            q = neutral.copy()
+            q[idx] = self.random_configuration(rng)[idx]
+            configurations.append(q)
         pairs = (("shoulder", "elbow"), ("elbow", "wrist"))
         d = np.empty((len(configurations), 2))
         for i, q in enumerate(configurations):
@@ -550,13 +564,19 @@ class Robot:
         self, rng: np.random.Generator, margin: float = 0.0, base_range: float = 1.0
     ) -> np.ndarray:
         """A configuration drawn uniformly inside the joint limits shrunk by ``margin``
-        (fraction of each range on each side), wheels at random angles, base uniform in
-        ``[-base_range, base_range]^2`` with any heading."""
+        (fraction of each range on each side; a joint without a limit on one side within 2 pi
+        (rad or m) of the other, without any in [-pi, pi]), wheels at random angles, base
+        uniform in ``[-base_range, base_range]^2`` with any heading."""
         lower, upper = self.position_limits
         q = self.neutral()
         s = self._scalar
-        span = upper[s] - lower[s]
-        q[self._scalar_q] = rng.uniform(lower[s] + margin * span, upper[s] - margin * span)
+        lo, hi = lower[s], upper[s]
+        # a side without a limit: 2 pi (rad or m) from the other, or [-pi, pi] with neither
+        has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
+        lo, hi = (np.where(has_lo, lo, np.where(has_hi, hi - 2 * np.pi, -np.pi)),
+                  np.where(has_hi, hi, np.where(has_lo, lo + 2 * np.pi, np.pi)))  # fmt: skip
+        span = hi - lo
+        q[self._scalar_q] = rng.uniform(lo + margin * span, hi - margin * span)
         ang = rng.uniform(-np.pi, np.pi, self._cont.size)
         q[self._cont_q], q[self._cont_q + 1] = np.cos(ang), np.sin(ang)
         if self.base.mobile:

@@ -79,9 +79,11 @@ def make_solver(backend: str) -> Solver:
 
 
 def scenario_robot(spec: ScenarioSpec) -> Robot:
-    """The scenario's robot: a directory beside the scenario file, else a bundled name."""
+    """The scenario's robot: a robot directory (or ``robot.toml``) beside the scenario file,
+    else a bundled name (a directory there without a ``robot.toml`` does not hide it)."""
     candidate = spec.path.parent / spec.robot
-    return load_robot(candidate if candidate.exists() else spec.robot)
+    usable = candidate.is_file() or (candidate / "robot.toml").is_file()
+    return load_robot(candidate if usable else spec.robot)
 
 
 def _stiffness(spec: ScenarioSpec, robot: Robot) -> float | StiffnessModel:

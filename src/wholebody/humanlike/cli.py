@@ -19,6 +19,7 @@ import datetime
 import json
 from dataclasses import replace
 from pathlib import Path
+from shlex import quote
 
 import numpy as np
 
@@ -192,26 +193,29 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
         )
         + (" --no-svr" if args.no_svr else "")
         + f" --threads {args.threads}"
-        + f" --out {args.out} --card {args.card}"
+        + f" --out {quote(str(args.out))} --card {quote(str(args.card))}"
     )
-    fit = f"wholebody stiffness fit --dataset data/stiffness/{dataset.name} "
+    data = quote(f"data/stiffness/{dataset.name}")
+    fit = f"wholebody stiffness fit --dataset {data} "
     opts = meta.get("dataset_options")
     if opts:  # every option the dataset was built with (datasets made by this version)
         make = (
-            f"wholebody stiffness dataset --robot {opts['robot']} --arm {opts['arm']} "
+            f"wholebody stiffness dataset --robot {quote(opts['robot'])} "
+            f"--arm {quote(opts['arm'])} "
             f"--records {opts['records']} --seed {opts['seed']} "
             f"--synthetic-participants {opts['synthetic_participants']}"
             + (" --no-real" if opts["no_real"] else "")
             + (" --calibrate" if opts["calibrate"] else "")
-            + (f" --held-out {','.join(opts['held_out'])}" if opts["held_out"] else "")
-            + (f" --recordings {opts['recordings']}" if opts["recordings"] else "")
+            + (f" --held-out {quote(','.join(opts['held_out']))}" if opts["held_out"] else "")
+            + (f" --recordings {quote(opts['recordings'])}" if opts["recordings"] else "")
         )
     else:  # an older dataset file: the options it records
+        robot = quote(str(meta.get("robot", "mobile_humanoid")))
         make = (
-            f"wholebody stiffness dataset --robot {meta.get('robot', 'mobile_humanoid')} "
+            f"wholebody stiffness dataset --robot {robot} "
             f"--records {meta.get('n_records', 5000)} --seed {meta.get('seed', 0)}"
         )
-    cmds = [f"{make} --out data/stiffness/{dataset.name}"]
+    cmds = [f"{make} --out {data}"]
     wd = config.weight_decay  # type: ignore[attr-defined]
     if args.select_hidden or args.select_weight_decay:
         sel = ""

@@ -38,8 +38,8 @@ lateral, the participant faced -y (participant ADL009 of the bundled data), and 
 recording is turned by 180 deg about z (x and y negated; the arm angle does not change) and
 says so in its ``note``. Samples where the sternum marker is missing (empty values) are left
 out of that mean, and the recording then keeps no sternum (its ``note`` says how many
-samples had it); with no complete sample the check is impossible and raises
-:class:`~wholebody.errors.DataError`. ``facing="as-is"`` skips the check.
+samples had it); with no complete sample the check is impossible, and the ``note`` says
+so. ``facing="as-is"`` skips the check.
 
 Validation
 ----------
@@ -300,12 +300,9 @@ def _recording(
         sternum = sternum * s
         medial = -1.0 if ident["side"] == "R" else 1.0
         whole = np.isfinite(sternum).all(axis=1)  # samples with the marker seen
-        if facing == "auto":
-            if not whole.any():
-                raise DataError(
-                    f"{path}: the sternum columns have no complete sample, so the facing "
-                    "cannot be checked; pass facing='as-is' to skip the check"
-                )
+        if facing == "auto" and not whole.any():
+            note = (note + "; " if note else "") + ("sternum never seen: facing not checked")
+        elif facing == "auto":
             lateral = sternum[whole, 0] - P["shoulder"][whole, 0]
             if float(np.mean(lateral)) * medial < 0:
                 turn = np.array([-1.0, -1.0, 1.0])
@@ -316,7 +313,7 @@ def _recording(
                     "participant faced -y"
                 )
         if not whole.all():  # a Recording's sternum is complete or absent
-            if facing == "auto":
+            if facing == "auto" and whole.any():
                 note = (note + "; " if note else "") + (
                     f"sternum seen in {int(whole.sum())} of {len(t)} samples: used for the "
                     "facing check only"

@@ -324,6 +324,9 @@ def test_fixed_step_rk4_is_asked_for_by_an_infinite_tolerance(scene_dmp: DMP) ->
     ref = scene_dmp.rollout(160, obstacles=pots)
     assert np.all(np.isfinite(fixed.positions))
     assert np.max(np.linalg.norm(fixed.positions - ref.positions, axis=1)) > 0.01  # coarse
+    # max_substeps fixed substeps per interval: 16 resolve the scene
+    fine = scene_dmp.rollout(160, obstacles=pots, tolerance=np.inf, max_substeps=16)
+    assert np.max(np.linalg.norm(fine.positions - ref.positions, axis=1)) < 1e-4
 
 
 @pytest.mark.parametrize("make", [

@@ -603,7 +603,7 @@ class _ObstacleIntegrator:
         self.rate = float(dmp.config.alpha_s) / (dmp.config.phase_tau_ratio * tau)
         self.kernel = kernel
         self.tol, self.max_substeps = tol, max_substeps
-        self.m = 1
+        self.m = max_substeps if tol == math.inf else 1  # inf: a fixed count, no control
         self.evaluations = 0
 
     def inputs(self, s0: float, h: float, m: int) -> list[list[float]]:
@@ -645,7 +645,8 @@ class _ObstacleIntegrator:
             # substep that would just meet the tolerance, with a safety factor of 0.8
             scale = (err / tol) ** 0.25 / 0.8 if err > 0.0 else 0.0
             if err <= tol:
-                self.m = min(top, max(1, m // 2, math.ceil(m * scale)))
+                if tol < math.inf:
+                    self.m = min(top, max(1, m // 2, math.ceil(m * scale)))
                 return y1, k1
             if m >= top or not math.isfinite(err):
                 t0 = math.log(s0) / -self.rate if s0 > 0.0 else math.inf

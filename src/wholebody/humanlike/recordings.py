@@ -300,24 +300,22 @@ def _recording(
         sternum = sternum * s
         medial = -1.0 if ident["side"] == "R" else 1.0
         whole = np.isfinite(sternum).all(axis=1)  # samples with the marker seen
+        notes = [note] if note else []
         if facing == "auto" and not whole.any():
-            note = (note + "; " if note else "") + ("sternum never seen: facing not checked")
+            notes.append("sternum never seen: facing not checked")
         elif facing == "auto":
             lateral = sternum[whole, 0] - P["shoulder"][whole, 0]
             if float(np.mean(lateral)) * medial < 0:
                 turn = np.array([-1.0, -1.0, 1.0])
                 P = {k: v * turn for k, v in P.items()}
                 sternum = sternum * turn
-                note = (note + "; " if note else "") + (
-                    "turned 180 deg about z: the sternum lay lateral of the shoulder, so the "
-                    "participant faced -y"
-                )
+                notes.append("turned 180 deg about z: the sternum lay lateral of the shoulder, "
+                             "so the participant faced -y")  # fmt: skip
+            if not whole.all():
+                notes.append(f"sternum seen in {int(whole.sum())} of {len(t)} samples: used "
+                             "for the facing check only")  # fmt: skip
+        note = "; ".join(notes)
         if not whole.all():  # a Recording's sternum is complete or absent
-            if facing == "auto" and whole.any():
-                note = (note + "; " if note else "") + (
-                    f"sternum seen in {int(whole.sum())} of {len(t)} samples: used for the "
-                    "facing check only"
-                )
             sternum = None
     return Recording(
         t.copy(),

@@ -21,13 +21,13 @@ leading dimensions (arrays of shape (..., 3)).
 
 from __future__ import annotations
 
-import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DOWN", "ArmAngle", "arm_angle", "arm_angle_terms", "arm_angle_with_gradient"]
+from wholebody.kernels.objectives import arm_angle_terms
+
+__all__ = ["DOWN", "ArmAngle", "arm_angle", "arm_angle_with_gradient"]
 
 DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -91,39 +91,10 @@ def arm_angle_with_gradient(S: np.ndarray, E: np.ndarray, W: np.ndarray,
         dx/du = u_z a + (a.u) e_z             dy/du = side (a_y, -a_x, 0)
         d/dS = -d/da - P d/du,   d/dE = d/da,   d/dW = P d/du,   P = (I - u u^T) / |W - S|
 
-    (evaluated in plain floats by :func:`arm_angle_terms`: this runs in the control loop).
+    (evaluated by the kernel :func:`wholebody.kernels.objectives.arm_angle_terms`, which the
+    arm energy runs in the control loop).
     """
-    alpha, x, y, dx, dy = arm_angle_terms(
-        np.asarray(S, float).tolist(), np.asarray(E, float).tolist(),
-        np.asarray(W, float).tolist(), side,
-    )  # fmt: skip
-    return ArmAngle(alpha, x, y, np.array(dx).reshape(3, 3), np.array(dy).reshape(3, 3))
-
-
-def arm_angle_terms(
-    S: Sequence[float], E: Sequence[float], W: Sequence[float], side: float
-) -> tuple[float, float, float, list[float], list[float]]:
-    """:func:`arm_angle_with_gradient` on three positions given as 3 floats each, in plain
-    Python floats (no numpy call): ``(alpha, x, y, dx, dy)`` with ``dx``, ``dy`` the 3x3
-    gradients flattened row-major (rows d/dS, d/dE, d/dW)."""
-    sx, sy, sz = S
-    ax, ay, az = E[0] - sx, E[1] - sy, E[2] - sz
-    cx, cy, cz = W[0] - sx, W[1] - sy, W[2] - sz
-    L = math.sqrt(cx * cx + cy * cy + cz * cz)
-    ux, uy, uz = cx / L, cy / L, cz / L
-    au = ax * ux + ay * uy + az * uz
-    x = -az + au * uz
-    y = side * (ux * ay - uy * ax)
-    # d/da
-    xa0, xa1, xa2 = uz * ux, uz * uy, uz * uz - 1.0
-    ya0, ya1 = -side * uy, side * ux
-    # d/du, then d/dW = (v - u (u.v)) / L
-    xu0, xu1, xu2 = uz * ax, uz * ay, uz * az + au
-    yu0, yu1 = side * ay, -side * ax
-    t = ux * xu0 + uy * xu1 + uz * xu2
-    xw0, xw1, xw2 = (xu0 - ux * t) / L, (xu1 - uy * t) / L, (xu2 - uz * t) / L
-    t = ux * yu0 + uy * yu1
-    yw0, yw1, yw2 = (yu0 - ux * t) / L, (yu1 - uy * t) / L, (0.0 - uz * t) / L
-    dx = [-xa0 - xw0, -xa1 - xw1, -xa2 - xw2, xa0, xa1, xa2, xw0, xw1, xw2]
-    dy = [-ya0 - yw0, -ya1 - yw1, -0.0 - yw2, ya0, ya1, 0.0, yw0, yw1, yw2]
-    return math.atan2(y, x), x, y, dx, dy
+    dx, dy = np.empty(9), np.empty(9)
+    alpha, x, y = arm_angle_terms(np.array(S, dtype=float), np.array(E, dtype=float),
+                                  np.array(W, dtype=float), float(side), dx, dy)  # fmt: skip
+    return ArmAngle(float(alpha), float(x), float(y), dx.reshape(3, 3), dy.reshape(3, 3))

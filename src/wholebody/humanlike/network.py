@@ -165,6 +165,24 @@ class NetworkStiffness(StiffnessModel):
             g = WT @ (g * (1.0 - h * h))
         return k, g
 
+    def packed(self) -> np.ndarray | None:
+        """The network as one flat array, the layout the compiled core reads
+        (:func:`wholebody.kernels.objectives.mlp_stiffness`): ``[L, beta, b_out, H_max]``,
+        then per hidden layer ``[out, in, W (row-major), b]``, then ``w_out``; the
+        normalisations are folded in (read-only, made once). None for a subclass that
+        evaluates the network otherwise."""
+        if type(self).evaluate is not NetworkStiffness.evaluate:
+            return None
+        if getattr(self, "_packed", None) is None:
+            width = max(W.shape[0] for W, _ in self._layers)
+            parts = [np.array([len(self._layers), self.floor_beta, self._b_out, width], float)]
+            for W, b in self._layers:
+                parts += [np.array(W.shape, float), W.ravel(), b]
+            parts.append(self._w_out)
+            self._packed = np.concatenate(parts)
+            self._packed.setflags(write=False)
+        return self._packed
+
     def in_range(self, P: np.ndarray) -> np.ndarray:
         """Whether points (..., 3) lie in the bounding box of the training inputs."""
         if self.input_low is None or self.input_high is None:

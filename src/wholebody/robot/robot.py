@@ -33,6 +33,7 @@ import pinocchio as pin
 
 from wholebody.errors import DimensionError, FrameError, ModelError, WholebodyError
 from wholebody.robot.base import BaseModel, base_model
+from wholebody.robot.compiled import RobotKinematics
 from wholebody.robot.config import ArmConfig, RobotConfig
 
 __all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
@@ -155,6 +156,8 @@ class Robot:
             "arm", {a: self._arm(c) for a, c in config.arms.items()}
         )
         self._home = self._configuration_from(config.home, "home")
+        self.kinematics = RobotKinematics(self)
+        """What the compiled core reads (views of Pinocchio's data, actuation entries)."""
 
     # ------------------------------------------------------------------ construction
     def _build_actuation(self) -> None:

@@ -39,14 +39,31 @@ axes (x forward, y medial, z up; see :mod:`wholebody.humanlike.stiffness`):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from wholebody.errors import DimensionError
-from wholebody.humanlike.arm_geometry import arm_angle_terms
 from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.kernels.objectives import (
+    AE_COM1,
+    AE_COM2,
+    AE_CONSTANT,
+    AE_DK,
+    AE_FADE,
+    AE_G,
+    AE_GIVEN,
+    AE_K,
+    AE_M1,
+    AE_M2,
+    AE_NET,
+    AE_SHOULDER,
+    AE_SIDE,
+    AE_SMOOTH,
+    AE_WIDTH,
+    ARM_PARTS,
+    arm_energy,
+)
 from wholebody.robot import ArmChain, Frame, Robot, RobotState
 from wholebody.tasks.base import Objective, ObjectiveValue
 
@@ -128,86 +145,59 @@ class ArmPotentialEnergy(Objective):
         self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
                         arm.forearm.frame)  # fmt: skip
         self._frames_base = (*self._frames, robot.base_frame)
-        # (body, mass, offset of its rows in C, centre of mass as floats) per arm body
-        self._bodies = tuple((body, body.mass, o, tuple(body.com.tolist()))
-                             for body, o in ((arm.upper_arm, 18), (arm.forearm, 24)))  # fmt: skip
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
         """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
         stiffness depends on the wrist position."""
         return self._frames if self._constant else self._frames_base
 
-    def evaluate(self, state: RobotState) -> ArmEnergyValue:
-        # Plain floats for the 3-vectors; the gradient is one product of a coefficient row
-        # with the stacked Jacobians of (shoulder, elbow, wrist, upper arm, forearm, base).
-        arm, g = self.arm, self.g
-        m1, m2 = arm.upper_arm.mass, arm.forearm.mass
-        S = state.rotation_translation(arm.shoulder)[1].tolist()
-        E = state.rotation_translation(arm.elbow)[1].tolist()
-        W = state.rotation_translation(arm.wrist)[1].tolist()
-        C = [0.0] * 36  # coefficients of the 6 rows of each frame, in jacobian_frames() order
-        # Gravity: only the z rows of the centre-of-mass Jacobians are needed,
-        # v_com,z = v_o,z + w_x r_y - w_y r_x with r the body-frame-to-com offset.
-        gravity = 0.0
-        for body, m, o, (c0, c1, c2) in self._bodies:
-            R, p = state.rotation_translation(body.frame)
-            r0, r1, r2 = R.tolist()
-            rx = r0[0] * c0 + r0[1] * c1 + r0[2] * c2
-            ry = r1[0] * c0 + r1[1] * c1 + r1[2] * c2
-            rz = r2[0] * c0 + r2[1] * c1 + r2[2] * c2
-            gm = g * m
-            gravity += gm * (float(p[2]) + rz)
-            C[o + 2] += gm
-            C[o + 3] += gm * ry
-            C[o + 4] -= gm * rx
-        if self.reference == "shoulder":
-            gravity -= g * (m1 + m2) * S[2]
-            C[2] -= g * (m1 + m2)
+    def parameters(self) -> np.ndarray:
+        """The kernel's parameter row (``AE_*`` of :mod:`wholebody.kernels.objectives`)
+        without the stiffness entries (a fresh array)."""
+        arm = self.arm
+        par = np.zeros(AE_WIDTH)
+        par[AE_G], par[AE_M1], par[AE_M2] = self.g, arm.upper_arm.mass, arm.forearm.mass
+        par[AE_COM1 : AE_COM1 + 3] = arm.upper_arm.com
+        par[AE_COM2 : AE_COM2 + 3] = arm.forearm.com
+        par[AE_SIDE], par[AE_FADE], par[AE_SMOOTH] = self.side, self.fade, self.smoothing
+        par[AE_SHOULDER] = self.reference == "shoulder"
+        return par
 
-        alpha, x, y, dx, dy = arm_angle_terms(S, E, W, self.side)
-        rho2, eps2 = x * x + y * y, self.fade**2
-        w = rho2 / (rho2 + eps2)
-        delta = self.smoothing
-        if abs(alpha) < delta:
-            s, ds = alpha * alpha / (2 * delta) + delta / 2, alpha / delta
-        else:
-            s, ds = abs(alpha), (alpha > 0) - (alpha < 0)
-        rest = math.pi - s
+    def network(self) -> np.ndarray | None:
+        """The stiffness as a packed network the kernels evaluate themselves, or None (a
+        constant, or a model evaluated in Python)."""
+        packed = getattr(self.stiffness, "packed", None)
+        return packed() if callable(packed) else None
+
+    def evaluate(self, state: RobotState) -> ArmEnergyValue:
+        frames = self._frames_base
+        P = np.empty((6, 3))
+        R = np.empty((6, 3, 3))
+        for i, f in enumerate(frames):
+            R[i], P[i] = state.rotation_translation(f)
+        J = state.jacobians(frames)
+        par = self.parameters()
+        nets = self.network()
         stiffness = self.stiffness
         if type(stiffness) is ConstantStiffness:  # k does not depend on the wrist
-            k, dk_dp = stiffness.k, None
-        else:
-            Rb = state.rotation(self.robot.base_frame)
-            r = np.array([W[0] - S[0], W[1] - S[1], W[2] - S[2]])
-            k, dk_dp = stiffness.evaluate(self._mirror * Rb.T.dot(r))
+            par[AE_K], par[AE_NET] = stiffness.k, AE_CONSTANT
+        elif nets is not None:
+            par[AE_NET] = 0
+        else:  # a model evaluated here, at the canonical wrist Mirror R_b^T (W - S)
+            wrist = self._mirror * R[5].T.dot(P[2] - P[0])
+            k, dk = stiffness.evaluate(wrist)
+            par[AE_K] = k
             if self._constant:
-                dk_dp = None
-        spring = 0.5 * k * rest * rest * w
-        # d f_e = k rest (1/2 rest dw - s' w dalpha): a combination of dx and dy, with
-        # dw = 2 eps^2 (x dx + y dy) / (rho^2 + eps^2)^2, w dalpha = (x dy - y dx)/(rho^2+eps^2)
-        den = rho2 + eps2
-        cw = k * rest * 0.5 * rest * 2 * eps2 / (den * den)
-        ca = -k * rest * ds / den
-        coef_x = cw * x - ca * y
-        coef_y = cw * y + ca * x
-        for i, o in enumerate((0, 1, 2, 6, 7, 8, 12, 13, 14)):  # d f_e / d(S, E, W)
-            C[o] += coef_x * dx[i] + coef_y * dy[i]
-        if dk_dp is not None:
-            # dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang): with q = (c dk_dp Mirror) R_b^T,
-            # q.dp = q.J_W - q.J_S + (q x (W - S)).J_b,ang
-            q0, q1, q2 = ((0.5 * rest * rest * w) * (dk_dp * self._mirror)).dot(Rb.T).tolist()
-            d0, d1, d2 = r.tolist()
-            for i, qi in enumerate((q0, q1, q2)):
-                C[12 + i] += qi
-                C[i] -= qi
-            C[33] += q1 * d2 - q2 * d1
-            C[34] += q2 * d0 - q0 * d2
-            C[35] += q0 * d1 - q1 * d0
-            J = state.jacobians(self._frames_base)
-            grad = np.array(C).dot(J.reshape(36, -1))
-        else:
-            J = state.jacobians(self._frames)
-            grad = np.array(C[:30]).dot(J.reshape(30, -1))
-        return ArmEnergyValue(value=gravity + spring, gradient=grad, gravity=gravity,
-                              spring=spring, arm_angle=alpha, stiffness=k,
-                              rho=math.sqrt(rho2))  # fmt: skip
+                par[AE_NET] = AE_CONSTANT
+            else:
+                par[AE_NET], par[AE_DK : AE_DK + 3] = AE_GIVEN, dk
+        grad = np.empty(self.robot.nu)
+        parts = np.empty(ARM_PARTS)
+        arm_energy(P, R, J, par, _NO_NETWORK if nets is None else nets, grad, parts)
+        value, gravity, spring, alpha, k, rho = parts.tolist()
+        return ArmEnergyValue(value=value, gradient=grad, gravity=gravity, spring=spring,
+                              arm_angle=alpha, stiffness=k, rho=rho)  # fmt: skip
+
+
+_NO_NETWORK = np.zeros(1)
+_NO_NETWORK.setflags(write=False)

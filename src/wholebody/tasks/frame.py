@@ -33,17 +33,17 @@ import pinocchio as pin
 
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError
+from wholebody.kernels.rows import pose_rows
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
 __all__ = [
     "FrameTask",
-    "PoseRows",
+    "PoseTask",
     "check_pose",
     "check_twist",
     "integrate_error",
     "pose_error",
-    "pose_rows",
 ]
 
 
@@ -86,10 +86,14 @@ def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
 
 
 def _gain(value: float | Sequence[float], what: str) -> np.ndarray:
-    g = np.broadcast_to(np.asarray(value, dtype=float), (6,)).copy()
+    """A read-only (6,) gain from a number or 6 numbers, finite and >= 0."""
+    try:
+        g = np.broadcast_to(np.asarray(value, dtype=float), (6,)).copy()
+    except (TypeError, ValueError) as exc:
+        raise DimensionError(f"{what} must be a number or 6 numbers, got {value!r}") from exc
     if not np.all(np.isfinite(g)) or np.any(g < 0):
         raise DimensionError(f"{what} must be finite and >= 0, got {value!r}")
-    return g
+    return _readonly(g)
 
 
 def pose_error(p: np.ndarray, R: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,120 +102,147 @@ def pose_error(p: np.ndarray, R: np.ndarray, target: np.ndarray) -> tuple[np.nda
     return np.concatenate([target[:3, 3] - p, pin.log3(E)]), E
 
 
-def pose_rows(
-    J: np.ndarray,
-    p: np.ndarray,
-    R: np.ndarray,
-    target: np.ndarray,
-    twist: np.ndarray,
-    kp: np.ndarray,
-    ki: np.ndarray,
-    integral: np.ndarray,
-    rows: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Task Jacobian, right-hand side and error of a pose task (see the module docstring).
+class PoseTask(Task):
+    """What :class:`FrameTask` and :class:`~wholebody.tasks.relative.RelativeFrameTask` share:
+    a pose tracked with the PI law, its target, gains, integral and the error of its last rows.
 
-    ``J`` is the frame's 6 x nu Jacobian in the axes in which ``p, R, target, twist`` are
-    expressed; ``rows`` selects among the 6 rows.
-    """
-    A = np.empty((6, J.shape[1]))
-    v = np.empty(6)
-    e = PoseRows()(J, p, R, target, twist, kp, ki, integral, A, v).copy()
-    if rows.size == 6:
-        return A, v, e
-    return A[rows], v[rows], e
+    Subclasses say what is tracked (:meth:`_measured`: the Jacobian, position and rotation in
+    the task's axes) and what a held target is (:meth:`_hold`). The rows come from the kernel
+    :func:`wholebody.kernels.rows.pose_rows`, the same one the compiled stack runs.
 
-
-class PoseRows:
-    """The 6 rows of a pose task with preallocated work arrays (one per task).
-
-    With ``K = diag(I, Jlog3(E))`` the rows are ``K J`` and the right-hand side is
-    ``K [v_d; E^T w_d] + Kp e + Ki I``: two products instead of a product per part.
+    Gains and targets are read-only arrays: change them by assignment or :meth:`set_target`
+    (so that a compiled stack sees every change); the integral is updated in place.
     """
 
-    __slots__ = ("K", "_Ko", "_Rd", "_eo", "_ep", "_pd", "_target", "_written", "e", "ff")
-
-    def __init__(self) -> None:
-        self.K = np.eye(6)
-        self.ff = np.empty(6)
-        self.e = np.empty(6)
-        # views made once: K's Jlog3 block, the error's parts, the last target's parts
-        self._Ko = self.K[3:, 3:]
-        self._ep = self.e[:3]
-        self._eo = self.e[3:]
-        self._target: np.ndarray | None = None
-        self._Rd = self._pd = None
-        self._written: tuple[object, np.ndarray] | None = None  # (state, target) of self.e
-
-    def __call__(
+    def __init__(
         self,
-        J: np.ndarray,
-        p: np.ndarray,
-        R: np.ndarray,
-        target: np.ndarray,
-        twist: np.ndarray,
-        kp: np.ndarray,
-        ki: np.ndarray,
-        integral: np.ndarray,
-        A: np.ndarray,
-        v: np.ndarray,
-    ) -> np.ndarray:
-        """Write the rows into ``A`` and ``v``; return the error (a work array: copy it to
-        keep it)."""
-        if target is not self._target:
-            self._target, self._Rd, self._pd = target, target[:3, :3], target[:3, 3]
-        E = self._Rd.dot(R.T)
-        K, ff, e = self.K, self.ff, self.e
-        self._Ko[...] = pin.Jlog3(E)
-        np.dot(K, J, out=A)
-        np.subtract(self._pd, p, out=self._ep)
-        self._eo[...] = pin.log3(E)
-        if _count_nonzero(twist):
-            ff[:3] = twist[:3]
-            np.dot(twist[3:], E, out=ff[3:])  # E^T w_d
-            np.dot(K, ff, out=v)
-            v += kp * e
-        else:  # no feed-forward: K 0 = 0
-            np.multiply(kp, e, out=v)
-        if _count_nonzero(integral):  # integral.any(), without its Python wrapper
-            v += ki * integral
-        return e
-
-    def error_at(self, state: object, target: np.ndarray | None) -> np.ndarray | None:
-        """The full (6,) error of the last :meth:`write` if it was at ``state`` and
-        ``target`` (a task's advance after its solve), else None."""
-        w = self._written
-        return self.e if w is not None and w[0] is state and w[1] is target else None
-
-    def write(
-        self,
-        state: object,
-        rows: np.ndarray,
-        J: np.ndarray,
-        p: np.ndarray,
-        R: np.ndarray,
-        target: np.ndarray,
-        twist: np.ndarray,
-        kp: np.ndarray,
-        ki: np.ndarray,
-        integral: np.ndarray,
-        A: np.ndarray,
-        v: np.ndarray,
+        robot: Robot,
+        name: str,
+        *,
+        position: bool,
+        orientation: bool,
+        kp: float | Sequence[float],
+        ki: float | Sequence[float],
+        integral_limit: float,
+        weight: float | Sequence[float],
     ) -> None:
-        """:meth:`__call__` at ``state`` keeping only the rows ``rows`` (indices among the 6),
-        written into ``A`` (len(rows) x nu) and ``v``: straight into them when all 6 are
-        kept. The full error stays available to :meth:`error_at`."""
-        self._written = (state, target)
-        if rows.size == 6:
-            self(J, p, R, target, twist, kp, ki, integral, A, v)
+        if not (position or orientation):
+            raise DimensionError(f"{type(self).__name__}: track the position, the orientation "
+                                 "or both")  # fmt: skip
+        self.robot = robot
+        self.name = name
+        self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
+        self.rows.setflags(write=False)
+        self.kp = kp
+        self.ki = ki
+        if not integral_limit >= 0:
+            raise DimensionError(f"{self.name}: integral_limit must be >= 0")
+        self.integral_limit = float(integral_limit)
+        self.weight = weight
+        self._target: np.ndarray | None = None
+        self._twist = _readonly(np.zeros(6))
+        self.integral = np.zeros(6)
+        """The integral of the error (m s, rad s), advanced in place by :meth:`advance`."""
+        self._held = False  # the target is the pose captured at first use (reset forgets it)
+        self._error = np.zeros(6)  # the full error of the last rows, at _error_key
+        self._error_key: tuple[object, object] | None = None  # (state, target) of _error
+
+    @property
+    def kp(self) -> np.ndarray:
+        """Proportional gain (1/s) per component [x, y, z, rx, ry, rz] (read-only)."""
+        return self._kp
+
+    @kp.setter
+    def kp(self, value: float | Sequence[float]) -> None:
+        self._kp = _gain(value, f"{self.name}: kp")
+
+    @property
+    def ki(self) -> np.ndarray:
+        """Integral gain (1/s^2) per component (read-only)."""
+        return self._ki
+
+    @ki.setter
+    def ki(self, value: float | Sequence[float]) -> None:
+        self._ki = _gain(value, f"{self.name}: ki")
+
+    @property
+    def target(self) -> np.ndarray | None:
+        """The target pose (4x4, read-only), or None before it is set or captured."""
+        return self._target
+
+    @property
+    def target_twist(self) -> np.ndarray:
+        """The target twist ``[v (m/s), w (rad/s)]`` (read-only)."""
+        return self._twist
+
+    @property
+    def dim(self) -> int:
+        return self.rows.size
+
+    def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
+        """Target pose (4x4 or SE3) and twist ``[v (m/s), w (rad/s)]`` (zero when omitted), in
+        the task's axes (see the subclass)."""
+        self._target = _readonly(check_pose(pose, f"{self.name}: target pose"))
+        self._twist = _readonly(check_twist(twist, f"{self.name}: target twist"))
+        self._held = False
+
+    def current_target(self, state: RobotState) -> np.ndarray:
+        """The target, capturing the current pose when none is set (held until
+        :meth:`reset`)."""
+        if self._target is None:
+            self._target = _readonly(self._hold(state))
+            self._held = True
+        return self._target
+
+    def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracked pose's Jacobian (6 x nu), position and rotation at ``state``."""
+        raise NotImplementedError
+
+    def _hold(self, state: RobotState) -> np.ndarray:
+        """The pose (4x4) to hold when no target is set."""
+        raise NotImplementedError
+
+    def compute(self, state: RobotState) -> TaskRows:
+        A = np.empty((self.rows.size, self.robot.nu))
+        v = np.empty(self.rows.size)
+        self.write_rows(state, A, v)
+        return TaskRows(A, v, self._weights())
+
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        Jm, p, R = self._measured(state)
+        target = self.current_target(state)
+        pose_rows(Jm, p, R, target, self._twist, self._kp, self._ki, self.integral, self.rows,
+                  J, v, self._error)  # fmt: skip
+        self._error_key = (state, target)
+        return self.weight
+
+    def _full_error(self, state: RobotState) -> np.ndarray:
+        """The (6,) error at ``state`` and the current target: that of the last rows when
+        they were written there (a task's advance after its solve), else computed."""
+        key = self._error_key
+        if key is None or key[0] is not state or key[1] is not self._target:
+            self.write_rows(state, np.empty((self.rows.size, self.robot.nu)),
+                            np.empty(self.rows.size))  # fmt: skip
+        return self._error
+
+    def error(self, state: RobotState) -> np.ndarray:
+        """(dim,) error: position error (m) and/or orientation error (rad)."""
+        return self._full_error(state)[self.rows]
+
+    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
+        if not _count_nonzero(self._ki):
             return
-        A6, v6 = np.empty((6, A.shape[1])), np.empty(6)
-        self(J, p, R, target, twist, kp, ki, integral, A6, v6)
-        A[...] = A6[rows]
-        v[...] = v6[rows]
+        integrate_error(self.integral, self._full_error(state), dt, saturated,
+                        self.integral_limit)  # fmt: skip
+
+    def reset(self) -> None:
+        """Zero the integral; a target captured at first use (none was set) is forgotten."""
+        self.integral[:] = 0.0
+        if self._held:
+            self._target, self._held = None, False
 
 
-class FrameTask(Task):
+class FrameTask(PoseTask):
     """Track a target pose (and twist) of a frame: 6 rows, or 3 with position/orientation only.
 
     Parameters
@@ -228,6 +259,9 @@ class FrameTask(Task):
         Anti-windup clamp of each integral component (m s, rad s).
     weight
         Weight in its level, scalar or per row.
+
+    The target pose and twist are in the world (world axes, linear velocity of the target
+    frame's origin).
     """
 
     def __init__(
@@ -243,81 +277,28 @@ class FrameTask(Task):
         integral_limit: float = 0.05,
         weight: float | Sequence[float] = 1.0,
     ) -> None:
-        if not (position or orientation):
-            raise DimensionError("FrameTask: track the position, the orientation or both")
-        self.robot = robot
         self.frame = robot.frame(frame)
-        self.name = name or self.frame.name
-        self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
-        self.kp = _gain(kp, f"{self.name}: kp")
-        self.ki = _gain(ki, f"{self.name}: ki")
-        if not integral_limit >= 0:
-            raise DimensionError(f"{self.name}: integral_limit must be >= 0")
-        self.integral_limit = float(integral_limit)
-        self.weight = weight
-        self.target: np.ndarray | None = None
-        self.target_twist = np.zeros(6)
-        self.integral = np.zeros(6)
-        self._held = False  # the target is the pose captured at first use (reset forgets it)
-        self._rows = PoseRows()
+        super().__init__(robot, name or self.frame.name, position=position,
+                         orientation=orientation, kp=kp, ki=ki, integral_limit=integral_limit,
+                         weight=weight)  # fmt: skip
 
-    @property
-    def dim(self) -> int:
-        return self.rows.size
-
-    def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
-        """Target pose (4x4 or SE3, world) and twist ``[v (m/s), w (rad/s)]`` (world axes,
-        linear velocity of the target frame's origin; zero when omitted)."""
-        self.target = check_pose(pose, f"{self.name}: target pose")
-        self.target_twist = check_twist(twist, f"{self.name}: target twist")
-        self._held = False
-
-    def _target(self, state: RobotState) -> np.ndarray:
-        if self.target is None:  # hold the current pose until told otherwise
-            self.target = state.pose(self.frame)
-            self._held = True
-        return self.target
-
-    def compute(self, state: RobotState) -> TaskRows:
-        A = np.empty((self.rows.size, self.robot.nu))
-        v = np.empty(self.rows.size)
-        self.write_rows(state, A, v)
-        return TaskRows(A, v, self._weights())
-
-    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+    def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         R, p = state.rotation_translation(self.frame)
-        target = self.target if self.target is not None else self._target(state)
-        self._rows.write(state, self.rows, state.jacobian(self.frame), p, R, target,
-                         self.target_twist, self.kp, self.ki, self.integral, J, v)  # fmt: skip
-        return self.weight
+        return state.jacobian(self.frame), p, np.ascontiguousarray(R)
+
+    def _hold(self, state: RobotState) -> np.ndarray:
+        return state.pose(self.frame)
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
         return (self.frame,)
 
-    def error(self, state: RobotState) -> np.ndarray:
-        """(dim,) error: position error (m) and/or orientation error (rad), world axes."""
-        e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
-                                   self._target(state))  # fmt: skip
-        return e[self.rows]
-
-    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        ki = self.ki
-        if not (_count_nonzero(ki) if isinstance(ki, np.ndarray) else np.any(ki)):
-            return
-        e = self._rows.error_at(state, self.target)  # the rows' own, after the usual solve
-        if e is None:
-            e, _ = pose_error(state.position(self.frame), state.rotation(self.frame),
-                              self._target(state))  # fmt: skip
-        integrate_error(self.integral, e, dt, saturated, self.integral_limit)
-
-    def reset(self) -> None:
-        """Zero the integral; a target captured at first use (none was set) is forgotten."""
-        self.integral[:] = 0.0
-        if self._held:
-            self.target, self._held = None, False
-
     def __repr__(self) -> str:
         return f"FrameTask({self.name!r}, frame={self.frame.name!r}, rows={self.dim})"
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 def integrate_error(integral: np.ndarray, e: np.ndarray, dt: float, saturated: bool,

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.rows import half_space_row
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import InequalityRows, InequalityTask
 
@@ -59,9 +60,25 @@ class FrameHalfSpace(InequalityTask):
         if not (np.isfinite(offset) and 0 < gain <= 1):
             raise DimensionError(f"{self.name}: offset must be finite and gain in (0, 1]")
         self.robot = robot
-        self.normal = nrm / length
-        self.offset = float(offset)
-        self.gain = float(gain)
+        self._normal = nrm / length
+        self._normal.setflags(write=False)
+        self._offset = float(offset)
+        self._gain = float(gain)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """The unit normal (world axes), fixed at construction (read-only)."""
+        return self._normal
+
+    @property
+    def offset(self) -> float:
+        """``d`` (m), fixed at construction."""
+        return self._offset
+
+    @property
+    def gain(self) -> float:
+        """Fraction of the remaining distance one step may cover, fixed at construction."""
+        return self._gain
 
     @property
     def dim(self) -> int:
@@ -72,9 +89,11 @@ class FrameHalfSpace(InequalityTask):
         return float(self.normal @ state.position(self.frame)) - self.offset
 
     def compute(self, state: RobotState, dt: float) -> InequalityRows:
-        C = (self.normal @ state.jacobian(self.frame)[:3])[None, :]
-        lower = np.array([-self.gain * self.distance(state) / dt])
-        return InequalityRows(C, lower, np.array([np.inf]))
+        C = np.empty((1, self.robot.nu))
+        p = state.rotation_translation(self.frame)[1]
+        lower = half_space_row(state.jacobian(self.frame), p, self.normal, self.offset,
+                               self.gain, dt, C[0])  # fmt: skip
+        return InequalityRows(C, np.array([lower]), np.array([np.inf]))
 
     def __repr__(self) -> str:
         return f"FrameHalfSpace({self.name!r}, normal={self.normal}, offset={self.offset})"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.rows import position_box
 from wholebody.robot import Robot, RobotState
 from wholebody.tasks.base import Bounds, Constraint
 
@@ -36,17 +37,32 @@ class JointPositionLimits(Constraint):
         if not margin >= 0 or np.any(upper - lower <= 2 * margin):
             raise DimensionError(f"{name}: margin {margin} must be >= 0 and smaller than half "
                                  "of every joint range")  # fmt: skip
-        self.robot, self.gain, self.margin, self.name = robot, gain, margin, name
+        self.robot, self.name = robot, name
+        self._gain, self._margin = float(gain), float(margin)
         self._lower = lower + margin
         self._upper = upper - margin
+        for a in (self._lower, self._upper):
+            a.setflags(write=False)
+
+    @property
+    def gain(self) -> float:
+        """Fraction of the remaining distance one step may cover, fixed at construction."""
+        return self._gain
+
+    @property
+    def margin(self) -> float:
+        """Distance (rad, m) kept from each limit, fixed at construction."""
+        return self._margin
+
+    @property
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(q_min + margin, q_max - margin)`` per actuated velocity (read-only)."""
+        return self._lower, self._upper
 
     def bounds(self, state: RobotState, dt: float) -> Bounds:
-        q = state.joint_positions()
-        k = self.gain / dt
-        lower = self._lower - q  # inf - inf does not occur: q is finite
-        lower *= k
-        upper = self._upper - q
-        upper *= k
+        lower, upper = np.empty(self.robot.nu), np.empty(self.robot.nu)
+        position_box(state.joint_positions(), self._lower, self._upper, self.gain, dt, lower,
+                     upper)  # fmt: skip
         return Bounds(lower, upper)
 
 
@@ -59,7 +75,13 @@ class VelocityLimits(Constraint):
             raise DimensionError(f"{name}: scale must be > 0, got {scale}")
         self.name = name
         self._upper = scale * robot.velocity_limits
+        self._upper.setflags(write=False)
         self._bounds = Bounds(-self._upper, self._upper)
+
+    @property
+    def upper(self) -> np.ndarray:
+        """``scale * v_max`` per actuated velocity (rad/s, m/s; read-only)."""
+        return self._upper
 
     def bounds(self, state: RobotState, dt: float) -> Bounds:
         return self._bounds

@@ -8,21 +8,17 @@ weighted sum a stack level forms from its objectives (manipulability with a nega
 from __future__ import annotations
 
 import difflib
-import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dtrtri
 
 from wholebody.errors import DimensionError, WholebodyError
+from wholebody.kernels.objectives import joint_limit_avoidance, manipulability
 from wholebody.robot import Frame, Robot, RobotState
-from wholebody.robot.hessian import JacobianDerivativeContraction
+from wholebody.robot.hessian import actuated_support_mask, check_off_wheels
 from wholebody.tasks.base import Objective, ObjectiveValue
 
 __all__ = ["JointLimitAvoidance", "Manipulability"]
-
-_sum = np.add.reduce  # ndarray.sum() without its Python wrapper
-_PIVOT_FLOOR = 1e-8  # Cholesky pivots^2 below this fraction of max diag(J J^T): LU decides
 
 
 class JointLimitAvoidance(Objective):
@@ -75,49 +71,24 @@ class JointLimitAvoidance(Objective):
             raise WholebodyError(f"{name}: no joint with finite limits to act on")
         self.name, self.weight, self.robot = name, float(weight), robot
         self.indices = idx
-        self._lo, self._hi = lower[idx], upper[idx]
-        span = self._hi - self._lo
-        self._c = span**2 / 4
-        self._eps = 1e-6 * span
         # Evaluated over all nu entries at once (no gather/scatter): every joint with finite
         # limits over its range, the others over the dummy range [-1, 1]; the joints left out
-        # get c = 0, so they contribute exact zeros. The ranges are the same for every
-        # instance on this robot, so the terms that do not involve c are computed once per
-        # state and shared (see _terms).
+        # get c = 0, so they contribute exact zeros.
         nu = robot.nu
         lo, hi, c = np.full(nu, -1.0), np.full(nu, 1.0), np.zeros(nu)
         lo[limited], hi[limited] = lower[limited], upper[limited]
-        c[idx] = self._c
-        self._lo_all, self._hi_all, self._c_all, self._c2_all = lo, hi, c, 2 * c
-        eps = 1e-6 * (hi - lo)
-        self._qmin_all, self._qmax_all = lo + eps, hi - eps
-
-    def _terms(self, state: RobotState) -> tuple[np.ndarray, ...]:
-        """``(b - a, a b, (a b)^2, (a b)^3, a b + (b - a)^2)`` per actuated velocity, with
-        ``a = qmax - q``, ``b = q - qmin`` (q clamped ``range * 1e-6`` inside the limits)."""
-        q = np.maximum(state.joint_positions(), self._qmin_all)
-        np.minimum(q, self._qmax_all, out=q)
-        a = self._hi_all - q
-        b = np.subtract(q, self._lo_all, out=q)
-        ab = a * b
-        d = np.subtract(b, a, out=a)
-        ab2 = ab * ab
-        ab3 = ab2 * ab
-        e = d * d
-        e += ab
-        return d, ab, ab2, ab3, e
+        c[idx] = (upper[idx] - lower[idx]) ** 2 / 4
+        self.ranges = np.array([lo, hi, c])
+        """(3, nu): the range ``[lo, hi]`` and coefficient ``c = range^2 / 4`` per actuated
+        velocity (read-only; ``c = 0`` for the joints left out)."""
+        self.ranges.setflags(write=False)
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
-        d, ab, ab2, ab3, e = state.memo(_TERMS_KEY, self._terms)
-        grad = self._c_all * d
-        grad /= ab2
-        curv = self._c2_all * e
-        curv /= ab3
-        value = _sum(self._c_all / ab)
+        nu = self.robot.nu
+        grad, curv = np.empty(nu), np.empty(nu)
+        lo, hi, c = self.ranges
+        value = joint_limit_avoidance(state.joint_positions(), lo, hi, c, grad, curv)
         return ObjectiveValue(float(value), grad, curv)
-
-
-_TERMS_KEY = "joint_limit_avoidance_terms"
 
 
 class Manipulability(Objective):
@@ -143,7 +114,10 @@ class Manipulability(Objective):
         if 6 * len(self.frames) > robot.nu:
             raise DimensionError(f"{name}: {6 * len(self.frames)} rows exceed nu = {robot.nu}; "
                                  "J J^T is always singular")  # fmt: skip
-        self._contract = JacobianDerivativeContraction(robot, self.frames)
+        check_off_wheels(robot, self.frames)
+        self.support = actuated_support_mask(robot)
+        """(nu, nu): ``support[l, k]``, column l supports column k (read-only)."""
+        self.support.setflags(write=False)
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         """The stacked 6F x nu Jacobian."""
@@ -153,25 +127,7 @@ class Manipulability(Objective):
         return tuple(self.frames)
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
-        J = state.jacobians(self.frames).reshape(6 * len(self.frames), -1)
-        JJt = J.dot(J.T)
-        # Cholesky J J^T = L L^T: log det = 2 sum log L_ii and (J J^T)^-1 J = L^-T L^-1 J.
-        # Where the smallest pivot is not well above rounding, the LU route decides instead
-        # whether J J^T counts as singular (the same answer as before, at a higher cost).
-        L, info = dpotrf(JJt, lower=1, clean=1)
-        d = L.diagonal() if info == 0 else None
-        if d is not None and min(x * x for x in d.tolist()) > _PIVOT_FLOOR * max(
-            JJt.diagonal().tolist()
-        ):
-            logdet = 2.0 * float(_sum(np.log(d)))
-            if logdet < -200:
-                return ObjectiveValue(0.0, np.zeros(self.robot.nu))
-            Linv, _ = dtrtri(L, lower=1)
-            P = Linv.T.dot(Linv.dot(J))
-        else:
-            sign, logdet = np.linalg.slogdet(JJt)
-            if sign <= 0 or logdet < -200:
-                return ObjectiveValue(0.0, np.zeros(self.robot.nu))
-            P = np.linalg.solve(JJt, J)
-        h2 = math.exp(0.5 * logdet)
-        return ObjectiveValue(h2, h2 * self._contract(state, P, J))
+        J = state.jacobians(self.frames)
+        grad = np.empty(self.robot.nu)
+        h2 = manipulability(J, self.support, grad)
+        return ObjectiveValue(float(h2), grad)

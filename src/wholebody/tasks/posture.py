@@ -4,17 +4,17 @@ For joints with a position (revolute, prismatic) the error is ``q_ref - q``; for
 joints other than wheels (an endless wrist) it is that difference wrapped into ``[-pi, pi)``,
 the shorter way round; for wheels and the virtual actuators of a planar base it is zero, so
 their rows damp the speed to zero (at a low priority this pins, e.g., the Mecanum base's
-internal wheel mode).
+internal wheel mode). The rows come from :func:`wholebody.kernels.rows.posture_rows`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.rows import posture_rows
 from wholebody.robot import Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
@@ -36,6 +36,9 @@ class PostureTask(Task):
         Gain (1/s), scalar or per joint.
     weight
         Weight in its level, scalar or per joint.
+
+    The target and the gains are read-only arrays: change them with :meth:`set_target` and
+    by assigning ``kp``.
     """
 
     def __init__(
@@ -58,54 +61,72 @@ class PostureTask(Task):
         else:
             idx = np.array([robot.index(j) for j in joints], dtype=int)
             label = "posture"
-        self.indices = idx
-        self._all = idx.size == robot.nu and bool(np.all(idx == np.arange(robot.nu)))
+        self.indices = np.array(idx, dtype=np.int64)
+        self.indices.setflags(write=False)
         self.name = name or label
         base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, planar actuators
-        self._tracked = (~base)[idx].astype(float)  # 0: no position error
-        self._wrapped = np.flatnonzero(~robot.positional[idx] & ~base[idx])  # endless joints
-        self.kp = np.broadcast_to(np.asarray(kp, float), idx.shape).copy()
-        if not np.all(np.isfinite(self.kp)) or np.any(self.kp < 0):
-            raise DimensionError(f"{self.name}: kp must be finite and >= 0")
+        self.tracked = (~base)[idx]
+        """Per joint, whether it has a position error (False: wheels, a planar base)."""
+        self.wrapped = ~robot.positional[idx] & ~base[idx]
+        """Per joint, whether its error wraps into [-pi, pi) (endless joints)."""
+        for a in (self.tracked, self.wrapped):
+            a.setflags(write=False)
+        self.kp = kp
         self.weight = weight
-        self._J = np.zeros((idx.size, robot.nu))
-        self._J[np.arange(idx.size), idx] = 1.0
-        self._J.setflags(write=False)
         self.set_target(robot.joint_positions(robot.home())[idx] if target is None else target)
 
     @property
     def dim(self) -> int:
         return self.indices.size
 
+    @property
+    def kp(self) -> np.ndarray:
+        """Gain (1/s) per joint (read-only)."""
+        return self._kp
+
+    @kp.setter
+    def kp(self, value: float | Sequence[float]) -> None:
+        try:
+            kp = np.broadcast_to(np.asarray(value, float), self.indices.shape).copy()
+        except (TypeError, ValueError) as exc:
+            raise DimensionError(f"{self.name}: kp must be a number or {self.dim} numbers, "
+                                 f"got {value!r}") from exc  # fmt: skip
+        if not np.all(np.isfinite(kp)) or np.any(kp < 0):
+            raise DimensionError(f"{self.name}: kp must be finite and >= 0")
+        kp.setflags(write=False)
+        self._kp = kp
+
+    @property
+    def target(self) -> np.ndarray:
+        """Reference positions (rad, m), one per joint (read-only)."""
+        return self._target
+
     def set_target(self, target: np.ndarray | Sequence[float]) -> None:
         """Reference positions, one per joint of the task (rad, m)."""
-        t = np.asarray(target, dtype=float)
+        t = np.array(target, dtype=float)
         if t.shape != self.indices.shape or not np.all(np.isfinite(t)):
             raise DimensionError(f"{self.name}: target must be {self.indices.size} finite "
                                  f"values, got shape {t.shape}")  # fmt: skip
-        self.target = t.copy()
+        t.setflags(write=False)
+        self._target = t
 
     def error(self, state: RobotState) -> np.ndarray:
-        e = self.target - state.joint_positions()[self.indices]
-        self._finish(e)
+        e = np.empty(self.dim)
+        self._rows(state, np.empty((self.dim, self.robot.nu)), np.empty(self.dim), e)
         return e
 
-    def _finish(self, e: np.ndarray) -> None:
-        """``target - q`` into the error: wrapped for endless joints, 0 for the base."""
-        w = self._wrapped
-        if w.size:
-            e[w] = np.remainder(e[w] + math.pi, 2.0 * math.pi) - math.pi
-        e *= self._tracked
+    def _rows(self, state: RobotState, J: np.ndarray, v: np.ndarray, e: np.ndarray) -> None:
+        posture_rows(state.joint_positions(), self.indices, self._target, self._kp,
+                     self.tracked, self.wrapped, J, v, e)  # fmt: skip
 
     def compute(self, state: RobotState) -> TaskRows:
-        return TaskRows(self._J, self.kp * self.error(state), self._weights())
+        J = np.empty((self.dim, self.robot.nu))
+        v = np.empty(self.dim)
+        self._rows(state, J, v, np.empty(self.dim))
+        return TaskRows(J, v, self._weights())
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
-        jp = state.joint_positions()
-        np.subtract(self.target, jp if self._all else jp[self.indices], out=v)
-        self._finish(v)
-        v *= self.kp
-        J[...] = self._J
+        self._rows(state, J, v, np.empty(self.dim))
         return self.weight
 
     def __repr__(self) -> str:

@@ -1,0 +1,173 @@
+"""The compiled core: numba kernels for the control step and the DMP rollout.
+
+A kernel is plain numpy-style Python under :func:`kernel` (``numba.njit(cache=True)``), so
+``NUMBA_DISABLE_JIT=1`` runs exactly the same code uncompiled: the tests compare both, and
+once more with ``NUMBA_BOUNDSCHECK=1``. Kernels take numpy arrays and numbers only; the
+Python side (:mod:`wholebody.solvers.plan`, :mod:`wholebody.planning.dmp`) lays out their
+buffers once and calls them.
+
+Compilation happens once per machine. On first use a kernel is compiled (tens of seconds
+for the whole control core; :func:`compile_notice` tells the user) and written to a cache;
+later processes load it in well under a second. ``wholebody warmup`` compiles everything
+ahead of time. The cache lives in the package's ``__pycache__`` directories or, when the
+installed package is not writable, in the user's cache directory
+(``$XDG_CACHE_HOME/numba`` or ``~/.cache/numba``); ``NUMBA_CACHE_DIR`` overrides both. A
+kernel's cache entry is keyed on a digest of its module's source and of the kernel modules
+that module imports (numba alone would only notice a change of the caller's own file, and
+reuse a caller compiled against an older callee), and kept apart for
+``NUMBA_BOUNDSCHECK=1`` builds.
+"""
+
+from __future__ import annotations
+
+import ast
+import contextlib
+import functools
+import hashlib
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TypeVar
+
+import numba
+from numba.core import caching
+
+__all__ = ["DISABLED", "cache_directory", "compile_notice", "kernel"]
+
+F = TypeVar("F", bound=Callable)
+
+DISABLED: bool = bool(numba.config.DISABLE_JIT)
+"""Whether kernels run uncompiled (``NUMBA_DISABLE_JIT=1``)."""
+
+_HERE = Path(__file__).resolve().parent
+
+
+def _imports(path: Path) -> set[str]:
+    """The kernel modules ``path`` imports (``from wholebody.kernels[.x] import ...``)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            if node.module == "wholebody.kernels":
+                names.update(f"{a.name}.py" for a in node.names)
+            elif node.module.startswith("wholebody.kernels."):
+                names.add(node.module.rsplit(".", 1)[1] + ".py")
+    return {n for n in names if (_HERE / n).is_file()}
+
+
+@functools.cache
+def _digest(name: str) -> str:
+    """A digest of the source of the kernel module ``name`` and of every kernel module it
+    depends on (its imports, transitively) and of this one: the cache's freshness stamp."""
+    todo, seen = [name, "__init__.py"], set()
+    while todo:
+        n = todo.pop()
+        if n not in seen:
+            seen.add(n)
+            todo.extend(_imports(_HERE / n))
+    h = hashlib.sha256()
+    for n in sorted(seen):
+        h.update(n.encode())
+        h.update((_HERE / n).read_bytes())
+    return h.hexdigest()
+
+
+def _flavour() -> str:
+    """The cache subdirectory for the current compile flags."""
+    return "boundscheck" if numba.config.BOUNDSCHECK else "default"
+
+
+class _KernelCacheLocator(caching._CacheLocator):
+    """Where numba caches a kernel of this package (see the module docstring): the user's
+    ``NUMBA_CACHE_DIR``, else the package's ``__pycache__``, else the user-wide cache; the
+    freshness stamp is the digest of the kernel's module and of the kernel modules it
+    depends on."""
+
+    def __init__(self, py_func: Callable, py_file: str, path: str) -> None:
+        self._lineno = py_func.__code__.co_firstlineno
+        self._stamp = _digest(Path(py_file).name)
+        self._path = path
+
+    def get_cache_path(self) -> str:
+        return self._path
+
+    def get_source_stamp(self) -> str:
+        return self._stamp
+
+    def get_disambiguator(self) -> str:
+        return str(self._lineno)
+
+    @classmethod
+    def from_function(cls, py_func: Callable, py_file: str) -> _KernelCacheLocator | None:
+        if Path(py_file).resolve().parent != _HERE:
+            return None  # not ours: numba's own locators decide
+        for base in _cache_bases(py_file):
+            self = cls(py_func, py_file, os.path.join(base, "wholebody-kernels", _flavour()))
+            try:
+                self.ensure_cache_path()
+            except OSError:
+                continue
+            return self
+        return None
+
+
+def _cache_bases(py_file: str) -> list[str]:
+    """Candidate cache directories, in order of preference."""
+    sub = caching._CacheLocator.get_suitable_cache_subpath(py_file)
+    if numba.config.CACHE_DIR:
+        return [os.path.join(numba.config.CACHE_DIR, sub)]
+    user = caching.AppDirs(appname="numba", appauthor=False).user_cache_dir
+    return [os.path.join(os.path.dirname(py_file), "__pycache__"), os.path.join(user, sub)]
+
+
+if _KernelCacheLocator not in caching.CacheImpl._locator_classes:
+    caching.CacheImpl._locator_classes.insert(0, _KernelCacheLocator)
+
+
+def cache_directory() -> Path | None:
+    """The directory the kernels are cached in (None when none is writable)."""
+    probe = _KernelCacheLocator.from_function(cache_directory, str(_HERE / "__init__.py"))
+    return None if probe is None else Path(probe.get_cache_path())
+
+
+def kernel(fn: F) -> F:
+    """Compile ``fn`` with numba in nopython mode, cached on disk.
+
+    ``error_model="numpy"``: a float division by zero gives inf or NaN as in numpy (the
+    kernels guard the divisions whose result they use), not a Python exception."""
+    return numba.njit(cache=True, error_model="numpy")(fn)  # type: ignore[return-value]
+
+
+_NOTICE_AFTER = 1.0  # s: a first call that takes longer than this is compiling
+
+
+@contextlib.contextmanager
+def compile_notice(what: str) -> Iterator[None]:
+    """Tell the user on stderr when the block takes long enough to be compiling ``what``
+    (the first use on this machine), and how long it took; silent when the kernels come
+    from the cache."""
+    if DISABLED:
+        yield
+        return
+    start = time.perf_counter()
+    said = threading.Event()
+
+    def say() -> None:
+        said.set()
+        where = cache_directory()
+        cached = f"; cached in {where}" if where is not None else ""
+        print(f"wholebody: compiling {what} for this machine (once{cached}) ...",
+              file=sys.stderr, flush=True)  # fmt: skip
+
+    timer = threading.Timer(_NOTICE_AFTER, say)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        if said.is_set():
+            took = time.perf_counter() - start
+            print(f"wholebody: compiled {what} in {took:.1f} s", file=sys.stderr, flush=True)

@@ -1,0 +1,176 @@
+"""Task rows in kernels: pose tracking (a frame, or one frame relative to another), posture,
+half-spaces, and the boxes of the joint position and velocity limits.
+
+The maths is documented where the tasks are (:mod:`wholebody.tasks.frame`,
+:mod:`wholebody.tasks.relative`, :mod:`wholebody.tasks.posture`,
+:mod:`wholebody.tasks.inequality`, :mod:`wholebody.tasks.limits`); the task classes call these
+kernels for their own rows, and the compiled plan calls them for every built-in task of a
+stack in one pass.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wholebody.kernels import kernel
+from wholebody.kernels.so3 import jlog3, log3
+
+__all__ = [
+    "half_space_row",
+    "pose_rows",
+    "position_box",
+    "posture_rows",
+    "relative_pose",
+]
+
+
+@kernel
+def pose_rows(
+    J: np.ndarray,
+    p: np.ndarray,
+    R: np.ndarray,
+    target: np.ndarray,
+    twist: np.ndarray,
+    kp: np.ndarray,
+    ki: np.ndarray,
+    integral: np.ndarray,
+    rows: np.ndarray,
+    A: np.ndarray,
+    v: np.ndarray,
+    e: np.ndarray,
+) -> None:
+    """The rows of a pose task at its current pose ``(p, R)`` (with Jacobian ``J``, 6 x nu)
+    and target (4x4, and twist ``[v_d; w_d]``), all in one frame's axes: ``A = (K J)[rows]``
+    and ``v = (K [v_d; E^T w_d] + kp e + ki I)[rows]`` with ``E = R_d R^T``,
+    ``K = diag(I, Jlog3(E))``, ``e = [p_d - p; log3(E)]`` (written into ``e``, all 6)."""
+    E = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            E[i, j] = target[i, 0] * R[j, 0] + target[i, 1] * R[j, 1] + target[i, 2] * R[j, 2]
+    eo = np.empty(3)
+    theta = log3(E, eo)
+    Jl = np.empty((3, 3))
+    jlog3(theta, eo, Jl)
+    full = np.empty(6)
+    for i in range(3):
+        e[i] = target[i, 3] - p[i]
+        e[3 + i] = eo[i]
+        full[i] = twist[i]
+    for i in range(3):  # E^T w_d, then Jlog3 of it
+        full[3 + i] = twist[3] * E[0, i] + twist[4] * E[1, i] + twist[5] * E[2, i]
+    ff = np.empty(3)
+    for i in range(3):
+        ff[i] = Jl[i, 0] * full[3] + Jl[i, 1] * full[4] + Jl[i, 2] * full[5]
+    for i in range(3):
+        full[3 + i] = ff[i]
+    nu = J.shape[1]
+    for r in range(rows.shape[0]):
+        i = rows[r]
+        v[r] = full[i] + kp[i] * e[i] + ki[i] * integral[i]
+        if i < 3:
+            for c in range(nu):
+                A[r, c] = J[i, c]
+        else:
+            a, b, d = Jl[i - 3, 0], Jl[i - 3, 1], Jl[i - 3, 2]
+            for c in range(nu):
+                A[r, c] = a * J[3, c] + b * J[4, c] + d * J[5, c]
+
+
+@kernel
+def relative_pose(
+    Ja: np.ndarray,
+    pa: np.ndarray,
+    Ra: np.ndarray,
+    Jb: np.ndarray,
+    pb: np.ndarray,
+    Rb: np.ndarray,
+    J: np.ndarray,
+    p: np.ndarray,
+    R: np.ndarray,
+) -> None:
+    """The pose of frame b in frame a (``p = R_a^T (p_b - p_a)``, ``R = R_a^T R_b``) and the
+    Jacobian of b's twist relative to a in a's axes,
+    ``J = R_a^T [J_b,lin - J_a,lin + [p_b - p_a]x J_a,ang ; J_b,ang - J_a,ang]``."""
+    rx, ry, rz = pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]
+    for i in range(3):
+        p[i] = Ra[0, i] * rx + Ra[1, i] * ry + Ra[2, i] * rz
+        for j in range(3):
+            R[i, j] = Ra[0, i] * Rb[0, j] + Ra[1, i] * Rb[1, j] + Ra[2, i] * Rb[2, j]
+    d = np.empty(6)
+    for c in range(J.shape[1]):
+        wx, wy, wz = Ja[3, c], Ja[4, c], Ja[5, c]
+        d[0] = Jb[0, c] - Ja[0, c] + (ry * wz - rz * wy)
+        d[1] = Jb[1, c] - Ja[1, c] + (rz * wx - rx * wz)
+        d[2] = Jb[2, c] - Ja[2, c] + (rx * wy - ry * wx)
+        d[3] = Jb[3, c] - wx
+        d[4] = Jb[4, c] - wy
+        d[5] = Jb[5, c] - wz
+        for i in range(3):
+            J[i, c] = Ra[0, i] * d[0] + Ra[1, i] * d[1] + Ra[2, i] * d[2]
+            J[3 + i, c] = Ra[0, i] * d[3] + Ra[1, i] * d[4] + Ra[2, i] * d[5]
+
+
+@kernel
+def posture_rows(
+    positions: np.ndarray,
+    indices: np.ndarray,
+    target: np.ndarray,
+    kp: np.ndarray,
+    tracked: np.ndarray,
+    wrapped: np.ndarray,
+    A: np.ndarray,
+    v: np.ndarray,
+    e: np.ndarray,
+) -> None:
+    """Posture rows: ``A`` the unit rows of ``indices`` and ``v = kp e`` with the error
+    ``e = target - positions[indices]`` (into ``e``), wrapped into ``[-pi, pi)`` where
+    ``wrapped`` and 0 where not ``tracked`` (wheels and a planar base's actuators)."""
+    A[:, :] = 0.0
+    for r in range(indices.shape[0]):
+        k = indices[r]
+        A[r, k] = 1.0
+        err = target[r] - positions[k]
+        if wrapped[r]:
+            err = (err + math.pi) % (2.0 * math.pi) - math.pi
+        if not tracked[r]:
+            err = 0.0
+        e[r] = err
+        v[r] = kp[r] * err
+
+
+@kernel
+def half_space_row(
+    J: np.ndarray,
+    p: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    gain: float,
+    dt: float,
+    C: np.ndarray,
+) -> float:
+    """The row ``n^T J_lin`` (into ``C``, nu) of a half-space ``n . p >= d`` and its lower
+    bound ``-gain (n . p - d) / dt`` (returned)."""
+    for c in range(J.shape[1]):
+        C[c] = normal[0] * J[0, c] + normal[1] * J[1, c] + normal[2] * J[2, c]
+    distance = normal[0] * p[0] + normal[1] * p[1] + normal[2] * p[2] - offset
+    return -gain * distance / dt
+
+
+@kernel
+def position_box(
+    positions: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    gain: float,
+    dt: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> None:
+    """Joint position limits as velocity bounds: ``lo = gain (lower - q) / dt`` and
+    ``hi = gain (upper - q) / dt`` (infinite where the limit is)."""
+    k = gain / dt
+    for i in range(positions.shape[0]):
+        lo[i] = (lower[i] - positions[i]) * k
+        hi[i] = (upper[i] - positions[i]) * k

@@ -1,0 +1,134 @@
+"""What the compiled core reads from a robot: Pinocchio's data through views, the actuation
+matrix's entries, frame supports and joint-position indices.
+
+After :meth:`Robot.update <wholebody.Robot.update>` (``computeJointJacobians`` and
+``updateFramePlacements``) the joint Jacobians ``data.J`` (6 x nv) and the frame placements
+``data.oMf`` hold everything the kernels need. Reading them through the Python proxies costs
+microseconds per frame; :meth:`RobotKinematics.views` instead returns numpy views of that
+memory, made once: ``data.J`` itself (column-major) and the placements as an (nframes, 12)
+array, each row a rotation in column-major order followed by the translation (the memory
+layout of Pinocchio's ``SE3``). The layout is checked against the proxies when the views are
+made; where it is not the one assumed (another Pinocchio build), the placements are gathered
+through the proxies instead: slower, never wrong.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+if TYPE_CHECKING:
+    from wholebody.robot.robot import Frame, Robot
+
+__all__ = ["RobotKinematics"]
+
+_SE3_DOUBLES = 12  # rotation (3 x 3, column-major), translation (3)
+
+
+class RobotKinematics:
+    """The compiled core's view of one robot (see the module docstring).
+
+    Attributes
+    ----------
+    act_k, act_j, act_a
+        The non-zero entries of the actuation matrix ``A`` (nv x nu): ``A[j, k] = a``.
+    position_index, position_pair
+        Per actuated velocity, the index into ``q`` of its scalar position, and whether it is
+        an angle stored as a (cos, sin) pair there (wheels, continuous joints, a planar
+        base's yaw): see :func:`wholebody.kernels.kinematics.joint_positions`.
+    fast
+        Whether :meth:`views` returns views of Pinocchio's memory (False: copies).
+    """
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        A = robot.actuation
+        k, j = np.nonzero(A.T)
+        self.act_k = k.astype(np.int64)
+        self.act_j = j.astype(np.int64)
+        self.act_a = np.ascontiguousarray(A.T[k, j])
+        index = np.zeros(robot.nu, dtype=np.int64)
+        pair = np.zeros(robot.nu, dtype=np.bool_)
+        index[robot._scalar] = robot._scalar_q
+        index[robot._cont] = robot._cont_q
+        pair[robot._cont] = True
+        if robot._virtual.size:  # a planar base's (x, y, yaw): q[0], q[1], (q[2], q[3])
+            index[robot._virtual] = (0, 1, 2)
+            pair[robot._virtual[2]] = True
+        self.position_index, self.position_pair = index, pair
+        for arr in (self.act_k, self.act_j, self.act_a, index, pair):
+            arr.setflags(write=False)
+        self._data: pin.Data | None = None
+        self._J = self._oMf = None
+        self.fast = False
+        self._make_views(robot.data)
+
+    def support(self, frames: list[Frame]) -> np.ndarray:
+        """(F, nv) boolean: whether each velocity coordinate moves each frame (the columns
+        of the joints that support the frame's parent joint)."""
+        model = self.robot.model
+        out = np.zeros((len(frames), model.nv), dtype=np.bool_)
+        for f, frame in enumerate(frames):
+            for jid in model.supports[frame.joint]:
+                jm = model.joints[jid]
+                if jm.nv:
+                    out[f, jm.idx_v : jm.idx_v + jm.nv] = True
+        return out
+
+    def views(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(J, oMf)``: ``data.J`` (6 x nv, column-major) and the frame placements
+        (nframes, 12) of the robot's data as they are now (after :meth:`Robot.update`)."""
+        data = self.robot.data
+        if data is not self._data:
+            self._make_views(data)
+        if self.fast:
+            return self._J, self._oMf
+        return np.asfortranarray(data.J), _gather(data)
+
+    def _make_views(self, data: pin.Data) -> None:
+        self._data = data
+        J = data.J
+        self._J = J if J.flags.f_contiguous and J.dtype == np.float64 else None
+        self._oMf = _placement_view(data)
+        self.fast = self._J is not None and self._oMf is not None and self._check(data)
+
+    def _check(self, data: pin.Data) -> bool:
+        """Whether the views show what the proxies show, at a random configuration (done when
+        the robot is loaded; it leaves the data there and invalidates older states)."""
+        robot = self.robot
+        q = robot.random_configuration(np.random.default_rng(0))
+        robot.update(q)
+        return bool(np.array_equal(self._J, data.J) and np.array_equal(self._oMf, _gather(data)))
+
+
+def _gather(data: pin.Data) -> np.ndarray:
+    """The frame placements (nframes, 12) read through Pinocchio's proxies."""
+    out = np.empty((len(data.oMf), _SE3_DOUBLES))
+    for i, M in enumerate(data.oMf):
+        out[i, :9] = M.rotation.ravel(order="F")
+        out[i, 9:] = M.translation
+    return out
+
+
+def _placement_view(data: pin.Data) -> np.ndarray | None:
+    """A view (nframes, 12) of ``data.oMf``'s memory, or None when the proxies do not show
+    the contiguous layout of 12 doubles per frame that the view assumes."""
+    frames = data.oMf
+    n = len(frames)
+    if n == 0:
+        return None
+    first = frames[0]
+    R, t = first.rotation, first.translation
+    if R.flags.owndata or t.flags.owndata or not R.flags.f_contiguous:
+        return None  # copies, not views of the data
+    base = R.__array_interface__["data"][0]
+    step = _SE3_DOUBLES * 8
+    if t.__array_interface__["data"][0] != base + 72:
+        return None
+    if n > 1 and frames[1].rotation.__array_interface__["data"][0] != base + step:
+        return None
+    buffer = (ctypes.c_double * (n * _SE3_DOUBLES)).from_address(base)
+    return np.ctypeslib.as_array(buffer).reshape(n, _SE3_DOUBLES)

@@ -1,0 +1,93 @@
+"""The kernels' building blocks against independent references: LAPACK through the kernels
+against scipy's wrappers, SO(3) against Pinocchio, frame kinematics against Pinocchio's
+frame Jacobians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.linalg.lapack as scipy_lapack
+
+from wholebody.kernels import lapack
+from wholebody.kernels.kinematics import frame_kinematics, joint_positions
+from wholebody.kernels.so3 import jlog3, log3
+
+
+def test_lapack_routines_give_scipys_answers_bit_for_bit(rng):
+    M = rng.normal(size=(12, 23))
+    qr, jp, tau, _, _ = scipy_lapack.dgeqp3(M.T, lwork=8 * 13)
+    a = M.copy().T  # Fortran-ordered M^T
+    jpvt, tau_k = np.zeros(12, np.int32), np.zeros(12)
+    assert lapack.geqp3(a, jpvt, tau_k) == 0
+    np.testing.assert_array_equal(a, qr)
+    np.testing.assert_array_equal(jpvt, jp)
+    G = M @ M.T
+    L, _ = scipy_lapack.dpotrf(G, lower=1, clean=1)
+    a = np.asfortranarray(G)
+    assert lapack.potrf(a, True) == 0
+    np.testing.assert_array_equal(a, L)
+    Li, _ = scipy_lapack.dtrtri(L, lower=1)
+    assert lapack.trtri(a, True) == 0
+    np.testing.assert_array_equal(a, Li)
+    full = np.zeros((23, 23), order="F")
+    full[:, :12] = qr
+    Q, _, _ = scipy_lapack.dorgqr(full.copy(order="F"), tau, lwork=8 * 23)
+    assert lapack.orgqr(full, tau, 12, 8 * 23) == 0
+    np.testing.assert_array_equal(full, Q)
+    c = rng.normal(size=12)
+    z, _ = scipy_lapack.dtrtrs(qr[:12, :12], c, lower=0, trans=1)
+    b = c.copy()
+    assert lapack.trtrs(np.asfortranarray(qr)[:12, :12], b, False, True) == 0
+    np.testing.assert_array_equal(b, z)
+    T, y = rng.normal(size=(30, 8)), rng.normal(size=30)
+    _, x, _ = scipy_lapack.dgels(T, y)
+    a, b = np.asfortranarray(T), y.copy()
+    assert lapack.gels(a, b) == 0
+    np.testing.assert_array_equal(b[:8], x[:8])
+    # a singular factorisation is reported, not hidden
+    assert lapack.potrf(np.asfortranarray(np.zeros((3, 3))), True) != 0
+
+
+@pytest.mark.parametrize("kind", ["generic", "small", "near_pi", "zero", "pi", "perturbed"])
+def test_log3_and_jlog3_are_pinocchios(rng, kind):
+    worst = 0.0
+    for _ in range(200):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = {"generic": rng.uniform(0, np.pi), "small": rng.uniform(0, 1e-5),
+                 "near_pi": np.pi - rng.uniform(0, 1e-5), "zero": 0.0, "pi": np.pi,
+                 "perturbed": rng.uniform(0, np.pi)}[kind]  # fmt: skip
+        R = pin.exp3(angle * axis)
+        if kind == "perturbed":  # not quite orthonormal: both re-orthonormalise
+            R = R + 1e-9 * rng.normal(size=(3, 3))
+        w = np.empty(3)
+        theta = log3(R, w)
+        Jl = np.empty((3, 3))
+        jlog3(theta, w, Jl)
+        worst = max(worst, np.abs(w - pin.log3(R)).max(), np.abs(Jl - pin.Jlog3(R)).max())
+    assert worst < 1e-12
+
+
+@pytest.mark.parametrize("name", ["mobile_humanoid", "dual_arm_torso"])
+def test_frame_kinematics_equal_pinocchios_frame_jacobians(name, humanoid, torso, rng):
+    robot = humanoid if name == "mobile_humanoid" else torso
+    kin = robot.kinematics
+    assert kin.fast  # the views of Pinocchio's memory are used, their layout checked
+    frames = [robot.frame(f.name) for f in robot.model.frames]
+    index = np.array([f.index for f in frames])
+    support = kin.support(frames)
+    F = len(frames)
+    J, p, R = np.zeros((F, 6, robot.nu)), np.zeros((F, 3)), np.zeros((F, 3, 3))
+    jp = np.zeros(robot.nu)
+    for _ in range(5):
+        q = robot.random_configuration(rng)
+        state = robot.update(q)
+        Jd, oMf = kin.views()
+        frame_kinematics(Jd, oMf, index, support, kin.act_k, kin.act_j, kin.act_a, J, p, R)
+        joint_positions(q, kin.position_index, kin.position_pair, jp)
+        for k, frame in enumerate(frames):
+            np.testing.assert_allclose(J[k], state.jacobian(frame), rtol=0, atol=1e-14)
+            np.testing.assert_allclose(p[k], state.position(frame), rtol=0, atol=1e-15)
+            np.testing.assert_allclose(R[k], state.rotation(frame), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(jp, state.joint_positions(), rtol=0, atol=1e-15)

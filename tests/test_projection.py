@@ -233,16 +233,6 @@ def test_level_with_more_rows_than_columns_is_plain_least_squares(humanoid, rng)
         np.testing.assert_allclose(result.u, expected, atol=1e-9 * (1 + np.abs(expected).max()))
 
 
-class _Evaluated:
-    """A stack whose evaluation is a given problem (test helper)."""
-
-    def __init__(self, problem: StackProblem) -> None:
-        self.problem = problem
-
-    def evaluate(self, state, dt):
-        return self.problem
-
-
 @pytest.mark.parametrize("kappa", [1.0, 3e2, 3e3, 3e4, 1e7])
 def test_a_tall_level_is_its_least_squares_solution_at_every_condition_number(rng, kappa):
     # Singular values from 0.03 kappa down to 0.03 (> singular_threshold: no damping): the
@@ -262,7 +252,7 @@ def test_a_tall_level_is_its_least_squares_solution_at_every_condition_number(rn
                                    1.0)]  # fmt: skip
             box = np.full(n, 1e12)
             problem = StackProblem(levels, -box, box, np.ones(n), {})
-            u = ProjectionSolver().solve(_Evaluated(problem), None, DT).u
+            u = ProjectionSolver().solve_problem(problem).u
             exact = np.linalg.lstsq(A, b, rcond=None)[0]
             worst = max(worst, np.linalg.norm(u - exact) / np.linalg.norm(exact))
     assert worst <= 1e-10 * max(1.0, kappa / 1e4)
@@ -284,8 +274,7 @@ def test_round_off_of_a_computed_projector_does_not_damp_a_tall_level_below(rng)
                   LevelProblem("L1", A1, b1, np.zeros((0, n)), np.zeros(0), np.zeros(0),
                                {"t1": slice(0, 46)})]  # fmt: skip
         box = np.full(n, 1e12)
-        u = ProjectionSolver().solve(_Evaluated(StackProblem(levels, -box, box, np.ones(n), {})),
-                                     None, DT).u  # fmt: skip
+        u = ProjectionSolver().solve_problem(StackProblem(levels, -box, box, np.ones(n), {})).u
         N = np.linalg.svd(A0)[2][7:].T  # what level 0 leaves free, exactly
         gradient = N.T @ A1.T @ (A1 @ u - b1)
         assert np.linalg.norm(gradient) <= 1e-5 * np.linalg.norm(N.T @ A1.T @ b1)

@@ -25,9 +25,9 @@ from numba.extending import get_cython_function_address
 
 from wholebody.kernels import DISABLED, kernel
 
-__all__ = ["gels", "geqp3", "orgqr", "potrf", "trtri", "trtrs"]
+__all__ = ["gels", "geqp3", "geqrf", "orgqr", "potrf", "trtri", "trtrs"]
 
-_ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dorgqr": 9, "dgels": 11}
+_ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dgeqrf": 8, "dorgqr": 9, "dgels": 11}
 
 
 def _external(name: str):
@@ -45,6 +45,7 @@ _dpotrf = _external("dpotrf")
 _dtrtri = _external("dtrtri")
 _dtrtrs = _external("dtrtrs")
 _dgeqp3 = _external("dgeqp3")
+_dgeqrf = _external("dgeqrf")
 _dorgqr = _external("dorgqr")
 _dgels = _external("dgels")
 
@@ -127,6 +128,24 @@ def geqp3(a: np.ndarray, jpvt: np.ndarray, tau: np.ndarray) -> int:
     _dgeqp3(iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data, iv[2:].ctypes.data,
             jpvt.ctypes.data, tau.ctypes.data, work.ctypes.data, iv[3:].ctypes.data,
             iv[4:].ctypes.data)  # fmt: skip
+    return int(iv[4])
+
+
+@kernel
+def geqrf(a: np.ndarray, tau: np.ndarray) -> int:
+    """QR factorisation ``a = Q R`` of ``a`` (m x n, Fortran) in place, the reflectors'
+    factors in ``tau`` (min(m, n)); workspace ``max(3 n, 1)``."""
+    m, n = a.shape
+    lwork = max(3 * n, 1)
+    work = np.empty(lwork)
+    iv = np.empty(5, np.int32)
+    iv[0] = m
+    iv[1] = n
+    iv[2] = max(m, 1)
+    iv[3] = lwork
+    iv[4] = 0
+    _dgeqrf(iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data, iv[2:].ctypes.data,
+            tau.ctypes.data, work.ctypes.data, iv[3:].ctypes.data, iv[4:].ctypes.data)  # fmt: skip
     return int(iv[4])
 
 

@@ -87,9 +87,12 @@ from scipy.linalg.lapack import dpotrf, dtrtri
 
 from wholebody._numeric import NORMAL_KAPPA, normal_solve
 from wholebody._numeric import count_nonzero as _count
-from wholebody.errors import SolverError
+from wholebody.errors import DimensionError, SolverError
+from wholebody.kernels import layout as lay
+from wholebody.kernels import projection as kernel
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
+from wholebody.solvers.plan import ProblemArena, first_call
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 
@@ -202,6 +205,10 @@ class ProjectionSolver(Solver):
     saturate
         Apply SNS. When False the bounds are not enforced (the textbook solution; used to
         show what the box costs, never in control).
+    compiled
+        Solve with the compiled core (:mod:`wholebody.kernels.projection`, the default), or,
+        with False, with this module's Python implementation, the reference the kernels are
+        tested against (same decisions, to rounding).
     """
 
     name = "projection"
@@ -214,6 +221,7 @@ class ProjectionSolver(Solver):
         rank_tolerance: float = 1e-9,
         tolerance: float = 1e-6,
         saturate: bool = True,
+        compiled: bool = True,
     ) -> None:
         values = (damping, singular_threshold, rank_tolerance, tolerance)
         if not (all(math.isfinite(v) for v in values) and damping >= 0 and singular_threshold > 0
@@ -228,6 +236,8 @@ class ProjectionSolver(Solver):
         self.rank_tolerance = rank_tolerance
         self.tolerance = tolerance
         self.saturate = saturate
+        self.compiled = compiled
+        self._par = np.zeros(kernel.PAR_WIDTH)
 
     # ------------------------------------------------------------------ linear algebra
     def _certified(self, B: np.ndarray) -> _Gram | None:
@@ -467,18 +477,39 @@ class ProjectionSolver(Solver):
 
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
+        if self.compiled:
+            return self._solve_compiled(stack, state, dt)
         start = time.perf_counter()
-        problem = stack.evaluate(state, dt)
+        result = self._solve_reference(stack.evaluate(state, dt, compiled=False))
+        result.solve_time = time.perf_counter() - start
+        return result
+
+    def solve_problem(self, problem: StackProblem) -> SolverResult:
+        """Solve an evaluated stack (rows in scaled coordinates, e.g. ``stack.evaluate()``'s
+        or a synthetic one): with the kernels, or with ``compiled=False`` the reference."""
+        if not self.compiled:
+            return self._solve_reference(problem)
+        start = time.perf_counter()
+        _refuse_inequalities(problem)
+        arena = ProblemArena(problem)
+        self._set_par()
+        first_call("projection problem", "the projection kernels", kernel.project, arena.f,
+                   arena.i, arena.h, self._par)  # fmt: skip
+        code = int(arena.view(lay.I_OUT)[lay.OUT_MESSAGE])
+        return arena.result(time.perf_counter() - start, _MESSAGES[code])
+
+    def _set_par(self) -> None:
+        self._par[:] = (self.damping, self.singular_threshold, self.rank_tolerance,
+                        self.tolerance, bool(self.saturate))  # fmt: skip
+
+    def _solve_reference(self, problem: StackProblem) -> SolverResult:
+        """The Python implementation, the reference of the kernels."""
+        start = time.perf_counter()
         lo, hi = problem.lower, problem.upper
-        for lp in problem.levels:
-            if lp.C.shape[0]:
-                raise SolverError(
-                    f"ProjectionSolver: {lp.name} has inequality tasks "
-                    f"({', '.join(lp.inequality_rows)}); use HierarchicalQPSolver for those"
-                )
+        _refuse_inequalities(problem)
         nu = lo.size
         if _count(lo <= hi) != nu:  # NaN compares false; Stack.evaluate never crosses the box
-            message = "the box is empty or not a number (NaN bounds): u = 0"
+            message = _EMPTY_BOX
             return self._result(problem, np.zeros(nu), np.ones(len(problem.levels)),
                                 time.perf_counter() - start, message, failed=True)  # fmt: skip
         u_start = np.minimum(np.maximum(0.0, lo), hi)  # SNS starts here: 0 unless the box
@@ -504,10 +535,28 @@ class ProjectionSolver(Solver):
                 scales[i] = state_k.scale
         u_s = state_k.u
         if not math.isfinite(u_s.dot(u_s)) and not np.all(np.isfinite(u_s)):
-            message = "non-finite solution replaced by the box's closest point to 0"
+            message = _NON_FINITE
             return self._result(problem, u_start, scales, time.perf_counter() - start, message,
                                 failed=True)  # fmt: skip
         return self._result(problem, u_s, scales, time.perf_counter() - start, "")
+
+    def _solve_compiled(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
+        start = time.perf_counter()
+        if not dt > 0:
+            raise DimensionError(f"control step dt must be > 0 s, got {dt}")
+        plan = stack.plan()
+        if plan.P:
+            _refuse_inequalities(plan.problem())
+        plan.sync(state, dt)
+        if plan.stale:  # an arm energy's stiffness was replaced: lay the stack out anew
+            plan = stack.plan()
+            plan.sync(state, dt)
+        self._set_par()
+        first_call("projection", "the projection kernels", kernel.solve,
+                   *plan.kernel_args(state), self._par)  # fmt: skip
+        plan.written(state)
+        code = int(plan.view(lay.I_OUT)[lay.OUT_MESSAGE])
+        return plan.result(time.perf_counter() - start, _MESSAGES[code])
 
     def _result(self, problem: StackProblem, u_s: np.ndarray, scales: np.ndarray, elapsed: float,
                 message: str, failed: bool = False) -> SolverResult:  # fmt: skip
@@ -543,6 +592,20 @@ class ProjectionSolver(Solver):
             solve_time=elapsed,
             message=message,
         )
+
+
+_EMPTY_BOX = "the box is empty or not a number (NaN bounds): u = 0"
+_NON_FINITE = "non-finite solution replaced by the box's closest point to 0"
+_MESSAGES = {0: "", kernel.MESSAGE_EMPTY_BOX: _EMPTY_BOX, kernel.MESSAGE_NON_FINITE: _NON_FINITE}
+
+
+def _refuse_inequalities(problem: StackProblem) -> None:
+    for lp in problem.levels:
+        if lp.C.shape[0]:
+            raise SolverError(
+                f"ProjectionSolver: {lp.name} has inequality tasks "
+                f"({', '.join(lp.inequality_rows)}); use HierarchicalQPSolver for those"
+            )
 
 
 class _Free:

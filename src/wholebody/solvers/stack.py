@@ -40,6 +40,7 @@ import numpy as np
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
+from wholebody.solvers.plan import Plan, sqrt_weights
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
 __all__ = ["OBJECTIVES", "Level", "LevelProblem", "Stack", "StackProblem"]
@@ -250,6 +251,7 @@ class Stack:
         self.constraints = list(constraints)
         self._scale_version = 0
         self.metric = np.ones(robot.nu) if metric is None else metric
+        self._plan: Plan | None = None
         self._check_entries()
         self._allocate()
 
@@ -313,6 +315,27 @@ class Stack:
     def _relayout(self) -> None:
         self._check_entries()
         self._allocate()
+        self._plan = None
+
+    def _check_layout(self) -> None:
+        """Lay the buffers out anew where levels or their entries were replaced."""
+        plans = self._plans
+        if len(plans) != len(self.levels):
+            self._relayout()
+            return
+        for level, plan in zip(self.levels, plans, strict=True):
+            if level is not plan.level or level.entries is not plan.entries:
+                self._relayout()
+                return
+
+    def plan(self) -> Plan:
+        """The stack compiled for the kernels (:mod:`wholebody.solvers.plan`), laid out at the
+        first use and again whenever levels or entries were replaced."""
+        self._check_layout()
+        plan = self._plan
+        if plan is None or plan.stale:
+            plan = self._plan = Plan(self)
+        return plan
 
     def _allocate(self) -> None:
         nu = self.robot.nu
@@ -354,19 +377,23 @@ class Stack:
     def objectives(self) -> list[Objective]:
         return [o for level in self.levels for o in level.objectives]
 
-    def evaluate(self, state: RobotState, dt: float) -> StackProblem:
+    def evaluate(self, state: RobotState, dt: float, *, compiled: bool = True) -> StackProblem:
         """Rows of every level and the box at ``state`` for a step of ``dt`` s (scaled
-        coordinates, see the module docstring)."""
+        coordinates, see the module docstring): by the compiled plan, or with
+        ``compiled=False`` entry by entry in Python (the reference). The arrays are buffers
+        that the next evaluation overwrites."""
         if not dt > 0:
             raise DimensionError(f"control step dt must be > 0 s, got {dt}")
-        plans = self._plans
-        if len(plans) != len(self.levels):  # levels added or removed: lay the buffers out anew
-            self._relayout()
-        else:
-            for level, plan in zip(self.levels, plans, strict=True):
-                if level is not plan.level or level.entries is not plan.entries:  # replaced
-                    self._relayout()
-                    break
+        if compiled:
+            plan = self.plan()
+            plan.evaluate(state, dt)
+            if plan.stale:  # an arm energy's stiffness was replaced: lay out anew
+                plan = self.plan()
+                plan.evaluate(state, dt)
+            problem = plan.problem()
+            problem.objective_values = plan.objective_values()
+            return problem
+        self._check_layout()
         D = self._scale
         state.prefetch(self._frames)
         values: dict[str, ObjectiveValue] = {}
@@ -500,15 +527,7 @@ class _LevelPlan:
 
     def set_weight(self, i: int, w: object, D: np.ndarray) -> None:
         """Task i's rows now have weight(s) ``w``."""
-        task = self.tasks[i]
-        try:
-            wa = np.broadcast_to(np.asarray(w, dtype=float), (task.dim,))
-        except (TypeError, ValueError) as exc:
-            raise DimensionError(f"{task.name}: weight must be a number or {task.dim} numbers, "
-                                 f"got {w!r}") from exc  # fmt: skip
-        if not (np.all(np.isfinite(wa)) and np.all(wa >= 0)):
-            raise DimensionError(f"{task.name}: weights must be finite and >= 0, got {w!r}")
-        sw = np.sqrt(wa)
+        sw = sqrt_weights(self.tasks[i], w)
         self.sqrt_weights[i] = sw
         self.weight_keys[i] = float(w) if isinstance(w, (float, int)) else np.array(w, float)
         sl = self.slices[i]

@@ -25,9 +25,22 @@ from numba.extending import get_cython_function_address
 
 from wholebody.kernels import DISABLED, kernel
 
-__all__ = ["gels", "geqp3", "geqrf", "orgqr", "potrf", "trtri", "trtrs"]
+__all__ = [
+    "gels",
+    "geqp3",
+    "geqrf",
+    "gesdd",
+    "getrf",
+    "getrs",
+    "orgqr",
+    "potrf",
+    "syevd",
+    "trtri",
+    "trtrs",
+]
 
-_ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dgeqrf": 8, "dorgqr": 9, "dgels": 11}
+_ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dgeqrf": 8, "dorgqr": 9, "dgels": 11,
+         "dgesdd": 14, "dsyevd": 11, "dgetrf": 6, "dgetrs": 9}
 
 
 def _external(name: str):
@@ -48,8 +61,12 @@ _dgeqp3 = _external("dgeqp3")
 _dgeqrf = _external("dgeqrf")
 _dorgqr = _external("dorgqr")
 _dgels = _external("dgels")
+_dgesdd = _external("dgesdd")
+_dsyevd = _external("dsyevd")
+_dgetrf = _external("dgetrf")
+_dgetrs = _external("dgetrs")
 
-_L, _U, _N, _T = 76, 85, 78, 84  # ord("L"), ord("U"), ord("N"), ord("T")
+_L, _U, _N, _T, _A, _S, _V = 76, 85, 78, 84, 65, 83, 86  # ord("L"), ord("U"), ...
 
 
 @kernel
@@ -193,3 +210,100 @@ def gels(a: np.ndarray, b: np.ndarray) -> int:
            a.ctypes.data, iv[3:].ctypes.data, b.ctypes.data, iv[4:].ctypes.data,
            work.ctypes.data, iv[5:].ctypes.data, iv[6:].ctypes.data)  # fmt: skip
     return int(iv[6])
+
+
+@kernel
+def gesdd(a: np.ndarray, full: bool) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """The singular value decomposition ``a = U diag(s) V^T`` of ``a`` (m x n, Fortran; it is
+    destroyed) by divide and conquer, as ``numpy.linalg.svd``: ``(info, U, s, Vt)``, U and
+    Vt Fortran-ordered, m x m and n x n when ``full`` else m x k and k x n (k = min(m, n))."""
+    m, n = a.shape
+    k = min(m, n)
+    mu, nv = (m, n) if full else (k, k)
+    U = np.zeros((mu, m)).T
+    Vt = np.zeros((n, nv)).T
+    s = np.zeros(max(k, 1))
+    lwork = 4 * k * k + 7 * k + max(m, n) + 1
+    work = np.empty(lwork)
+    iwork = np.empty(max(8 * k, 1), np.int32)
+    ch = np.empty(1, np.uint8)
+    ch[0] = _A if full else _S
+    iv = np.empty(7, np.int32)
+    iv[0] = m
+    iv[1] = n
+    iv[2] = max(m, 1)
+    iv[3] = max(m, 1)
+    iv[4] = max(nv, 1)
+    iv[5] = lwork
+    iv[6] = 0
+    if k:
+        _dgesdd(ch.ctypes.data, iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data,
+                iv[2:].ctypes.data, s.ctypes.data, U.ctypes.data, iv[3:].ctypes.data,
+                Vt.ctypes.data, iv[4:].ctypes.data, work.ctypes.data, iv[5:].ctypes.data,
+                iwork.ctypes.data, iv[6:].ctypes.data)  # fmt: skip
+    else:  # nothing to decompose: identities of the requested shapes
+        for j in range(min(mu, m)):
+            U[j, j] = 1.0
+        for j in range(min(nv, n)):
+            Vt[j, j] = 1.0
+    return int(iv[6]), U, s[:k], Vt
+
+
+@kernel
+def syevd(a: np.ndarray) -> tuple[int, np.ndarray]:
+    """Eigen-decomposition of the symmetric ``a`` (n x n, Fortran; its lower triangle is read
+    and it is overwritten with the eigenvectors, in columns) by divide and conquer, as
+    ``numpy.linalg.eigh``: ``(info, w)``, the eigenvalues ascending."""
+    n = a.shape[0]
+    w = np.zeros(max(n, 1))
+    lwork = 1 + 6 * n + 2 * n * n
+    liwork = 3 + 5 * n
+    work = np.empty(lwork)
+    iwork = np.empty(liwork, np.int32)
+    ch = np.empty(2, np.uint8)
+    ch[0] = _V
+    ch[1] = _L
+    iv = np.empty(5, np.int32)
+    iv[0] = n
+    iv[1] = max(n, 1)
+    iv[2] = lwork
+    iv[3] = liwork
+    iv[4] = 0
+    if n:
+        _dsyevd(ch[0:].ctypes.data, ch[1:].ctypes.data, iv[0:].ctypes.data, a.ctypes.data,
+                iv[1:].ctypes.data, w.ctypes.data, work.ctypes.data, iv[2:].ctypes.data,
+                iwork.ctypes.data, iv[3:].ctypes.data, iv[4:].ctypes.data)  # fmt: skip
+    return int(iv[4]), w[:n]
+
+
+@kernel
+def getrf(a: np.ndarray, ipiv: np.ndarray) -> int:
+    """LU factorisation with partial pivoting ``P a = L U`` of ``a`` (n x n, Fortran) in
+    place, the pivots (1-based, int32) in ``ipiv`` (n)."""
+    n = a.shape[0]
+    iv = np.empty(3, np.int32)
+    iv[0] = n
+    iv[1] = max(n, 1)
+    iv[2] = 0
+    _dgetrf(iv[0:].ctypes.data, iv[0:].ctypes.data, a.ctypes.data, iv[1:].ctypes.data,
+            ipiv.ctypes.data, iv[2:].ctypes.data)  # fmt: skip
+    return int(iv[2])
+
+
+@kernel
+def getrs(lu: np.ndarray, ipiv: np.ndarray, b: np.ndarray) -> int:
+    """Solve ``a x = b`` from :func:`getrf`'s factorisation of ``a``; ``b`` (n x k, Fortran)
+    is overwritten with ``x``."""
+    n, k = b.shape
+    ch = np.empty(1, np.uint8)
+    ch[0] = _N
+    iv = np.empty(5, np.int32)
+    iv[0] = n
+    iv[1] = k
+    iv[2] = max(n, 1)
+    iv[3] = max(n, 1)
+    iv[4] = 0
+    _dgetrs(ch.ctypes.data, iv[0:].ctypes.data, iv[1:].ctypes.data, lu.ctypes.data,
+            iv[2:].ctypes.data, ipiv.ctypes.data, b.ctypes.data, iv[3:].ctypes.data,
+            iv[4:].ctypes.data)  # fmt: skip
+    return int(iv[4])

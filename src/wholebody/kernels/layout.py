@@ -69,7 +69,8 @@ I_BOX = N_FLOAT + 14  # (3,): number of position, velocity and Python boxes
 I_OUT = N_FLOAT + 15  # (OUT_INTS,): solver outcome codes (out)
 I_ACTIVE = N_FLOAT + 16  # (nu,): 1 where u is on a bound (out)
 I_INFEASIBLE = N_FLOAT + 17  # (T,): 1 where a task is not met (out)
-N_REGIONS = N_FLOAT + 18
+I_INEQ = N_FLOAT + 18  # (Pt, 3): inequality tasks' level, first and last row
+N_REGIONS = N_FLOAT + 19
 
 HEADER_WIDTH = 5  # offset, size, d0, d1, d2
 
@@ -131,17 +132,18 @@ def imat(i: np.ndarray, h: np.ndarray, r: int) -> np.ndarray:
     return i[o : o + h[r, 1]].reshape((h[r, 2], h[r, 3]))
 
 
-def build(shapes: dict[int, tuple[int, ...]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def build(shapes: dict[int, tuple[int, ...]], n_float: int = N_FLOAT,
+          n_regions: int = N_REGIONS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The arenas ``(f, i)`` and header ``h`` for regions of the given shapes (every region
-    id must be given; float ids below ``N_FLOAT``); the arenas are zeroed."""
-    h = np.zeros((N_REGIONS, HEADER_WIDTH), dtype=np.int64)
+    id below ``n_regions`` must be given; float ids below ``n_float``); zeroed."""
+    h = np.zeros((n_regions, HEADER_WIDTH), dtype=np.int64)
     sizes = [0, 0]
-    for r in range(N_REGIONS):
+    for r in range(n_regions):
         shape = tuple(int(d) for d in shapes[r])
         if not 1 <= len(shape) <= 3 or min(shape) < 0:
             raise ValueError(f"region {r}: bad shape {shape}")
         size = int(np.prod(shape))
-        kind = 0 if r < N_FLOAT else 1
+        kind = 0 if r < n_float else 1
         h[r, 0], h[r, 1] = sizes[kind], size
         h[r, 2 : 2 + len(shape)] = shape
         sizes[kind] += size

@@ -19,7 +19,6 @@ import numpy as np
 
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
-from wholebody.kernels.evaluate import evaluate
 from wholebody.kernels.lapack import geqrf, orgqr, potrf
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
 from wholebody.kernels.linalg import (
@@ -30,7 +29,7 @@ from wholebody.kernels.linalg import (
     normal_solve,
 )
 
-__all__ = ["PAR_WIDTH", "project", "solve"]
+__all__ = ["PAR_WIDTH", "project"]
 
 _INSIDE_TOL = 1e-10
 _EPS = 2.220446049250313e-16
@@ -469,14 +468,6 @@ def _saturate_identity(b, s, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol):
 
 
 # ---------------------------------------------------------------------- the solve
-@kernel
-def solve(f: np.ndarray, i: np.ndarray, h: np.ndarray, J: np.ndarray, oMf: np.ndarray,
-          q: np.ndarray, par: np.ndarray) -> None:  # fmt: skip
-    """Evaluate the stack (:func:`wholebody.kernels.evaluate.evaluate`) and solve it."""
-    evaluate(f, i, h, J, oMf, q)
-    project(f, i, h, par)
-
-
 @kernel
 def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> None:
     """Solve the evaluated stack: ``F_U`` (scaled and actuated), per level its residual and

@@ -180,9 +180,13 @@ from scipy.optimize import lsq_linear
 
 from wholebody._numeric import NORMAL_KAPPA, normal_solve
 from wholebody._numeric import count_nonzero as _count_nonzero
-from wholebody.errors import SolverError
+from wholebody.errors import DimensionError, SolverError
+from wholebody.kernels import hqp as hqp_kernel
+from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
+from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Solver
+from wholebody.solvers.plan import Arena, ProblemArena, first_call
 from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
@@ -268,6 +272,10 @@ class HierarchicalQPSolver(Solver):
         daqp's soft-constraint weight in native mode (uniform on every row, so that each level
         minimises its true least squares): a level's optimum is exact up to about
         ``rho_soft |x|^2`` in its objective.
+    compiled
+        Run the cascade's arithmetic in the compiled kernels (:mod:`wholebody.kernels.hqp`,
+        the default), or, with False, in this module's Python, the reference the kernels are
+        tested against (same decisions, to rounding). The native method always runs here.
     """
 
     name = "hqp"
@@ -284,6 +292,7 @@ class HierarchicalQPSolver(Solver):
         engine_settings: dict[str, Any] | None = None,
         method: str = "cascade",
         rho_soft: float = 1e-7,
+        compiled: bool = True,
     ) -> None:
         for label, value in (("tolerance", tolerance), ("rank_tolerance", rank_tolerance),
                              ("regularization", regularization),
@@ -319,10 +328,25 @@ class HierarchicalQPSolver(Solver):
         self.active_tolerance = 1e-7
         """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
         self._engines: list[QPEngine] = []
-        self.levels: list[LevelReport] = []
-        """Per-level report of the last solve."""
+        self.levels = []
         self.qp_time = 0.0
         """Wall time (s) of the last solve without the stack evaluation."""
+        self.compiled = bool(compiled)
+        self._par = np.zeros(hqp_kernel.PAR_WIDTH)
+        self._workspace: compiled_hqp.Workspace | None = None
+        self._tie_status = QPStatus.SOLVED
+
+    @property
+    def levels(self) -> list[LevelReport]:
+        """Per-level report of the last solve."""
+        if self._pending is not None:
+            self._levels = compiled_hqp.reports(*self._pending, LevelReport)
+            self._pending = None
+        return self._levels
+
+    @levels.setter
+    def levels(self, value: list[LevelReport]) -> None:
+        self._levels, self._pending = value, None
 
     def __repr__(self) -> str:
         return f"HierarchicalQPSolver(engine={self.engine_name!r}, method={self.method!r})"
@@ -345,13 +369,46 @@ class HierarchicalQPSolver(Solver):
         ``solve_time`` covers the evaluation and the solve; :attr:`qp_time` the solve only.
         """
         t0 = time.perf_counter()
-        problem = stack.evaluate(state, dt)
-        result = self.solve_problem(problem)
+        if self.compiled and self.method == "cascade":
+            if not dt > 0:
+                raise DimensionError(f"control step dt must be > 0 s, got {dt}")
+            plan = stack.plan()
+            plan.sync(state, dt)
+            if plan.stale:  # an arm energy's stiffness was replaced: lay the stack out anew
+                plan = stack.plan()
+                plan.sync(state, dt)
+            first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state))
+            plan.written(state)
+            result = self._solve_arena(plan)
+        else:
+            problem = stack.evaluate(state, dt, compiled=self.compiled)
+            result = self.solve_problem(problem)
         result.solve_time = time.perf_counter() - t0
         return result
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
-        """Solve an evaluated stack (rows in scaled coordinates)."""
+        """Solve an evaluated stack (rows in scaled coordinates): with the kernels, or with
+        ``compiled=False`` (and with the native method) in Python, the reference."""
+        if self.compiled and self.method == "cascade":
+            return self._solve_arena(ProblemArena(problem))
+        return self._solve_reference(problem)
+
+    def _solve_arena(self, arena: Arena) -> SolverResult:
+        """The compiled cascade on an evaluated arena (:mod:`.compiled_hqp`)."""
+        t0 = time.perf_counter()
+        ws = self._workspace
+        if ws is None or ws.arena is not arena:
+            ws = self._workspace = compiled_hqp.Workspace(arena)
+        self._par[:] = (self.tolerance, self.rank_tolerance, self.regularization,
+                        self.bound_relaxation, self.active_tolerance, self.proximal_steps)  # fmt: skip
+        compiled_hqp.run(self, arena, ws)
+        self._pending = (arena, ws)
+        result = compiled_hqp.result(self, arena, ws, 0.0)
+        self.qp_time = result.solve_time = time.perf_counter() - t0
+        return result
+
+    def _solve_reference(self, problem: StackProblem) -> SolverResult:
+        """The Python implementation, the reference of the kernels."""
         t0 = time.perf_counter()
         x, failures, clip = self._cascade(problem)
         u = problem.to_u(x)
@@ -757,8 +814,10 @@ class HierarchicalQPSolver(Solver):
         if rp.dot(rp) > res.dot(res) or not _inside(x + (yp if Z is None else Z.dot(yp)), lo, hi,
                                                 inherited):  # fmt: skip
             yp, rp = y, res
-        if free is not None and math.sqrt(rp.dot(rp)) > self.tolerance * (
-            1.0 + math.sqrt(c.dot(c))
+        if (
+            free is not None
+            and math.sqrt(rp.dot(rp)) > self.tolerance * (1.0 + math.sqrt(c.dot(c)))
+            and not _box_optimal(M, c, yp, lo - x, hi - x, self.active_tolerance)
         ):
             fit = lsq_linear(
                 M,
@@ -1044,6 +1103,18 @@ def _optimal(lev: LevelProblem, x: np.ndarray, Z: np.ndarray | None, bounds: Bou
     if gn == 0.0:
         return True
     return mu is not None and res <= rtol * gn and bool(np.all(mu >= -rtol * gn))
+
+
+def _box_optimal(M: np.ndarray, c: np.ndarray, y: np.ndarray, lb: np.ndarray, ub: np.ndarray,
+                 act: float, rtol: float = 1e-4) -> bool:  # fmt: skip
+    """Whether ``y`` meets the optimality conditions of ``min ||M y - c||`` over the box
+    ``[lb, ub]`` (as :func:`_optimal` where only the box bounds a level): the gradient
+    vanishes on the free entries and points outwards on the bound ones, to ``rtol |g|``."""
+    g = M.T.dot(M.dot(y) - c)
+    up, low = y >= ub - act, y <= lb + act
+    tol = rtol * math.sqrt(g.dot(g))
+    free = g[~(up | low)]
+    return bool(free.dot(free) <= tol * tol and np.all(g[up] <= tol) and np.all(g[low] >= -tol))
 
 
 def _active_multipliers(lev: LevelProblem, x: np.ndarray, Z: np.ndarray | None, bounds: Bounds,

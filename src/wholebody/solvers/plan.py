@@ -66,14 +66,14 @@ def sqrt_weights(task: Task, w: object) -> np.ndarray:
     return np.sqrt(wa)
 
 
-def first_call(name: str, what: str, call, *args) -> None:
+def first_call(name: str, what: str, call, *args):  # noqa: ANN201 (the kernel's result)
     """``call(*args)``, telling the user when its first call in this process compiles."""
     if _WARM.get(name):
-        call(*args)
-        return
+        return call(*args)
     with kernels.compile_notice(what):
-        call(*args)
+        out = call(*args)
     _WARM[name] = True
+    return out
 
 
 class _Rows:
@@ -181,6 +181,11 @@ class Arena:
         self._outputs: tuple[np.ndarray, ...] | None = None
         self.reported: list[tuple[int, str, str]] = []
         """``(task index, task name, level name)`` of the equality tasks a result reports."""
+        self.inequality_rows: list[tuple[int, int, int, str]] = []
+        """``(level, first row, last row, name)`` of the inequality tasks."""
+        self.level_names: list[str] = []
+        self.task_names: list[str] = []
+        """The equality tasks' names, in the order of ``I_TASK``."""
 
     def view(self, region: int) -> np.ndarray:
         """Region ``region`` of the arenas as a numpy view (written by the kernels too)."""
@@ -237,6 +242,7 @@ class ProblemArena(Arena):
             lay.F_U: (2, n), lay.F_LEVEL_OUT: (L, 2), lay.F_TASK_RES: (len(tasks), 3),
             lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (len(tasks), 3),
             lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (n,), lay.I_INFEASIBLE: (len(tasks),),
+            lay.I_INEQ: (sum(len(lp.inequality_rows) for lp in levels), 3),
         })  # fmt: skip
         v = self.view
         metric = v(lay.F_METRIC)
@@ -259,6 +265,15 @@ class ProblemArena(Arena):
         if tasks:
             v(lay.I_TASK)[:] = [t[:3] for t in tasks]
         self.reported = [(t, name, levels[li].name) for t, (li, _, _, name) in enumerate(tasks)]
+        self.task_names = [name for *_, name in tasks]
+        self.level_names = [lp.name for lp in levels]
+        k = 0
+        for li, lp in enumerate(levels):
+            for name, sl in sorted(lp.inequality_rows.items(), key=lambda kv: kv[1].start):
+                self.inequality_rows.append((li, k + sl.start, k + sl.stop, name))
+            k += lp.C.shape[0]
+        if self.inequality_rows:
+            v(lay.I_INEQ)[:] = [row[:3] for row in self.inequality_rows]
 
 
 class Plan(Arena):
@@ -273,9 +288,12 @@ class Plan(Arena):
         self._frame_list: list[Frame] = []
         self._collect()
         super().__init__(self._shapes())
+        self.inequality_rows = self._inequality_rows
         self._fill_constants()
         self.reported = [(t, r.task.name, self.levels[r.level].name)
                          for t, r in enumerate(self.rows) if r.stop > r.start]  # fmt: skip
+        self.task_names = [r.task.name for r in self.rows]
+        self.level_names = [lv.name for lv in self.levels]
         self._problem: StackProblem | None = None
         self.metric_version = -1
         self.stale = False
@@ -294,6 +312,7 @@ class Plan(Arena):
         self.rows: list[_Rows] = []  # every equality task, in order
         self.pose_tasks, self.posture_tasks, self.python_tasks = [], [], []
         self.half_spaces, self.python_inequalities = [], []
+        self._inequality_rows: list[tuple[int, int, int, str]] = []  # level, rows, name
         self.objectives: list[tuple[Objective, int]] = []  # (objective, level)
         self.level_rows: list[tuple[int, int, int, int, int]] = []
         k = p = 0
@@ -316,6 +335,7 @@ class Plan(Arena):
             for t in level.inequalities:
                 kind = self.half_spaces if type(t) is FrameHalfSpace else self.python_inequalities
                 kind.append((t, p))
+                self._inequality_rows.append((li, p, p + t.dim, t.name))
                 p += t.dim
             self.level_rows.append((row0, tasks_end, k, ineq0, p))
         self.K, self.P = k, p
@@ -372,7 +392,7 @@ class Plan(Arena):
             lay.I_H2: (len(self.h2), 1 + fmax), lay.I_H2_MASK: (nu, nu) if self.h2 else (0, 0),
             lay.I_OBJ: (nO, 4), lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (T, 3),
             lay.I_BOX: (3,), lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (nu,),
-            lay.I_INFEASIBLE: (T,),
+            lay.I_INFEASIBLE: (T,), lay.I_INEQ: (len(self._inequality_rows), 3),
         }  # fmt: skip
 
     def _fill_constants(self) -> None:
@@ -390,6 +410,7 @@ class Plan(Arena):
             levels[li] = (row0, tasks_end, row_end, ineq0, ineq_end,
                           bool(self.levels[li].tasks))  # fmt: skip
         v(lay.I_TASK)[:] = [(r.level, r.start, r.stop) for r in self.rows] or np.zeros((0, 3))
+        v(lay.I_INEQ)[:] = [row[:3] for row in self._inequality_rows] or np.zeros((0, 3))
         for j, c in enumerate(self.pos_limits):
             v(lay.F_POS_BOX)[j] = (*c.limits, np.full(robot.nu, c.gain))
         for j, c in enumerate(self.vel_limits):

@@ -90,6 +90,7 @@ from wholebody._numeric import count_nonzero as _count
 from wholebody.errors import DimensionError, SolverError
 from wholebody.kernels import layout as lay
 from wholebody.kernels import projection as kernel
+from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
 from wholebody.solvers.plan import ProblemArena, first_call
@@ -552,9 +553,10 @@ class ProjectionSolver(Solver):
             plan = stack.plan()
             plan.sync(state, dt)
         self._set_par()
-        first_call("projection", "the projection kernels", kernel.solve,
-                   *plan.kernel_args(state), self._par)  # fmt: skip
+        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state))
         plan.written(state)
+        first_call("projection", "the projection kernels", kernel.project, plan.f, plan.i,
+                   plan.h, self._par)  # fmt: skip
         code = int(plan.view(lay.I_OUT)[lay.OUT_MESSAGE])
         return plan.result(time.perf_counter() - start, _MESSAGES[code])
 

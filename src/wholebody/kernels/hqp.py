@@ -1,0 +1,1174 @@
+"""The hierarchical QP's cascade in kernels: everything but the QP engine's own solves.
+
+The algorithm, its decisions and thresholds are those of the reference
+:class:`wholebody.solvers.hqp.HierarchicalQPSolver` (method ``"cascade"``; read its module
+docstring for the maths): level by level the exact unconstrained candidate by a complete
+orthogonal decomposition, and where it leaves the box or an inequality, the level's QP, then
+the polish that removes the Tikhonov bias (with the exact bounded least squares, BVLS, where
+only the box bounds the level), the level's optimality conditions, proximal steps, the
+constraints the level's optimum presses on fixed for the levels below, and at the end the
+minimum-norm tie-break.
+
+The QPs themselves are solved by the engine in Python (daqp by default), so the cascade runs
+as a few kernel calls that stop where a QP is needed: :func:`begin` and :func:`after_qp`,
+:func:`proximal`, :func:`tie_done` each return what to do next (``NEED_QP``,
+``NEED_PROXIMAL``, ``NEED_TIE`` or ``DONE``); the QP's data are in the workspace (``W_H``,
+``W_G``, ``W_QC``, ``W_QB``). The cascade's state between the calls is the workspace arena
+(regions ``W_*``, laid out like :mod:`wholebody.kernels.layout`'s): the point ``x``, the
+relaxed box, the basis ``Z`` of the free directions (or the identity), the inherited
+inequality rows, and per level its report.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wholebody.kernels import kernel
+from wholebody.kernels import layout as lay
+from wholebody.kernels.lapack import gels, geqp3, gesdd, orgqr, potrf, trtri, trtrs
+from wholebody.kernels.layout import fmat, fvec, imat, ivec
+from wholebody.kernels.linalg import NORMAL_KAPPA, frobenius2, level_report, normal_solve
+
+__all__ = [
+    "DONE",
+    "NEED_PROXIMAL",
+    "NEED_QP",
+    "NEED_TIE",
+    "after_qp",
+    "begin",
+    "bump",
+    "finish",
+    "proximal",
+    "tie_done",
+]
+
+DONE, NEED_QP, NEED_PROXIMAL, NEED_TIE = 0, 1, 2, 3
+
+# the solver's settings (par)
+P_TOL, P_RANK, P_REG, P_RELAX, P_ACT, P_PROX = 0, 1, 2, 3, 4, 5
+PAR_WIDTH = 6
+
+# workspace regions: floats, then ints
+W_X = 0  # (n,): the current point x (scaled coordinates)
+W_BOX = 1  # (4, n): lo, hi (relaxed by the bound relaxation, then to contain x), lb, ub
+W_Z = 2  # (n, n): the basis Z of the free directions in its first r columns
+W_INH = 3  # (P, n): the inherited inequality rows G
+W_INHB = 4  # (2, P): their bounds glo, ghi
+W_XC = 5  # (n,): the level's unconstrained candidate
+W_CV = 6  # (m_max,): c = b - A x of the level
+W_M = 7  # (m_max, n): M = A Z of the level (first r columns)
+W_NULL = 8  # (n, n): the level's own null space in free coordinates (r x cols)
+W_SCAL = 9  # (8,): scalars (C_*)
+W_H = 10  # (nv_max^2,): the QP's Hessian, nv x nv row-major
+W_G = 11  # (2, nv_max): the QP's gradient, and g0 of the proximal steps
+W_QC = 12  # (rows_max nv_max,): the QP's constraint rows, rows x nv row-major
+W_QB = 13  # (4, q_max): the QP's row bounds cl, cu and box lb, ub
+W_Y = 14  # (2, n): the level's step y, and its residual c - M y (first m)
+N_WFLOAT = 15
+W_STATE = 15  # (S_WIDTH,): the cascade's state (S_*)
+W_REPORT = 16  # (L, R_WIDTH): per level (R_*)
+W_LIMITED = 17  # (T + Pt,): per equality then inequality task: limited, violated or bad
+N_WREGIONS = 18
+
+S_K, S_R, S_ZI, S_ANYQP, S_EXACT, S_NINH, S_NV, S_NROWS, S_HASBOX, S_RANK = range(10)
+S_NULL, S_M, S_P, S_PROX, S_BOXBAD, S_TIEFAIL, S_TIE = range(10, 17)
+S_WIDTH = 17
+C_SMAX, C_D, C_TOL, C_F, C_CLIP, C_RES = range(6)
+R_FREE, R_RANK, R_QP, R_FAILED, R_ITER, R_RETRIES, R_STATUS, R_FAIL, R_OBJBAD = range(9)
+R_WIDTH = 9
+FAIL_NONFINITE, FAIL_DECOMPOSITION, FAIL_STEP, FAIL_ENGINE = 1, 2, 3, 4
+_MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
+_EPS = 2.220446049250313e-16
+_ACT = 1e-8  # the polish's activity threshold
+
+
+# ---------------------------------------------------------------------- linear algebra
+@kernel
+def _rank_certificate(M: np.ndarray, Rinv: np.ndarray, rtol: float, floor: float) -> float:
+    """``kappa_F^2 = ||R^-1||_F^2 ||M||_F^2`` when the rank rule of :func:`cod` is certain to
+    find full column rank for a tall M (the reference's ``_rank_certificate``), else -1."""
+    inv2 = frobenius2(Rinv)
+    k2 = inv2 * frobenius2(M)
+    m = M.shape[0]
+    margin = _MARGIN * rtol
+    if k2 * m * margin * margin < 1.0 and inv2 * m * floor * floor < 1.0:
+        return k2
+    return -1.0
+
+
+@kernel
+def _normal_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float):
+    """The tall ``M``'s least-squares solution by its normal equations where they are
+    accurate and full column rank is certain: ``(ok, y)`` (the reference's
+    ``_normal_solve``)."""
+    U = np.asfortranarray(M.T.dot(M))
+    if potrf(U, False) != 0 or trtri(U, False) != 0:
+        return False, c[: M.shape[1]].copy()
+    k2 = _rank_certificate(M, U, rtol, floor)
+    if not (k2 >= 0 and k2 <= NORMAL_KAPPA * NORMAL_KAPPA):
+        return False, c[: M.shape[1]].copy()
+    return True, normal_solve(M, np.ascontiguousarray(U.T), c, k2)
+
+
+@kernel
+def _transposed(M: np.ndarray) -> np.ndarray:
+    """``M^T`` as a new Fortran-ordered array (its memory: M's rows)."""
+    out = np.empty(M.shape)  # C-ordered (m, r): the Fortran-ordered (r, m) transpose
+    out[:, :] = M
+    return out.T
+
+
+@kernel
+def cod(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: float):
+    """Minimum-norm least squares with a rank threshold by a complete orthogonal
+    decomposition (the reference's ``_cod``): ``(info, rank, y, Q2, smax, known)`` with
+    ``y = Q_1 a - Q_2 Q_2^T t``, ``Q2`` the null space (r x (r - rank); None in the
+    reference when rank = r: here 0 columns), ``smax = |R_00|`` when ``known``; ``info``
+    nonzero where LAPACK failed (the reference raises)."""
+    m, r = M.shape
+    have_tall = False
+    tall = np.zeros(r)
+    if m > r > 0:
+        ok, y = _normal_solve(M, c, rtol, floor)
+        if ok:
+            return 0, r, y, np.zeros((r, 0)), 0.0, False
+        lqr = np.asfortranarray(M)
+        z = c.copy()
+        if gels(lqr, z) == 0:
+            tall = z[:r].copy()
+            have_tall = True
+            R = np.asfortranarray(lqr[:r, :r])
+            if trtri(R, False) == 0 and _rank_certificate(M, R, rtol, floor) >= 0:
+                return 0, r, tall, np.zeros((r, 0)), 0.0, False
+    k = min(m, r)
+    qr = _transposed(M)  # Fortran-ordered M^T (r x m)
+    jpvt = np.zeros(max(m, 1), np.int32)
+    tau = np.zeros(max(k, 1))
+    info = geqp3(qr, jpvt[:m], tau[:k])
+    if info != 0:
+        return info, 0, np.zeros(r), np.zeros((r, 0)), 0.0, True
+    smax, rank = 0.0, 0
+    if k:
+        smax = abs(qr[0, 0])
+        if smax > floor:
+            thr = max(rtol * smax, floor)
+            for j in range(k):
+                if abs(qr[j, j]) > thr:
+                    rank += 1
+    if rank == r and have_tall:  # full column rank, more rows: the unique solution
+        return 0, rank, tall, np.zeros((r, 0)), smax, True
+    Q = np.zeros((r, r)).T
+    Q[:, :k] = qr[:, :k]
+    info = orgqr(Q, tau, k, 8 * r)
+    if info != 0:
+        return info, 0, np.zeros(r), np.zeros((r, 0)), 0.0, True
+    y = np.zeros(r)
+    if rank:
+        cp = np.empty(m)
+        for j in range(m):
+            cp[j] = c[jpvt[j] - 1]
+        if rank == m:  # R_11^T a = P^T c, triangular
+            info = trtrs(qr[:rank, :rank], cp, False, True)
+            z = cp
+        else:  # (m x rank) lower-trapezoidal least squares
+            R1t = np.zeros((rank, m)).T
+            for a in range(rank):
+                for b in range(a, m):
+                    R1t[b, a] = qr[a, b]
+            info = gels(R1t, cp)
+            z = cp
+        if info != 0:
+            return info, 0, np.zeros(r), np.zeros((r, 0)), 0.0, True
+        y = np.ascontiguousarray(Q[:, :rank]).dot(z[:rank].copy())
+    if rank == r:
+        return 0, rank, y, np.zeros((r, 0)), smax, True
+    Q2 = np.ascontiguousarray(Q[:, rank:])
+    if np.any(t != 0):  # (t = 0: nothing to remove, often at the first level)
+        y -= Q2.dot(Q2.T.dot(t))
+    return 0, rank, y, Q2, smax, True
+
+
+@kernel
+def _pivot_norm(M: np.ndarray) -> float:
+    """``|R_00|`` of the pivoted QR of ``M^T``."""
+    m, r = M.shape
+    if min(m, r) == 0:
+        return 0.0
+    qr = _transposed(M)
+    jpvt = np.zeros(m, np.int32)
+    tau = np.zeros(min(m, r))
+    if geqp3(qr, jpvt, tau) != 0:
+        return 0.0
+    return abs(qr[0, 0])
+
+
+@kernel
+def _null_space(Nz: np.ndarray, Z: np.ndarray, identity: bool, rtol: float,
+                floor: float) -> np.ndarray:  # fmt: skip
+    """Basis of ``{Z y : Nz y = 0}`` (``identity``: Z = I); singular values at most
+    ``max(rtol s_max, floor)`` count as zero (the reference's ``_null_space``)."""
+    q, r = Nz.shape
+    _, _, S, Vt = gesdd(np.asfortranarray(Nz), True)
+    rank = 0
+    if S.shape[0] and S[0] > floor:
+        thr = max(rtol * S[0], floor)
+        for s in S:
+            if thr < s:
+                rank += 1
+    V2 = np.ascontiguousarray(Vt[rank:].T)
+    return V2 if identity else np.ascontiguousarray(Z).dot(V2)
+
+
+# ---------------------------------------------------------------------- reading the stack
+@kernel
+def _rows(f, i, h, k):  # fmt: skip
+    """Level k's equality rows ``A, b``, inequality rows ``C, lower, upper`` and the index
+    ranges of its tasks and inequality tasks."""
+    levels = imat(i, h, lay.I_LEVEL)
+    r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
+    p0, p1 = levels[k, lay.LEVEL_INEQ0], levels[k, lay.LEVEL_INEQ_END]
+    A, b, C, cb = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B), fmat(f, h, lay.F_C), fmat(f, h, lay.F_CB)
+    return A[r0:r1], b[r0:r1], C[p0:p1], cb[0, p0:p1], cb[1, p0:p1], r0, p0
+
+
+@kernel
+def _task_range(tasks: np.ndarray, k: int) -> tuple[int, int]:
+    """The indices ``[t0, t1)`` of the rows of ``tasks`` (``(T, 3)``: level, ...) of level k."""
+    t0 = 0
+    while t0 < tasks.shape[0] and tasks[t0, 0] < k:
+        t0 += 1
+    t1 = t0
+    while t1 < tasks.shape[0] and tasks[t1, 0] == k:
+        t1 += 1
+    return t0, t1
+
+
+@kernel
+def _finite(a: np.ndarray) -> bool:
+    for v in a.ravel():
+        if not math.isfinite(v):
+            return False
+    return True
+
+
+@kernel
+def _finite_level(A, b, C, lo, hi) -> bool:  # fmt: skip
+    """Whether the level's rows are finite (its inequality bounds may be infinite)."""
+    if not (_finite(A) and _finite(b) and _finite(C)):
+        return False
+    for j in range(lo.shape[0]):
+        if lo[j] != lo[j] or hi[j] != hi[j]:
+            return False
+    return True
+
+
+@kernel
+def _skip_nonfinite(f, i, h, wi, wh, k) -> None:  # fmt: skip
+    """Mark the level skipped for non-finite rows, and which of its tasks have them."""
+    A, b, C, lo, hi, r0, p0 = _rows(f, i, h, k)
+    rep, limited = imat(wi, wh, W_REPORT), ivec(wi, wh, W_LIMITED)
+    tasks, ineq = imat(i, h, lay.I_TASK), imat(i, h, lay.I_INEQ)
+    T = tasks.shape[0]
+    rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_NONFINITE
+    t0, t1 = _task_range(tasks, k)
+    end = r0
+    for t in range(t0, t1):
+        a, z = tasks[t, 1] - r0, tasks[t, 2] - r0
+        end = max(end, tasks[t, 2])
+        limited[t] = not (_finite(A[a:z]) and _finite(b[a:z]))
+    rep[k, R_OBJBAD] = not (_finite(A[end - r0 :]) and _finite(b[end - r0 :]))
+    q0, q1 = _task_range(ineq, k)
+    for t in range(q0, q1):
+        a, z = ineq[t, 1] - p0, ineq[t, 2] - p0
+        bad = not _finite(C[a:z])
+        for j in range(a, z):
+            bad = bad or lo[j] != lo[j] or hi[j] != hi[j]
+        limited[T + t] = bad
+
+
+@kernel
+def _violated(f, i, h, wi, wh, k, Cx, lo, hi, tol, mark) -> np.ndarray:  # fmt: skip
+    """The level's inequality rows that ``Cx`` violates by more than ``tol`` (a mask), and,
+    where ``mark``, their tasks flagged in ``W_LIMITED``."""
+    viol = (Cx > hi + tol) | (Cx < lo - tol)
+    if mark and np.any(viol):
+        ineq, limited = imat(i, h, lay.I_INEQ), ivec(wi, wh, W_LIMITED)
+        T = imat(i, h, lay.I_TASK).shape[0]
+        p0 = imat(i, h, lay.I_LEVEL)[k, lay.LEVEL_INEQ0]
+        q0, q1 = _task_range(ineq, k)
+        for t in range(q0, q1):
+            if np.any(viol[ineq[t, 1] - p0 : ineq[t, 2] - p0]):
+                limited[T + t] = 1
+    return viol
+
+
+@kernel
+def _inside_rows(x: np.ndarray, G: np.ndarray, glo: np.ndarray, ghi: np.ndarray) -> bool:
+    """Whether ``x`` meets the inherited rows ``glo <= G x <= ghi``."""
+    if G.shape[0] == 0:
+        return True
+    Gx = G.dot(x)
+    for j in range(Gx.shape[0]):
+        if not (Gx[j] >= glo[j] and Gx[j] <= ghi[j]):
+            return False
+    return True
+
+
+@kernel
+def _in_box(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    for j in range(x.shape[0]):
+        if not (x[j] >= lo[j] and x[j] <= hi[j]):
+            return False
+    return True
+
+
+@kernel
+def _inside(x, lo, hi, G, glo, ghi) -> bool:  # fmt: skip
+    return _in_box(x, lo, hi) and _inside_rows(x, G, glo, ghi)
+
+
+@kernel
+def _level_objective(A, b, C, lo, hi, x) -> float:  # fmt: skip
+    """``1/2 ||A x - b||^2 + 1/2 ||s||^2``, ``s`` the least slack of the inequality rows."""
+    r = A.dot(x) - b
+    f = 0.5 * r.dot(r)
+    if C.shape[0]:
+        Cx = C.dot(x)
+        s = np.maximum(Cx - hi, 0.0) + np.maximum(lo - Cx, 0.0)
+        f += 0.5 * s.dot(s)
+    return f
+
+
+# ---------------------------------------------------------------------- the state
+@kernel
+def _state(wf, wi, wh):  # fmt: skip
+    """The cascade's state: ``(st, x, box, Z, G, gb, n_inherited)``."""
+    st = ivec(wi, wh, W_STATE)
+    ni = st[S_NINH]
+    G, gb = fmat(wf, wh, W_INH), fmat(wf, wh, W_INHB)
+    return st, fvec(wf, wh, W_X), fmat(wf, wh, W_BOX), fmat(wf, wh, W_Z), G[:ni], gb[:, :ni], ni
+
+
+@kernel
+def _apply_Z(Z: np.ndarray, r: int, identity: bool, y: np.ndarray) -> np.ndarray:
+    """``Z y`` (Z: the first r columns; the identity)."""
+    if identity:
+        return y.copy()
+    return np.ascontiguousarray(Z[:, :r]).dot(y)
+
+
+@kernel
+def _Zt(Z: np.ndarray, r: int, identity: bool, x: np.ndarray) -> np.ndarray:
+    """``Z^T x``."""
+    if identity:
+        return x.copy()
+    return np.ascontiguousarray(Z[:, :r]).T.dot(x)
+
+
+# ---------------------------------------------------------------------- optimality
+@kernel
+def _active_multipliers(A, b, C, clo, chi, x, Z, r, identity, lo, hi, G, glo, ghi, act,
+                        rank_tol):  # fmt: skip
+    """The norm of the level's gradient in the free coordinates, the rows ``N`` (x-space)
+    of the constraints active at ``x`` (within ``act``), their multipliers (``has_mu``
+    False when none is active) and the norm of what the normals leave of the gradient (the
+    reference's ``_active_multipliers``): ``(gnorm, N, has_mu, mu, res)``."""
+    n = x.shape[0]
+    g = A.T.dot(A.dot(x) - b)
+    if C.shape[0]:
+        Cx = C.dot(x)
+        g = g + C.T.dot(np.maximum(Cx - chi, 0.0) - np.maximum(clo - Cx, 0.0))
+    gy = _Zt(Z, r, identity, g)
+    gnorm = math.sqrt(gy.dot(gy))
+    low, up = x <= lo + act, x >= hi - act
+    count = int(np.sum(low | up))
+    Gx = G.dot(x) if G.shape[0] else np.zeros(0)
+    gl, gu = Gx <= glo + act, Gx >= ghi - act
+    count += int(np.sum(gl | gu))
+    N = np.zeros((count, n))
+    signs = np.zeros(count)
+    q = 0
+    for j in range(n):
+        if low[j] or up[j]:
+            N[q, j] = 1.0
+            signs[q] = 1.0 if low[j] else -1.0
+            q += 1
+    for j in range(Gx.shape[0]):
+        if gl[j] or gu[j]:
+            N[q] = G[j]
+            signs[q] = 1.0 if gl[j] else -1.0
+            q += 1
+    if count == 0:
+        return gnorm, N, False, np.zeros(0), gnorm
+    Ny = N if identity else N.dot(np.ascontiguousarray(Z[:, :r]))
+    for j in range(count):
+        Ny[j] *= signs[j]
+    info, _, mu, _, _, _ = cod(np.ascontiguousarray(Ny.T), gy, np.zeros(count), rank_tol, 0.0)
+    if info != 0:
+        return gnorm, N, False, np.zeros(0), gnorm
+    res = Ny.T.dot(mu) - gy
+    return gnorm, N, True, mu, math.sqrt(res.dot(res))
+
+
+@kernel
+def _box_optimal(M, c, y, lb, ub, act) -> bool:  # fmt: skip
+    """Whether ``y`` meets the optimality conditions of ``min ||M y - c||`` over ``[lb, ub]``
+    (the reference's ``_box_optimal``, rtol 1e-4)."""
+    rtol = 1e-4
+    g = M.T.dot(M.dot(y) - c)
+    tol = rtol * math.sqrt(g.dot(g))
+    free2 = 0.0
+    for j in range(y.shape[0]):
+        up, low = y[j] >= ub[j] - act, y[j] <= lb[j] + act
+        if up and not g[j] <= tol:
+            return False
+        if low and not g[j] >= -tol:
+            return False
+        if not (up or low):
+            free2 += g[j] * g[j]
+    return free2 <= tol * tol
+
+
+@kernel
+def _optimal(A, b, x, Z, r, identity, lo, hi, G, glo, ghi, act, rank_tol) -> bool:  # fmt: skip
+    """Whether ``x`` meets the optimality conditions of the level's least squares (the
+    reference's ``_optimal``, rtol 1e-4)."""
+    rtol = 1e-4
+    if identity and G.shape[0] == 0:  # the normals are unit vectors: mu = +-g on the bounds
+        g = A.T.dot(A.dot(x) - b)
+        tol = rtol * math.sqrt(g.dot(g))
+        free2 = 0.0
+        for j in range(x.shape[0]):
+            up, low = x[j] >= hi[j] - act, x[j] <= lo[j] + act
+            if up and not g[j] <= tol:
+                return False
+            if low and not g[j] >= -tol:
+                return False
+            if not (up or low):
+                free2 += g[j] * g[j]
+        return free2 <= tol * tol
+    C0 = np.zeros((0, x.shape[0]))
+    e = np.zeros(0)
+    gn, _, has_mu, mu, res = _active_multipliers(A, b, C0, e, e, x, Z, r, identity, lo, hi, G,
+                                                 glo, ghi, act, rank_tol)  # fmt: skip
+    if gn == 0.0:
+        return True
+    return has_mu and res <= rtol * gn and bool(np.all(mu >= -rtol * gn))
+
+
+# ---------------------------------------------------------------------- the cascade
+@kernel
+def begin(f, i, h, wf, wi, wh, par) -> int:  # fmt: skip
+    """Run the cascade of the evaluated stack from its first level."""
+    st = ivec(wi, wh, W_STATE)
+    st[:] = 0
+    imat(wi, wh, W_REPORT)[:, :] = 0
+    ivec(wi, wh, W_LIMITED)[:] = 0
+    box, x = fmat(wf, wh, W_BOX), fvec(wf, wh, W_X)
+    ab = fmat(f, h, lay.F_BOX)
+    n = x.shape[0]
+    box[2], box[3] = ab[0], ab[1]
+    fvec(wf, wh, W_SCAL)[:] = 0.0
+    for j in range(n):
+        if not ab[0, j] <= ab[1, j]:  # NaN compares false; evaluate never crosses the box
+            st[S_BOXBAD] = 1
+            x[:] = 0.0
+            return DONE
+    bt = par[P_RELAX]
+    x[:] = np.minimum(np.maximum(0.0, ab[0]), ab[1])  # the minimum-norm point of the box
+    box[0] = ab[0] - bt
+    box[1] = ab[1] + bt
+    st[S_R], st[S_ZI], st[S_EXACT] = n, 1, 1
+    return _advance(f, i, h, wf, wi, wh, par)
+
+
+@kernel
+def _advance(f, i, h, wf, wi, wh, par) -> int:  # fmt: skip
+    """Levels from the current one until one needs a QP; then the tie-break."""
+    st = ivec(wi, wh, W_STATE)
+    L = imat(i, h, lay.I_LEVEL).shape[0]
+    while st[S_K] < L:
+        if _level(f, i, h, wf, wi, wh, par, st[S_K]) == NEED_QP:
+            return NEED_QP
+        st[S_K] += 1
+    return _end(f, i, h, wf, wi, wh)
+
+
+@kernel
+def _level(f, i, h, wf, wi, wh, par, k) -> int:  # fmt: skip
+    """Level k up to its QP (the reference's loop body): the unconstrained candidate, taken
+    where it is feasible; else the QP is set up and NEED_QP returned."""
+    tol, rank_tol = par[P_TOL], par[P_RANK]
+    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
+    rep = imat(wi, wh, W_REPORT)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    n, r, identity = x.shape[0], st[S_R], st[S_ZI] == 1
+    m, p = A.shape[0], C.shape[0]
+    rep[k, R_FREE] = r
+    if r == 0:  # nothing left to move: report the inequality rows x leaves violated
+        if not _finite_level(A, b, C, clo, chi):
+            _skip_nonfinite(f, i, h, wi, wh, k)
+        elif p:
+            _violated(f, i, h, wi, wh, k, C.dot(x), clo, chi, tol, True)
+        return DONE
+    if p and not _finite_level(A, b, C, clo, chi):
+        _skip_nonfinite(f, i, h, wi, wh, k)
+        return DONE
+    t = _Zt(Z, r, identity, x)
+    smax, known, rank, null_cols = 0.0, True, 0, -1
+    Mw, cw, Nw = fmat(wf, wh, W_M), fvec(wf, wh, W_CV), fmat(wf, wh, W_NULL)
+    if m:
+        c = b - A.dot(x) if (not identity or np.any(x != 0)) else b.copy()
+        M = A.copy() if identity else A.dot(np.ascontiguousarray(Z[:, :r]))
+        cw[:m], Mw[:m, :r] = c, M
+        sw = fmat(f, h, lay.F_LEVEL)[k, lay.LEVEL_IDENTITY] if m == n else 0.0
+        if sw > 0:  # rows sw * I: M = sw Z has r singular values sw
+            rank, smax = r, sw
+            y = _Zt(Z, r, identity, c) / sw
+        else:
+            floor = 0.0 if identity else rank_tol * math.sqrt(frobenius2(A))
+            info, rank, y, Q2, smax, known = cod(M, c, t, rank_tol, floor)
+            if info != 0:
+                if not _finite_level(A, b, C, clo, chi):
+                    _skip_nonfinite(f, i, h, wi, wh, k)
+                else:
+                    rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_DECOMPOSITION
+                return DONE
+            if rank < r:
+                null_cols = Q2.shape[1]
+                Nw[:r, :null_cols] = Q2
+    else:
+        y = -t
+    if m and (rank == 0 or not _finite(y)) and not _finite_level(A, b, C, clo, chi):
+        _skip_nonfinite(f, i, h, wi, wh, k)
+        return DONE
+    if not _finite(y):  # finite rows, yet the decomposition overflowed
+        rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_STEP
+        return DONE
+    rep[k, R_RANK] = rank
+    xc = x + _apply_Z(Z, r, identity, y)
+    in_box = _in_box(xc, box[2], box[3])
+    st[S_RANK], st[S_NULL], st[S_M], st[S_P] = rank, null_cols, m, p
+    if ((in_box or _in_box(xc, box[0], box[1])) and _inside_rows(xc, G, gb[0], gb[1])
+            and (p == 0 or _rows_inside(C.dot(xc), clo, chi, tol))):  # fmt: skip
+        x[:] = xc
+        st[S_EXACT] = in_box
+        _close(f, i, h, wf, wi, wh, par, k)
+        return DONE
+    if m and rank == 0 and p == 0:
+        # rows with nothing left to move (round-off in the free directions, or a task the
+        # levels above fix): only the minimum-norm step left the box; the tie-break decides
+        st[S_ANYQP] = 1
+        _close(f, i, h, wf, wi, wh, par, k)
+        return DONE
+    rep[k, R_QP] = 1
+    st[S_ANYQP] = 1
+    if not known:  # certified full rank: |R_00| only now needed
+        smax = _pivot_norm(Mw[:m, :r])
+    fvec(wf, wh, W_XC)[:] = xc
+    fvec(wf, wh, W_SCAL)[C_SMAX] = smax
+    _qp_setup(f, i, h, wf, wi, wh, par, k)
+    return NEED_QP
+
+
+@kernel
+def _rows_inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> bool:
+    for j in range(v.shape[0]):
+        if not (v[j] >= lo[j] - tol and v[j] <= hi[j] + tol):
+            return False
+    return True
+
+
+@kernel
+def _qp_setup(f, i, h, wf, wi, wh, par, k) -> None:  # fmt: skip
+    """The level's QP in ``(y, s)`` (the reference's ``_level_qp`` up to the engine):
+    ``min 1/2 ||M y - c||^2 + d/2 ||y||^2 + 1/2 ||s||^2`` subject to the relaxed box (as
+    rows of Z, or the QP's own box where Z is the identity), the inherited rows (widened to
+    contain x) and the level's inequality rows with their slacks."""
+    st, x, box, Z, G, gb, ni = _state(wf, wi, wh)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    r, identity, m, p = st[S_R], st[S_ZI] == 1, st[S_M], st[S_P]
+    n = x.shape[0]
+    nv = r + p
+    smax = fvec(wf, wh, W_SCAL)[C_SMAX]
+    d = par[P_REG] * (smax * smax if smax > 0 else 1.0)
+    fvec(wf, wh, W_SCAL)[C_D] = d
+    H = fvec(wf, wh, W_H)[: nv * nv].reshape((nv, nv))
+    g = fmat(wf, wh, W_G)[0, :nv]
+    H[:, :] = 0.0
+    g[:] = 0.0
+    if m:
+        M, c = fmat(wf, wh, W_M)[:m, :r], fvec(wf, wh, W_CV)[:m]
+        H[:r, :r] = M.T.dot(M)
+        g[:r] = -(M.T.dot(c))
+    for j in range(r):
+        H[j, j] += d
+    for j in range(r, nv):
+        H[j, j] = 1.0
+    nrows = (0 if identity else n) + ni + p
+    Q = fvec(wf, wh, W_QC)[: nrows * nv].reshape((nrows, nv))
+    qb = fmat(wf, wh, W_QB)
+    Q[:, :] = 0.0
+    row = 0
+    if identity:
+        qb[2, :nv] = -np.inf
+        qb[3, :nv] = np.inf
+        qb[2, :r] = box[0] - x
+        qb[3, :r] = box[1] - x
+    else:
+        Q[:n, :r] = Z[:, :r]
+        qb[0, :n] = box[0] - x
+        qb[1, :n] = box[1] - x
+        row = n
+    if ni:  # widened to contain x, so that y = 0 is feasible
+        Gx = G.dot(x)
+        Q[row : row + ni, :r] = G if identity else G.dot(np.ascontiguousarray(Z[:, :r]))
+        qb[0, row : row + ni] = np.minimum(gb[0] - Gx, 0.0)
+        qb[1, row : row + ni] = np.maximum(gb[1] - Gx, 0.0)
+        row += ni
+    if p:
+        Q[row : row + p, :r] = C if identity else C.dot(np.ascontiguousarray(Z[:, :r]))
+        for j in range(p):
+            Q[row + j, r + j] = -1.0
+        Cx = C.dot(x)
+        qb[0, row : row + p] = clo - Cx
+        qb[1, row : row + p] = chi - Cx
+    st[S_NV], st[S_NROWS], st[S_HASBOX] = nv, nrows, identity
+
+
+@kernel
+def bump(wf, wi, wh, attempt) -> None:  # fmt: skip
+    """After an engine failure: the Tikhonov term times 100 (the reference's retry)."""
+    st = ivec(wi, wh, W_STATE)
+    d = fvec(wf, wh, W_SCAL)[C_D]
+    nv = st[S_NV]
+    H = fvec(wf, wh, W_H)[: nv * nv].reshape((nv, nv))
+    for j in range(st[S_R]):
+        H[j, j] += d * (100.0**attempt - 100.0 ** (attempt - 1))
+
+
+@kernel
+def after_qp(f, i, h, wf, wi, wh, par, sol, ok) -> int:  # fmt: skip
+    """The level's QP answer ``sol`` (``ok``: the engine solved it): polish, optimality
+    check, then the proximal steps (NEED_PROXIMAL) or the level's close and the next
+    levels."""
+    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
+    k, r, identity, m, p = st[S_K], st[S_R], st[S_ZI] == 1, st[S_M], st[S_P]
+    if not ok:
+        imat(wi, wh, W_REPORT)[k, R_FAILED] = 1
+        imat(wi, wh, W_REPORT)[k, R_FAIL] = FAIL_ENGINE
+        st[S_K] += 1
+        return _advance(f, i, h, wf, wi, wh, par)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    y = sol[:r].copy()
+    M, c = fmat(wf, wh, W_M)[:m, :r], fvec(wf, wh, W_CV)[:m]
+    if m == 0:
+        if p:  # only inequality rows: their slack is the level's least squares
+            y = _polish(f, i, h, wf, wi, wh, par, k, y, M, c, True)
+        return _finish_level(f, i, h, wf, wi, wh, par, y)
+    y = _polish(f, i, h, wf, wi, wh, par, k, y, M, c, p > 0)
+    xq = x + _apply_Z(Z, r, identity, y)
+    if p == 0 and _optimal(A, b, xq, Z, r, identity, box[0], box[1], G, gb[0], gb[1], par[P_ACT],
+                           par[P_RANK]):  # fmt: skip
+        return _finish_level(f, i, h, wf, wi, wh, par, y)
+    scal, gg, yr = fvec(wf, wh, W_SCAL), fmat(wf, wh, W_G), fmat(wf, wh, W_Y)
+    gg[1, :r] = gg[0, :r]
+    scal[C_TOL] = par[P_TOL] * (1.0 + math.sqrt(c.dot(c)))
+    scal[C_F] = _level_objective(A, b, C, clo, chi, xq) if p else 0.0
+    res = c - M.dot(y)
+    scal[C_RES] = math.sqrt(res.dot(res))
+    yr[0, :r] = y
+    st[S_PROX] = 0
+    return _next_proximal(f, i, h, wf, wi, wh, par)
+
+
+@kernel
+def _next_proximal(f, i, h, wf, wi, wh, par) -> int:  # fmt: skip
+    """Another proximal step (the Tikhonov term centred on the last answer), or the level's
+    close."""
+    st = ivec(wi, wh, W_STATE)
+    scal, gg, yr = fvec(wf, wh, W_SCAL), fmat(wf, wh, W_G), fmat(wf, wh, W_Y)
+    r = st[S_R]
+    if st[S_PROX] >= int(par[P_PROX]) or scal[C_RES] <= scal[C_TOL]:
+        return _finish_level(f, i, h, wf, wi, wh, par, yr[0, :r].copy())
+    gg[0, :r] = gg[1, :r] - scal[C_D] * yr[0, :r]
+    return NEED_PROXIMAL
+
+
+@kernel
+def proximal(f, i, h, wf, wi, wh, par, sol, ok) -> int:  # fmt: skip
+    """A proximal step's QP answer: kept if it fits the level better (the reference's loop)."""
+    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
+    k, r, identity, m, p = st[S_K], st[S_R], st[S_ZI] == 1, st[S_M], st[S_P]
+    scal, yr = fvec(wf, wh, W_SCAL), fmat(wf, wh, W_Y)
+    st[S_PROX] += 1
+    y = yr[0, :r].copy()
+    if not ok:
+        return _finish_level(f, i, h, wf, wi, wh, par, y)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    M, c = fmat(wf, wh, W_M)[:m, :r], fvec(wf, wh, W_CV)[:m]
+    yn = _polish(f, i, h, wf, wi, wh, par, k, sol[:r].copy(), M, c, p > 0)
+    rn = c - M.dot(yn)
+    fn = _level_objective(A, b, C, clo, chi, x + _apply_Z(Z, r, identity, yn)) if p else 0.0
+    if p and fn > scal[C_F]:
+        return _finish_level(f, i, h, wf, wi, wh, par, y)
+    rnorm = math.sqrt(rn.dot(rn))
+    better = scal[C_RES] - rnorm
+    if better <= 0.0:
+        return _finish_level(f, i, h, wf, wi, wh, par, y)
+    yr[0, :r] = yn
+    scal[C_RES], scal[C_F] = rnorm, fn
+    if better <= 1e-3 * scal[C_TOL]:
+        return _finish_level(f, i, h, wf, wi, wh, par, yn)
+    return _next_proximal(f, i, h, wf, wi, wh, par)
+
+
+@kernel
+def _finish_level(f, i, h, wf, wi, wh, par, y) -> int:  # fmt: skip
+    """The level's QP answer ``x + Z y`` taken: which tasks the box limited, the level's
+    close, the next levels."""
+    st, x, box, Z, _, _, _ = _state(wf, wi, wh)
+    k, r, identity, m = st[S_K], st[S_R], st[S_ZI] == 1, st[S_M]
+    xq = x + _apply_Z(Z, r, identity, y)
+    if m:
+        _bound_limited(f, i, h, wf, wi, wh, par, k, xq)
+    x[:] = xq
+    _close(f, i, h, wf, wi, wh, par, k)
+    st[S_K] += 1
+    return _advance(f, i, h, wf, wi, wh, par)
+
+
+@kernel
+def _bound_limited(f, i, h, wf, wi, wh, par, k, xq) -> None:  # fmt: skip
+    """Flag the level's tasks whose residual the box raised above the box-free optimum (none
+    when no entry of ``xq`` is on the box: then the levels above set the residual)."""
+    box = fmat(wf, wh, W_BOX)
+    tasks, limited = imat(i, h, lay.I_TASK), ivec(wi, wh, W_LIMITED)
+    t0, t1 = _task_range(tasks, k)
+    for t in range(t0, t1):
+        limited[t] = 0
+    on = False
+    for j in range(xq.shape[0]):
+        if xq[j] <= box[2, j] + 1e-7 or xq[j] >= box[3, j] - 1e-7:
+            on = True
+    if not on or t1 == t0:
+        return
+    A, b, _, _, _, r0, _ = _rows(f, i, h, k)
+    unweight = fmat(f, h, lay.F_ROW)[1, r0 : r0 + A.shape[0]]
+    at = np.zeros((t1 - t0, 3))
+    free = np.zeros((t1 - t0, 3))
+    level_report(A, b, unweight, xq, tasks[t0:t1], r0, at)
+    level_report(A, b, unweight, fvec(wf, wh, W_XC), tasks[t0:t1], r0, free)
+    for t in range(t1 - t0):
+        if at[t, 0] - free[t, 0] > par[P_TOL] * (1.0 + at[t, 2]):
+            limited[t0 + t] = 1
+
+
+@kernel
+def _close(f, i, h, wf, wi, wh, par, k) -> None:  # fmt: skip
+    """The level's optimal set: its rows fixed (the basis Z times its own null space), the
+    constraints its optimum presses on fixed too, its inequality rows inherited, the relaxed
+    box widened to contain x (the reference's end of a level)."""
+    st, x, box, Z, _, _, _ = _state(wf, wi, wh)
+    rep = imat(wi, wh, W_REPORT)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    n, r, identity, m, p, rank = x.shape[0], st[S_R], st[S_ZI] == 1, st[S_M], st[S_P], st[S_RANK]
+    Z_level = Z[:, :r].copy() if not identity else np.zeros((n, 0))
+    was_identity = identity
+    if rank:
+        cols = max(st[S_NULL], 0)
+        null = np.ascontiguousarray(fmat(wf, wh, W_NULL)[:r, :cols])
+        Znew = null if identity else Z_level.dot(null)
+        Z[:, :cols] = Znew
+        r, identity = cols, False
+    if rep[k, R_QP] and m and (identity or r > 0):
+        smax = fvec(wf, wh, W_SCAL)[C_SMAX]
+        delta = par[P_REG] * (smax * smax if smax > 0 else 1.0)
+        G, gb = _state(wf, wi, wh)[4:6]
+        pins = _strongly_active(A, b, C, clo, chi, x, Z_level, st[S_R], was_identity, box[0],
+                                box[1], G, gb[0], gb[1], delta, par)  # fmt: skip
+        if pins.shape[0]:
+            floor = par[P_RANK] * np.max(np.abs(pins))
+            Zc = np.ascontiguousarray(Z[:, :r])
+            Nz = pins if identity else pins.dot(Zc)
+            Znew = _null_space(Nz, Zc, identity, par[P_RANK], floor)
+            r, identity = Znew.shape[1], False
+            Z[:, :r] = Znew
+    st[S_R], st[S_ZI] = (n, 1) if identity else (r, 0)
+    if p:
+        Cx = C.dot(x)
+        viol = _violated(f, i, h, wi, wh, k, Cx, clo, chi, par[P_TOL], rep[k, R_QP] == 1)
+        bt = par[P_RELAX]
+        ni = st[S_NINH]
+        Gw, gbw = fmat(wf, wh, W_INH), fmat(wf, wh, W_INHB)
+        Gw[ni : ni + p] = C
+        for j in range(p):
+            lo_j = Cx[j] if viol[j] else clo[j]
+            hi_j = Cx[j] if viol[j] else chi[j]
+            gbw[0, ni + j] = min(lo_j, Cx[j]) - bt
+            gbw[1, ni + j] = max(hi_j, Cx[j]) + bt
+        st[S_NINH] = ni + p
+    if k != imat(i, h, lay.I_LEVEL).shape[0] - 1 or st[S_ANYQP]:
+        box[0] = np.minimum(box[0], x)
+        box[1] = np.maximum(box[1], x)
+
+
+@kernel
+def _strongly_active(A, b, C, clo, chi, x, Z, r, identity, lo, hi, G, glo, ghi, delta,
+                     par) -> np.ndarray:  # fmt: skip
+    """Rows (x-space) of the constraints the level's own objective presses on at ``x`` (the
+    reference's ``_strongly_active``); none where the bounds cost the level nothing."""
+    gnorm, N, has_mu, mu, _ = _active_multipliers(A, b, C, clo, chi, x, Z, r, identity, lo, hi,
+                                                  G, glo, ghi, par[P_ACT], par[P_RANK])  # fmt: skip
+    floor = max(1e-3 * par[P_TOL] * max(1.0, math.sqrt(b.dot(b))),
+                100.0 * delta * max(1.0, math.sqrt(x.dot(x))))  # fmt: skip
+    n = x.shape[0]
+    if gnorm <= floor or not has_mu:
+        return np.zeros((0, n))
+    Ny = N if identity else N.dot(Z)
+    scale = max(1.0, np.max(np.abs(Ny))) if Ny.size else 1.0
+    pin = mu > max(1e-6 * gnorm, floor) / scale
+    return np.ascontiguousarray(N[pin])
+
+
+# ---------------------------------------------------------------------- polish and BVLS
+@kernel
+def _polish(f, i, h, wf, wi, wh, par, k, y, M, c, with_rows) -> np.ndarray:  # fmt: skip
+    """Remove the Tikhonov bias (the reference's ``_polish``): the level's least squares
+    solved exactly on the face of the constraints active at the QP's answer; with
+    ``with_rows`` its inequality rows at or beyond a bound join the least squares and the
+    result is kept only if the level's objective is lower."""
+    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
+    r, identity = st[S_R], st[S_ZI] == 1
+    if not with_rows:
+        return _polish_box(x, y, Z, r, identity, M, c, box[0], box[1], G, gb[0], gb[1], par)[0]
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, st[S_K])
+    Cz = C if identity else C.dot(np.ascontiguousarray(Z[:, :r]))
+    Cx = C.dot(x)
+    v = Cx + Cz.dot(y)
+    low = v <= clo + 1e-8
+    touch = low | (v >= chi - 1e-8)
+    nt = int(np.sum(touch))
+    if nt:
+        M2 = np.zeros((M.shape[0] + nt, r))
+        c2 = np.zeros(M.shape[0] + nt)
+        M2[: M.shape[0]] = M
+        c2[: M.shape[0]] = c
+        q = M.shape[0]
+        for j in range(C.shape[0]):
+            if touch[j]:
+                M2[q] = Cz[j]
+                c2[q] = (clo[j] if low[j] else chi[j]) - Cx[j]
+                q += 1
+        M, c = M2, c2
+    yp, changed = _polish_box(x, y, Z, r, identity, M, c, box[0], box[1], G, gb[0], gb[1], par)
+    if not changed:
+        return y
+    xq = x + _apply_Z(Z, r, identity, y)
+    xp = x + _apply_Z(Z, r, identity, yp)
+    better = _level_objective(A, b, C, clo, chi, xp) < _level_objective(A, b, C, clo, chi, xq)
+    return yp if better else y
+
+
+@kernel
+def _polish_box(x, y, Z, r, identity, M, c, lo, hi, G, glo, ghi, par):  # fmt: skip
+    """The polish on the box and the inherited rows: ``(y', changed)``."""
+    rank_tol = par[P_RANK]
+    n = x.shape[0]
+    xq = x + _apply_Z(Z, r, identity, y)
+    on = (xq <= lo + _ACT) | (xq >= hi - _ACT)
+    Gx = G.dot(xq) if G.shape[0] else np.zeros(0)
+    gon = (Gx <= glo + _ACT) | (Gx >= ghi - _ACT)
+    n_on, n_g = int(np.sum(on)), int(np.sum(gon))
+    res = c - M.dot(y)
+    only_box = identity and n_g == 0
+    if only_box:  # only bounds of x: keep those entries, move the others
+        idx = np.flatnonzero(~on)
+        MW = np.ascontiguousarray(M[:, idx])
+        W = np.zeros((0, 0))
+    elif n_on + n_g:
+        N = np.zeros((n_on + n_g, n))
+        q = 0
+        for j in range(n):
+            if on[j]:
+                N[q, j] = 1.0
+                q += 1
+        for j in range(gon.shape[0]):
+            if gon[j]:
+                N[q] = G[j]
+                q += 1
+        Zc = np.ascontiguousarray(Z[:, :r])
+        W = _null_space(N if identity else N.dot(Zc), Zc, True, rank_tol, 0.0)
+        MW = M.dot(W)
+        idx = np.zeros(0, np.int64)
+    else:
+        W = np.eye(r)
+        MW = M.copy()
+        idx = np.zeros(0, np.int64)
+    if MW.shape[1] == 0:
+        return y, False
+    info, _, w, _, _, _ = cod(MW, res, np.zeros(MW.shape[1]), rank_tol, 0.0)
+    if info != 0:
+        return y, False
+    yp = y.copy()
+    if only_box:
+        for j in range(idx.shape[0]):
+            yp[idx[j]] += w[j]
+    else:
+        yp += W.dot(w)
+    if not _finite(yp):
+        return y, False
+    rp = c - M.dot(yp)
+    changed = True
+    if rp.dot(rp) > res.dot(res) or not _inside(x + _apply_Z(Z, r, identity, yp), lo, hi, G,
+                                                glo, ghi):  # fmt: skip
+        yp, rp, changed = y, res, False
+    if (only_box and math.sqrt(rp.dot(rp)) > par[P_TOL] * (1.0 + math.sqrt(c.dot(c)))
+            and not _box_optimal(M, c, yp, lo - x, hi - x, par[P_ACT])):  # fmt: skip
+        yb = _bvls(M, c, lo - x, hi - x, 20 * M.shape[1] + 20, 1e-13)
+        yb = np.minimum(np.maximum(yb, lo - x), hi - x)
+        rb = c - M.dot(yb)
+        if _finite(yb) and rb.dot(rb) < rp.dot(rp) and _inside(x + yb, lo, hi, G, glo, ghi):
+            return yb, True
+    return yp, changed
+
+
+@kernel
+def _lstsq(A: np.ndarray, b: np.ndarray, rcond: float) -> np.ndarray:
+    """The minimum-norm least-squares solution of ``A x = b`` by the SVD, singular values
+    below ``rcond s_max`` counted as zero (``rcond < 0``: machine precision)."""
+    m, n = A.shape
+    x = np.zeros(n)
+    if min(m, n) == 0:
+        return x
+    info, U, s, Vt = gesdd(np.asfortranarray(A), False)
+    if info != 0:
+        return x * np.nan
+    cut = (_EPS if rcond < 0 else rcond) * s[0]
+    c = np.ascontiguousarray(U.T).dot(b)
+    for k in range(s.shape[0]):
+        if s[k] > cut:
+            x += (c[k] / s[k]) * Vt[k]
+    return x
+
+
+@kernel
+def _bvls(A: np.ndarray, b: np.ndarray, lb: np.ndarray, ub: np.ndarray, max_iter: int,
+          tol: float) -> np.ndarray:  # fmt: skip
+    """Bounded-variable least squares ``min ||A x - b||`` over ``lb <= x <= ub`` (Stark and
+    Parker 1995) as the reference calls it, ``scipy.optimize.lsq_linear(method="bvls")``:
+    from the unconstrained solution, variables outside the box set on their bounds until the
+    free ones' least squares is inside; then, while the optimality conditions fail by
+    ``tol``, the variable whose gradient points inwards most is freed and the free ones move
+    towards their least squares, stopping at the first bound reached."""
+    m, n = A.shape
+    x = _lstsq(A, b, -1.0)
+    if _in_box(x, lb, ub):
+        return x
+    state = np.zeros(n)  # -1 on lb, 1 on ub, 0 free
+    for j in range(n):
+        if x[j] <= lb[j]:
+            x[j], state[j] = lb[j], -1.0
+        elif x[j] >= ub[j]:
+            x[j], state[j] = ub[j], 1.0
+    rcond = _EPS * max(m, n)
+    iteration = 0
+    while np.any(state == 0):  # the free variables' least squares inside the box
+        iteration += 1
+        idx = np.flatnonzero(state == 0)
+        z = _lstsq(np.ascontiguousarray(A[:, idx]), b - A.dot(x * (state != 0)), rcond)
+        violated = False
+        for q in range(idx.shape[0]):
+            j = idx[q]
+            if z[q] < lb[j]:
+                x[j], state[j], violated = lb[j], -1.0, True
+            elif z[q] > ub[j]:
+                x[j], state[j], violated = ub[j], 1.0, True
+            else:
+                x[j] = z[q]
+        if not violated:
+            break
+    r = A.dot(x) - b
+    cost = 0.5 * r.dot(r)
+    g = A.T.dot(r)
+    for _ in range(iteration, max_iter + iteration):
+        if _kkt(g, state) < tol:
+            break
+        state[np.argmax(g * state)] = 0.0
+        _bvls_free(A, b, lb, ub, x, state, rcond)
+        r = A.dot(x) - b
+        new = 0.5 * r.dot(r)
+        change = cost - new
+        cost = new
+        g = A.T.dot(r)
+        if change < tol * cost:
+            break
+    return x
+
+
+@kernel
+def _kkt(g: np.ndarray, state: np.ndarray) -> float:
+    """The largest violation of the bounded least squares' optimality conditions."""
+    worst = -np.inf
+    for j in range(g.shape[0]):
+        v = abs(g[j]) if state[j] == 0 else g[j] * state[j]
+        worst = max(worst, v)
+    return worst
+
+
+@kernel
+def _bvls_free(A, b, lb, ub, x, state, rcond) -> None:  # fmt: skip
+    """Move the free variables towards their least squares (the bound ones fixed), stopping
+    at the first bound reached and fixing that variable there, until the least squares is
+    inside the box."""
+    while True:
+        idx = np.flatnonzero(state == 0)
+        z = _lstsq(np.ascontiguousarray(A[:, idx]), b - A.dot(x * (state != 0)), rcond)
+        alpha, hit, side = np.inf, -1, 0.0
+        for q in range(idx.shape[0]):  # lower-bound violations first, then upper (argmin)
+            j = idx[q]
+            if z[q] < lb[j]:
+                a = (lb[j] - x[j]) / (z[q] - x[j])
+                if a < alpha:
+                    alpha, hit, side = a, q, -1.0
+        for q in range(idx.shape[0]):
+            j = idx[q]
+            if z[q] > ub[j]:
+                a = (ub[j] - x[j]) / (z[q] - x[j])
+                if a < alpha:
+                    alpha, hit, side = a, q, 1.0
+        if hit < 0:
+            for q in range(idx.shape[0]):
+                x[idx[q]] = z[q]
+            return
+        for q in range(idx.shape[0]):
+            j = idx[q]
+            x[j] = x[j] * (1.0 - alpha) + alpha * z[q]
+        state[idx[hit]] = side
+
+
+# ---------------------------------------------------------------------- the end
+@kernel
+def _end(f, i, h, wf, wi, wh) -> int:  # fmt: skip
+    """After the last level: the exact minimum-norm point of the last optimal set where a QP
+    ran and freedom is left (NEED_TIE when it needs one), and the clip to the exact box."""
+    st, x, box, Z, G, gb, ni = _state(wf, wi, wh)
+    r, identity = st[S_R], st[S_ZI] == 1
+    if r and st[S_ANYQP]:
+        t = _Zt(Z, r, identity, x)
+        xc = x - _apply_Z(Z, r, identity, t)
+        if _inside(xc, box[0], box[1], G, gb[0], gb[1]):
+            x[:] = xc
+        else:
+            _tie_setup(wf, wi, wh, t)
+            return NEED_TIE
+    return _clip(wf, wi, wh)
+
+
+@kernel
+def _tie_setup(wf, wi, wh, t) -> None:  # fmt: skip
+    """``min 1/2 ||x + Z y||^2`` over the relaxed box and the inherited rows: H = I, g = t."""
+    st, x, box, Z, G, gb, ni = _state(wf, wi, wh)
+    r, identity = st[S_R], st[S_ZI] == 1
+    n = x.shape[0]
+    H = fvec(wf, wh, W_H)[: r * r].reshape((r, r))
+    H[:, :] = 0.0
+    for j in range(r):
+        H[j, j] = 1.0
+    fmat(wf, wh, W_G)[0, :r] = t
+    nrows = (0 if identity else n) + ni
+    Q = fvec(wf, wh, W_QC)[: nrows * r].reshape((nrows, r))
+    qb = fmat(wf, wh, W_QB)
+    row = 0
+    if identity:
+        qb[2, :r] = box[0] - x
+        qb[3, :r] = box[1] - x
+    else:
+        Q[:n] = Z[:, :r]
+        qb[0, :n] = box[0] - x
+        qb[1, :n] = box[1] - x
+        row = n
+    if ni:
+        Gx = G.dot(x)
+        Q[row : row + ni] = G if identity else G.dot(np.ascontiguousarray(Z[:, :r]))
+        qb[0, row : row + ni] = gb[0] - Gx
+        qb[1, row : row + ni] = gb[1] - Gx
+    st[S_NV], st[S_NROWS], st[S_HASBOX], st[S_TIE] = r, nrows, identity, 1
+
+
+@kernel
+def tie_done(wf, wi, wh, sol, ok) -> int:  # fmt: skip
+    """The tie-break's answer (kept the last level's where the engine failed)."""
+    st, x, _, Z, _, _, _ = _state(wf, wi, wh)
+    if ok:
+        x += _apply_Z(Z, st[S_R], st[S_ZI] == 1, sol[: st[S_R]].copy())
+    else:
+        st[S_TIEFAIL] = 1
+    return _clip(wf, wi, wh)
+
+
+@kernel
+def _clip(wf, wi, wh) -> int:  # fmt: skip
+    """``x`` clipped to the exact box (by the relaxation and engine tolerances at most),
+    where anything may have moved it outside."""
+    st, x, box, _, _, _, _ = _state(wf, wi, wh)
+    scal = fvec(wf, wh, W_SCAL)
+    scal[C_CLIP] = 0.0
+    if st[S_EXACT] and not st[S_ANYQP]:
+        return DONE
+    worst = 0.0
+    for j in range(x.shape[0]):
+        v = min(max(x[j], box[2, j]), box[3, j])
+        worst = max(worst, abs(v - x[j]))
+        x[j] = v
+    scal[C_CLIP] = worst
+    return DONE
+
+
+@kernel
+def finish(f, i, h, wf, wi, wh, par) -> None:  # fmt: skip
+    """The outcome in the stack's arena: ``F_U``, residuals, met tasks, active bounds and the
+    status (``I_OUT``), as the reference's ``_result``."""
+    st, x, box, _, _, _, _ = _state(wf, wi, wh)
+    rep, limited = imat(wi, wh, W_REPORT), ivec(wi, wh, W_LIMITED)
+    levels, tasks = imat(i, h, lay.I_LEVEL), imat(i, h, lay.I_TASK)
+    A, b, rows = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B), fmat(f, h, lay.F_ROW)
+    out, lev_out = ivec(i, h, lay.I_OUT), fmat(f, h, lay.F_LEVEL_OUT)
+    res, infeasible = fmat(f, h, lay.F_TASK_RES), ivec(i, h, lay.I_INFEASIBLE)
+    active = ivec(i, h, lay.I_ACTIVE)
+    U, D = fmat(f, h, lay.F_U), fmat(f, h, lay.F_METRIC)[0]
+    U[0] = x
+    U[1] = D * x
+    tol, act = par[P_TOL], par[P_ACT]
+    failures = st[S_BOXBAD] or st[S_TIEFAIL]
+    top_unmet = any_limited = False
+    for k in range(levels.shape[0]):
+        r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
+        t0, t1 = _task_range(tasks, k)
+        lev_out[k, 0], lev_out[k, 1] = 0.0, 1.0
+        if r1 > r0:
+            lev_out[k, 0] = level_report(A[r0:r1], b[r0:r1], rows[1, r0:r1], x, tasks[t0:t1],
+                                         r0, res[t0:t1])  # fmt: skip
+        failures = failures or rep[k, R_FAILED] == 1
+        for t in range(t0, t1):
+            met = res[t, 0] <= tol * (1.0 + res[t, 2])  # (a NaN residual is not met)
+            empty = tasks[t, 2] == tasks[t, 1]
+            infeasible[t] = 0 if empty or (met and not rep[k, R_FAILED]) else 1
+            top_unmet = top_unmet or (k == 0 and infeasible[t] == 1)
+    for t in range(limited.shape[0]):
+        any_limited = any_limited or limited[t] == 1
+    any_active = False
+    for j in range(x.shape[0]):
+        active[j] = x[j] <= box[2, j] + act or x[j] >= box[3, j] - act
+        any_active = any_active or active[j] == 1
+    if failures:
+        status = 4
+    elif any_limited or top_unmet:
+        status = 3
+    elif any_active:
+        status = 1
+    else:
+        status = 0
+    out[lay.OUT_STATUS], out[lay.OUT_FAILED] = status, failures

@@ -1,0 +1,216 @@
+"""The compiled cascade's Python side: its workspace, the QP engine's solves between the
+kernel stages (:mod:`wholebody.kernels.hqp`), and the result.
+
+The kernels run the cascade until a level needs a QP and say so; here the level's engine
+solves it (with the reference's retries: 100 and 10000 times the Tikhonov term after a
+failure, the engine reset), the answer goes back to the kernels, and so on until the
+tie-break and the result (:class:`~wholebody.solvers.hqp.HierarchicalQPSolver` documents
+the method).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from wholebody.kernels import hqp as kernel
+from wholebody.kernels import layout as lay
+from wholebody.solvers.plan import Arena, first_call
+from wholebody.solvers.qp import QPStatus
+from wholebody.solvers.result import SolverResult
+
+if TYPE_CHECKING:
+    from wholebody.solvers.hqp import HierarchicalQPSolver, LevelReport
+
+__all__ = ["Workspace", "run"]
+
+_FAILURE = {
+    kernel.FAIL_DECOMPOSITION: "decomposition failed (LAPACK); level skipped",
+    kernel.FAIL_STEP: "decomposition failed (non-finite step); level skipped",
+}
+
+
+class Workspace:
+    """The cascade's state between its kernel calls, sized for one arena."""
+
+    def __init__(self, arena: Arena) -> None:
+        v = arena.view
+        n = v(lay.F_BOX).shape[1]
+        levels = v(lay.I_LEVEL)
+        L = levels.shape[0]
+        m_max = int(np.max(levels[:, 2] - levels[:, 0], initial=0))
+        p_max = int(np.max(levels[:, 4] - levels[:, 3], initial=0))
+        P = v(lay.F_C).shape[0]
+        T, Pt = v(lay.I_TASK).shape[0], v(lay.I_INEQ).shape[0]
+        nv = n + p_max
+        rows = n + P + p_max
+        shapes = {
+            kernel.W_X: (n,), kernel.W_BOX: (4, n), kernel.W_Z: (n, n), kernel.W_INH: (P, n),
+            kernel.W_INHB: (2, P), kernel.W_XC: (n,), kernel.W_CV: (m_max,),
+            kernel.W_M: (m_max, n), kernel.W_NULL: (n, n), kernel.W_SCAL: (8,),
+            kernel.W_H: (nv * nv,), kernel.W_G: (2, nv), kernel.W_QC: (rows * nv,),
+            kernel.W_QB: (4, max(rows, nv)), kernel.W_Y: (2, max(n, m_max)),
+            kernel.W_STATE: (kernel.S_WIDTH,), kernel.W_REPORT: (L, kernel.R_WIDTH),
+            kernel.W_LIMITED: (T + Pt,),
+        }  # fmt: skip
+        self.f, self.i, self.h = lay.build(shapes, kernel.N_WFLOAT, kernel.N_WREGIONS)
+        self._shapes = shapes
+        self.arena = arena
+        self.state = self.view(kernel.W_STATE)
+        self.report = self.view(kernel.W_REPORT)
+        self.limited = self.view(kernel.W_LIMITED)
+        self._H, self._g = self.view(kernel.W_H), self.view(kernel.W_G)
+        self._Q, self._qb = self.view(kernel.W_QC), self.view(kernel.W_QB)
+        self._nv = nv
+
+    def view(self, region: int) -> np.ndarray:
+        arena = self.f if region < kernel.N_WFLOAT else self.i
+        return lay.view(arena, self.h, region, self._shapes[region])
+
+    def qp(self) -> tuple[np.ndarray, ...]:
+        """The QP the kernels set up, as the engine takes it: ``H, g, C, lower, upper`` and
+        the box ``lb, ub`` (None where the problem has none)."""
+        st = self.state
+        nv, rows, has_box = int(st[kernel.S_NV]), int(st[kernel.S_NROWS]), st[kernel.S_HASBOX]
+        qb = self._qb
+        lb = qb[2, :nv] if has_box else None
+        ub = qb[3, :nv] if has_box else None
+        return (self._H[: nv * nv].reshape(nv, nv), self._g[0, :nv],
+                self._Q[: rows * nv].reshape(rows, nv), qb[0, :rows], qb[1, :rows], lb, ub)  # fmt: skip
+
+    def padded(self, x: np.ndarray | None) -> np.ndarray:
+        """An engine's answer as the kernels take it (zeros where there is none)."""
+        out = np.zeros(self._nv)
+        if x is not None:
+            out[: x.shape[0]] = x
+        return out
+
+
+def _solve(engine, ws: Workspace) -> tuple[object, bool]:
+    sol = engine.solve(*ws.qp())
+    return sol, sol.status <= QPStatus.INACCURATE and bool(np.all(np.isfinite(sol.x)))
+
+
+def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
+    """The cascade on the evaluated ``arena`` (see the module docstring); its outcome is in
+    the arena and the workspace."""
+    a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver._par)
+    code = first_call("hqp", "the hierarchical QP kernels", kernel.begin, *a)
+    report = ws.report
+    L = report.shape[0]
+    while code != kernel.DONE:
+        k = int(ws.state[kernel.S_K])
+        if code == kernel.NEED_TIE:
+            sol, ok = _solve(solver._engine(L), ws)
+            solver._tie_status = sol.status
+            code = kernel.tie_done(ws.f, ws.i, ws.h, ws.padded(sol.x if ok else None), ok)
+            continue
+        engine = solver._engine(k)
+        if code == kernel.NEED_QP:
+            for attempt in range(3):
+                if attempt:  # ill-conditioned and degenerate: retry cold, 100x more Tikhonov
+                    engine.reset()
+                    kernel.bump(ws.f, ws.i, ws.h, attempt)
+                    report[k, kernel.R_RETRIES] += 1
+                sol, ok = _solve(engine, ws)
+                report[k, kernel.R_STATUS] = int(sol.status)
+                report[k, kernel.R_ITER] += sol.iterations
+                if ok:
+                    break
+            code = kernel.after_qp(*a, ws.padded(sol.x if ok else None), ok)
+        else:  # NEED_PROXIMAL
+            sol, ok = _solve(engine, ws)
+            report[k, kernel.R_ITER] += sol.iterations
+            code = kernel.proximal(*a, ws.padded(sol.x if ok else None), ok)
+    kernel.finish(*a)
+
+
+def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace,
+           solve_time: float) -> SolverResult:  # fmt: skip
+    """The outcome as a :class:`SolverResult`, with the reference's message."""
+    out = arena.result(solve_time, scale=False)
+    failures = _failures(solver, arena, ws)
+    extra = _inequality_infeasible(arena, ws)
+    out.infeasible += extra
+    report = ws.report
+    names = arena.level_names
+    qps = [f"{names[k]}: {int(report[k, kernel.R_ITER])} it" for k in range(len(names))
+           if report[k, kernel.R_QP]]  # fmt: skip
+    msg = [f"{solver.engine_name}: " + ("; ".join(qps) if qps else "no QP needed"), *failures]
+    if out.infeasible:
+        msg.append("infeasible: " + ", ".join(f"{lv}/{t}" for lv, t in out.infeasible))
+    clip = float(ws.view(kernel.W_SCAL)[kernel.C_CLIP])
+    if clip > 10 * solver.bound_relaxation:
+        msg.append(f"clipped u by {clip:.2e} (scaled units) to the box")
+    out.message = "; ".join(msg)
+    return out
+
+
+def _limited_names(arena: Arena, ws: Workspace, k: int) -> list[str]:
+    """The tasks the box limited at level k, the inequality tasks it leaves violated, or the
+    tasks with non-finite rows of a level skipped for them."""
+    limited, report = ws.limited, ws.report
+    T = len(arena.task_names)
+    tasks = arena.view(lay.I_TASK)
+    names = [arena.task_names[t] for t in range(T) if tasks[t, 0] == k and limited[t]]
+    if report[k, kernel.R_OBJBAD]:
+        names.append("objectives")
+    names += [row[3] for j, row in enumerate(arena.inequality_rows)
+              if row[0] == k and limited[T + j]]  # fmt: skip
+    if report[k, kernel.R_FAIL] == kernel.FAIL_NONFINITE and not names:
+        names = [arena.level_names[k]]
+    return names
+
+
+def _inequality_infeasible(arena: Arena, ws: Workspace) -> list[tuple[str, str]]:
+    """Inequality tasks left violated, and those of a skipped level (the reference's order:
+    per level, a skipped level's others first)."""
+    out: list[tuple[str, str]] = []
+    T = len(arena.task_names)
+    for k, level in enumerate(arena.level_names):
+        rows = [(j, row[3]) for j, row in enumerate(arena.inequality_rows) if row[0] == k]
+        if ws.report[k, kernel.R_FAILED]:
+            out += [(level, name) for j, name in rows if not ws.limited[T + j]]
+        out += [(level, name) for j, name in rows if ws.limited[T + j]]
+    return out
+
+
+def _failures(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> list[str]:
+    st, report = ws.state, ws.report
+    out = []
+    if st[kernel.S_BOXBAD]:
+        out.append("the box is empty or not a number (NaN bounds): u = 0")
+    for k, level in enumerate(arena.level_names):
+        code = int(report[k, kernel.R_FAIL])
+        if code == kernel.FAIL_NONFINITE:
+            bad = ", ".join(_limited_names(arena, ws, k))
+            out.append(f"{level}: non-finite rows from {bad}; level skipped")
+        elif code == kernel.FAIL_ENGINE:
+            status = QPStatus(int(report[k, kernel.R_STATUS])).name.lower()
+            out.append(f"{level}: {status} ({solver.engine_name}); level left unsolved")
+        elif code:
+            out.append(f"{level}: {_FAILURE[code]}")
+    if st[kernel.S_TIEFAIL]:
+        status = QPStatus(int(solver._tie_status)).name.lower()
+        out.append(f"minimum-norm tie-break: {status} ({solver.engine_name}); kept the last "
+                   "level's answer")  # fmt: skip
+    return out
+
+
+def reports(arena: Arena, ws: Workspace, cls: type[LevelReport]) -> list[LevelReport]:
+    """The per-level reports of the last solve."""
+    report = ws.report
+    residuals = arena.view(lay.F_LEVEL_OUT)[:, 0]
+    out = []
+    for k, name in enumerate(arena.level_names):
+        row = report[k].tolist()
+        qp = bool(row[kernel.R_QP])
+        out.append(cls(
+            name, free=row[kernel.R_FREE], rank=row[kernel.R_RANK], qp=qp,
+            engine_status=QPStatus(row[kernel.R_STATUS]) if qp else None,
+            iterations=row[kernel.R_ITER], residual=float(residuals[k]),
+            retries=row[kernel.R_RETRIES], limited=_limited_names(arena, ws, k),
+            failed=bool(row[kernel.R_FAILED]),
+        ))  # fmt: skip
+    return out

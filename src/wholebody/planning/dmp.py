@@ -56,6 +56,24 @@ interval is split into adaptive RK4 substeps with an embedded error estimate
 same integrators (the phase advanced exactly, ``s <- s exp(-alpha_s dt / tau_s)``);
 stepping with ``dt = T / (N - 1)`` reproduces :meth:`DMP.rollout`.
 
+**Compiled kernels (decision).** :meth:`DMP.fit`, :meth:`DMP.rollout` and
+:class:`DMPStepper` run in numba kernels (:mod:`wholebody.kernels.dmp`): the same formulas in
+the same order, the same adaptive step control, so the compiled path is the reference's to
+rounding (1e-13 m in the paper's two-cylinder scene, the same substep count in every
+interval) at a fraction of its cost. Profiled, the reference spends an obstacle rollout in
+the Python arithmetic of some 1800 force evaluations, and a fit + rollout a third in the
+basis functions (``N x 50`` and ``(2N - 1) x 50`` exponentials and their reductions), a sixth
+in matrix products (the dense Savitzky-Golay operator, ``Phi^T Phi``), a sixth in the linear
+recurrence (``lfilter``) and the rest in numpy's per-call overhead; the kernels evaluate the
+exponentials with a vectorised polynomial, the filter as a banded correlation and the
+recurrence as a loop.
+The potentials of :mod:`~wholebody.planning.obstacles` are computed in the kernels from
+their parameters; a rollout with any other :class:`~wholebody.planning.obstacles.Potential`
+(a user's ``point_force``) runs the Python integrator below, as does a step of states that
+are not float64 arrays. The code of this module is the reference: inside
+:func:`reference_implementation` everything runs it (tests and ``benchmarks/dmp.py``
+compare the two). The kernels compile on first use, once per machine (:func:`warmup`).
+
 **Orientation.** :class:`DMPTrajectory` adds a slerp from the start to the goal rotation whose
 progress is the minimum-jerk polynomial of the normalised phase time
 ``xi = ln(s) / ln(phase_end) = t / T``: zero angular velocity and acceleration at both ends,
@@ -64,10 +82,14 @@ exactly the goal rotation at ``T``, exact angular velocity ``sigma'(t) R0 Log(R0
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -76,7 +98,7 @@ from scipy.signal import fftconvolve, lfilter
 
 from wholebody.errors import DimensionError, IntegrationError
 from wholebody.planning._checks import as_array, as_pose, as_positive, as_vector
-from wholebody.planning.obstacles import PointForce, Potential, make_point_force
+from wholebody.planning.obstacles import PointForce, Potential, kernel_rows, make_point_force
 from wholebody.planning.rotations import Slerp
 from wholebody.planning.trajectory import Trajectory, TrajectoryArrays, minimum_jerk_scaling
 
@@ -87,7 +109,77 @@ __all__ = [
     "DMPState",
     "DMPStepper",
     "DMPTrajectory",
+    "reference_implementation",
+    "warmup",
 ]
+
+# ------------------------------------------------------------------ compiled or reference
+
+_REFERENCE: ContextVar[bool] = ContextVar("wholebody_dmp_reference", default=False)
+_KERNELS: ModuleType | None = None
+_KERNELS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def reference_implementation(enabled: bool = True) -> Iterator[None]:
+    """Inside the block, :meth:`DMP.fit`, :meth:`DMP.rollout` and the :class:`DMPStepper` s
+    constructed there run the Python reference implementation of this module instead of the
+    compiled kernels (:mod:`wholebody.kernels.dmp`); ``enabled=False`` asks for the kernels
+    again. For tests and benchmarks that compare the two (they give the same paths to
+    rounding and take the same substep decisions). The switch is a context variable: it holds
+    for the current thread or task only."""
+    token = _REFERENCE.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _REFERENCE.reset(token)
+
+
+def _kernels() -> ModuleType | None:
+    """The compiled kernels, or None inside :func:`reference_implementation`."""
+    if _REFERENCE.get():
+        return None
+    if _KERNELS is None:
+        warmup()
+    return _KERNELS
+
+
+def warmup() -> None:
+    """Compile the DMP kernels now (once per machine; a notice on stderr says so while it
+    takes long) or load them from numba's cache, by running a small fit, rollouts with and
+    without obstacles and both steppers. The first compiled call does it anyway."""
+    global _KERNELS
+    from wholebody.kernels import DISABLED, compile_notice
+    from wholebody.kernels import dmp as kernels
+
+    with _KERNELS_LOCK:
+        if _KERNELS is not None:
+            return
+        _KERNELS = kernels
+        if DISABLED:  # NUMBA_DISABLE_JIT=1: nothing to compile
+            return
+        try:
+            with compile_notice("the DMP kernels"), reference_implementation(False):
+                _exercise()
+        except BaseException:
+            _KERNELS = None
+            raise
+
+
+def _exercise() -> None:
+    """Every kernel once, with the argument types of real use (see :func:`warmup`)."""
+    from wholebody.planning.obstacles import DynamicPotential, StaticPotential, sphere
+
+    t = np.linspace(0.0, 1.0, 12)
+    dmp = DMP.fit(np.stack([t, t * t, np.sin(t)], axis=1), t, config=DMPConfig(n_basis=4))
+    obstacles = (DynamicPotential(sphere([0.5, 0.3, 0.5], 0.1)),
+                 StaticPotential(sphere([2.0, 2.0, 2.0], 0.1)))  # fmt: skip
+    dmp.rollout(5)
+    dmp.rollout(5, obstacles=obstacles)
+    for pots in ((), obstacles):
+        stepper = dmp.stepper(obstacles=pots)
+        state = stepper.initial_state()
+        stepper.step(state, 0.1, out=state)
 
 
 @dataclass(frozen=True)
@@ -364,6 +456,9 @@ class DMP:
                 f"DMP.fit: window ({window}) must exceed polyorder ({polyorder}) and fit in "
                 f"{N} samples"
             )
+        kernels = _kernels()
+        if kernels is not None:
+            return cls._fit_compiled(kernels, X, h, T, cfg, window, polyorder, regularization)
         xs, xd, xdd = savitzky_golay(X, window, polyorder, h)
         x0, g = xs[0].copy(), xs[-1].copy()
         K, D = cfg.K, cfg.D
@@ -374,15 +469,43 @@ class DMP:
         Phi = dmp.basis(s)
         A = Phi.T.dot(Phi)
         nb = cfg.n_basis
-        ridge = float(regularization)
-        if not (math.isfinite(ridge) and ridge >= 0.0):
-            raise DimensionError(
-                f"DMP.fit: regularization must be a finite number >= 0, got {regularization!r}"
-            )
+        ridge = _ridge(regularization)
         A.flat[:: nb + 1] += ridge * A.trace() / nb
         rhs = Phi.T.dot(target)
         _, w, info = _posv(A, rhs)  # the ridge makes A positive definite: Cholesky
         dmp.weights = w if info == 0 else np.linalg.solve(A, rhs)
+        return dmp
+
+    @classmethod
+    def _fit_compiled(
+        cls,
+        kernels: ModuleType,
+        X: np.ndarray,
+        h: float,
+        T: float,
+        cfg: DMPConfig,
+        window: int,
+        polyorder: int,
+        regularization: float,
+    ) -> DMP:
+        """:meth:`fit` from the uniformly resampled ``X`` (N, d) by :func:`kernels.fit`: the
+        Savitzky-Golay filter there too up to 400 samples, beyond by FFT convolutions here."""
+        ridge = _ridge(regularization)
+        N, d = X.shape
+        nb = cfg.n_basis
+        filtered = np.empty((3, N, d))
+        if N <= _DENSE_SAVGOL:
+            E = _savgol_windows(window, polyorder)
+        else:
+            filtered[:] = savitzky_golay(X, window, polyorder, h)
+            E = _NO_WINDOWS
+        c, hw = cfg.layout()
+        A, rhs, W = np.empty((nb, nb)), np.empty((nb, d)), np.empty((nb, d))
+        rate_h = -float(cfg.alpha_s) * h / (cfg.phase_tau_ratio * T)
+        info = kernels.fit(np.ascontiguousarray(X, dtype=float), E, filtered, float(h), float(T),
+                           cfg.K, cfg.D, rate_h, c, hw, ridge, A, rhs, W)  # fmt: skip
+        dmp = cls(np.zeros((nb, d)), filtered[0, 0].copy(), filtered[0, -1].copy(), T, cfg)
+        dmp.weights = W if info == 0 else np.linalg.solve(A, rhs)
         return dmp
 
     # ------------------------------------------------------------------ rollout
@@ -436,41 +559,87 @@ class DMP:
         if samples != N or N < 2:
             raise DimensionError(f"DMP.rollout: samples must be an integer >= 2, got {samples}")
         x0, g, T = self._targets(start, goal, duration)
+        obstacles = tuple(obstacles)
+        kernels = _kernels()
+        if obstacles:
+            return self._rollout_obstacles(N, x0, g, T, obstacles, tolerance, max_substeps,
+                                           kernels)[0]  # fmt: skip
+        if kernels is not None:
+            return self._rollout_linear_compiled(kernels, N, x0, g, T)
         cfg = self.config
         K, D = cfg.K, cfg.D
         tau = T
         h = T / (N - 1)
-        kernel = make_point_force(tuple(obstacles))
-        # without obstacles: m RK4 steps per sample interval, enough for stability and
-        # accuracy however coarse the sampling (m = 1 unless N is small)
-        m = 1 if kernel is not None else _linear_substeps(cfg, h / tau)
+        # m RK4 steps per sample interval, enough for stability and accuracy however coarse
+        # the sampling (m = 1 unless N is small)
+        m = _linear_substeps(cfg, h / tau)
         t_half = np.linspace(0.0, T, 2 * m * (N - 1) + 1)  # steps and midpoints
         s_half = np.exp(-cfg.alpha_s * t_half / (cfg.phase_tau_ratio * T))
         b = K * (g - np.outer(s_half, g - x0) + self.forcing(s_half))  # (2m(N-1)+1, d)
-        if kernel is not None:
-            if self.dim != 3:
-                raise DimensionError(
-                    f"DMP.rollout: obstacles need a 3-D DMP, this one is {self.dim}-D"
-                )
-            integrator = _ObstacleIntegrator(self, x0, g, tau, kernel, _tolerance(tolerance),
-                                             _max_substeps(max_substeps))  # fmt: skip
-            x, v, vdot = integrator.rollout(b, h, s_half[::2])
-        else:
-            x, v = _rk4_linear(b, x0, K, D, tau, h / m)
-            if m > 1:
-                x, v = x[::m].copy(), v[::m].copy()
-            vdot = (b[:: 2 * m] - K * x - D * v) / tau
-        acc = vdot / tau
-        return DMPRollout(
-            times=t_half[:: 2 * m].copy(),
-            positions=x,
-            velocities=v / tau,
-            accelerations=acc,
-            phase=s_half[:: 2 * m].copy(),
-            start=x0.copy(),
-            goal=g.copy(),
-            duration=T,
-        )
+        x, v = _rk4_linear(b, x0, K, D, tau, h / m)
+        if m > 1:
+            x, v = x[::m].copy(), v[::m].copy()
+        vdot = (b[:: 2 * m] - K * x - D * v) / tau
+        return _result(t_half[:: 2 * m].copy(), s_half[:: 2 * m].copy(), x, v / tau, vdot / tau,
+                       x0, g, T)  # fmt: skip
+
+    def _rollout_linear_compiled(
+        self, kernels: ModuleType, N: int, x0: np.ndarray, g: np.ndarray, T: float
+    ) -> DMPRollout:
+        """:meth:`rollout` without obstacles by :func:`kernels.rollout_linear`."""
+        cfg = self.config
+        h = T / (N - 1)
+        m = _linear_substeps(cfg, h / T)
+        P, m0, mh, m1 = _rk4_matrices(cfg.K, cfg.D, h / m / T)
+        times, phase = np.empty(N), np.empty(N)
+        X, V, A = np.empty((N, self.dim)), np.empty((N, self.dim)), np.empty((N, self.dim))
+        kernels.rollout_linear(x0, g, cfg.K, cfg.D, T, -float(cfg.alpha_s),
+                               cfg.phase_tau_ratio * T, m, P, m0, mh, m1, self._c, self._h,
+                               _buffer(self.weights), times, phase, X, V, A)  # fmt: skip
+        return _result(times, phase, X, V, A, x0, g, T)
+
+    def _rollout_obstacles(
+        self,
+        N: int,
+        x0: np.ndarray,
+        g: np.ndarray,
+        T: float,
+        obstacles: tuple[Potential, ...],
+        tolerance: float,
+        max_substeps: int,
+        kernels: ModuleType | None,
+    ) -> tuple[DMPRollout, np.ndarray, int]:
+        """:meth:`rollout` with obstacles, by :func:`kernels.rollout_obstacles` when
+        ``kernels`` is given and computes every potential, else by the reference
+        :class:`_ObstacleIntegrator`. Also returns the substep count of each sample
+        interval (N - 1,) and the number of force evaluations: the step control's
+        decisions, which the two implementations share."""
+        rows = None if kernels is None else kernel_rows(obstacles)
+        force = make_point_force(obstacles) if rows is None else None
+        if self.dim != 3:
+            raise DimensionError(f"DMP.rollout: obstacles need a 3-D DMP, this one is {self.dim}-D")
+        tol, top = _tolerance(tolerance), _max_substeps(max_substeps)
+        cfg = self.config
+        if force is not None:
+            t_half = np.linspace(0.0, T, 2 * (N - 1) + 1)  # steps and midpoints
+            s_half = np.exp(-cfg.alpha_s * t_half / (cfg.phase_tau_ratio * T))
+            b = cfg.K * (g - np.outer(s_half, g - x0) + self.forcing(s_half))  # (2N - 1, 3)
+            integrator = _ObstacleIntegrator(self, x0, g, T, force, tol, top)
+            x, v, vdot, counts = integrator.rollout(b, T / (N - 1), s_half[::2])
+            return (_result(t_half[::2].copy(), s_half[::2].copy(), x, v / T, vdot / T, x0, g, T),
+                    counts, integrator.evaluations)  # fmt: skip
+        assert kernels is not None and rows is not None
+        model = _obstacle_model(cfg, T)
+        state = _substep_state(tol, top)
+        times, phase, counts = np.empty(N), np.empty(N), np.zeros(N - 1, dtype=np.int64)
+        X, V, A = np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3))
+        status, err, m, n = kernels.rollout_obstacles(
+            x0, g, model, -float(cfg.alpha_s), cfg.phase_tau_ratio * T, self._c, self._h,
+            _buffer(self.weights), rows, tol, top, state, times, phase, X, V, A, counts
+        )  # fmt: skip
+        if status != 0:
+            raise _failure(kernels, status, err, m, float(phase[n]), float(model[3]), tol)
+        return _result(times, phase, X, V, A, x0, g, T), counts, int(state[1])
 
     def stepper(
         self,
@@ -485,6 +654,14 @@ class DMP:
         """An online integrator of this DMP (see :class:`DMPStepper`)."""
         return DMPStepper(self, duration=duration, start=start, goal=goal, obstacles=obstacles,
                           tolerance=tolerance, max_substeps=max_substeps)  # fmt: skip
+
+
+def _ridge(value: float) -> float:
+    """The fit's regularisation, a finite number >= 0."""
+    ridge = float(value)
+    if not (math.isfinite(ridge) and ridge >= 0.0):
+        raise DimensionError(f"DMP.fit: regularization must be a finite number >= 0, got {value!r}")
+    return ridge
 
 
 _LINEAR_STEP = 0.25  # largest |lambda| h of a linear RK4 step (stable below 2.78)
@@ -517,6 +694,72 @@ def _max_substeps(value: int) -> int:
     if m != value or m < 1:
         raise DimensionError(f"DMP: max_substeps must be an integer >= 1, got {value}")
     return m
+
+
+def _is_buffer(a: object) -> bool:
+    """Whether ``a`` is an array the kernels can write into as it is."""
+    return (
+        isinstance(a, np.ndarray)
+        and a.dtype == np.float64
+        and a.flags.c_contiguous
+        and a.flags.writeable
+    )
+
+
+def _buffer(a: object) -> np.ndarray:
+    """``a`` as a C-ordered float64 array for the kernels (a copy only if it is not)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _result(
+    times: np.ndarray,
+    phase: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    a: np.ndarray,
+    x0: np.ndarray,
+    g: np.ndarray,
+    T: float,
+) -> DMPRollout:
+    """A :class:`DMPRollout` (``v``, ``a``: the velocities and accelerations x', x'')."""
+    return DMPRollout(times=times, positions=x, velocities=v, accelerations=a, phase=phase,
+                      start=x0.copy(), goal=g.copy(), duration=T)  # fmt: skip
+
+
+def _obstacle_model(cfg: DMPConfig, tau: float) -> np.ndarray:
+    """``(K, D, tau, rate)`` for the obstacle kernels; ``rate = alpha_s / tau_s`` (1/s)."""
+    return np.array([cfg.K, cfg.D, tau, float(cfg.alpha_s) / (cfg.phase_tau_ratio * tau)])
+
+
+def _substep_state(tol: float, top: int) -> np.ndarray:
+    """The obstacle kernels' step-control state (:mod:`wholebody.kernels.dmp`): one substep
+    per interval to start with, ``top`` fixed ones without error control (``tol = inf``)."""
+    return np.array([top if tol == math.inf else 1, 0, 0], dtype=np.int64)
+
+
+def _failure(
+    kernels: ModuleType, status: int, err: float, m: int, s0: float, rate: float, tol: float
+) -> ArithmeticError:
+    """The error the reference raises where an obstacle kernel returned ``status``: an
+    :class:`IntegrationError` (:func:`_unresolved`) or, for a force that overflows at the
+    start, Python's own ``OverflowError``."""
+    if status == kernels.OVERFLOW:
+        return OverflowError(34, "Numerical result out of range")
+    return _unresolved(err, m, s0, rate, tol)
+
+
+def _unresolved(err: float, m: int, s0: float, rate: float, tol: float) -> IntegrationError:
+    """The error of an interval from the phase ``s0`` that ``m`` substeps did not resolve
+    (its estimate ``err`` m, inf for a non-finite state); ``rate = alpha_s / tau_s``."""
+    t0 = max(0.0, math.log(s0) / -rate) if s0 > 0.0 else math.inf
+    what = (f"local error {err:.3g} m, above {_ACCEPT_AT_LIMIT:g} x the tolerance "
+            f"{tol:g} m," if err < math.inf else "a non-finite state")  # fmt: skip
+    return IntegrationError(
+        f"DMP obstacle rollout: {what} with {m} substeps in the interval from "
+        f"t = {t0:.4g} s: the path is not resolved there; raise max_substeps (a "
+        "force that jumps, beta = 1, needs many), or tighten the tolerance so that "
+        "the steps shrink before a steep obstacle is reached"
+    )
 
 
 @lru_cache(maxsize=64)
@@ -573,7 +816,9 @@ def _rk4_linear(
 
 
 class _ObstacleIntegrator:
-    """Adaptive RK4 of the 3-D DMP with a repulsive force, in scalar Python floats.
+    """Adaptive RK4 of the 3-D DMP with a repulsive force, in scalar Python floats: the
+    reference of the compiled integrator (:mod:`wholebody.kernels.dmp`), which follows it
+    decision by decision.
 
     Without the substeps, 160-sample RK4 misses the converged path by up to 10 cm in the
     paper's two-cylinder scene: the force switches on and grows steeply within a few
@@ -616,6 +861,7 @@ class _ObstacleIntegrator:
         self.tol, self.max_substeps = tol, max_substeps
         self.m = max_substeps if tol == math.inf else 1  # inf: a fixed count, no control
         self.evaluations = 0
+        self.last = 0  # the substeps of the last accepted interval
 
     def inputs(self, s0: float, h: float, m: int) -> list[list[float]]:
         """``b = K (g - (g - x0) s + f(s))`` at ``t0 + j h / (2m)``, j = 0..2m, from the phase
@@ -664,17 +910,10 @@ class _ObstacleIntegrator:
             if err < math.inf and (err <= tol or (m >= top and err <= _ACCEPT_AT_LIMIT * tol)):
                 if tol < math.inf:
                     self.m = min(top, max(1, m // 2, math.ceil(m * scale)))
+                self.last = m
                 return y1, k1
             if m >= top:
-                t0 = max(0.0, math.log(s0) / -self.rate) if s0 > 0.0 else math.inf
-                what = (f"local error {err:.3g} m, above {_ACCEPT_AT_LIMIT:g} x the tolerance "
-                        f"{tol:g} m," if err < math.inf else "a non-finite state")  # fmt: skip
-                raise IntegrationError(
-                    f"DMP obstacle rollout: {what} with {m} substeps in the interval from "
-                    f"t = {t0:.4g} s: the path is not resolved there; raise max_substeps (a "
-                    "force that jumps, beta = 1, needs many), or tighten the tolerance so that "
-                    "the steps shrink before a steep obstacle is reached"
-                )
+                raise _unresolved(err, m, s0, self.rate, tol)
             m = min(top, 4 * m if err == math.inf else max(m + 1, math.ceil(m * scale)))
 
     def _substeps(
@@ -738,20 +977,22 @@ class _ObstacleIntegrator:
 
     def rollout(
         self, b: np.ndarray, h: float, phase: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """All ``N`` samples from rest at ``x0``; ``b`` (2N-1, 3) on the half-step grid.
-        Returns ``x``, ``v`` (DMP units) and ``v'`` (N, 3)."""
+        Returns ``x``, ``v`` (DMP units), ``v'`` (N, 3) and the substeps of each interval
+        (N - 1,)."""
         N = (b.shape[0] + 1) // 2
         bl = b.tolist()
         y = (*self.x0.tolist(), 0.0, 0.0, 0.0)
         k = self.deriv(bl[0], y)
-        Y, Kd = [y], [k]
+        Y, Kd, counts = [y], [k], []
         for n in range(N - 1):
             y, k = self.interval(y, k, float(phase[n]), h, bl[2 * n : 2 * n + 3])
             Y.append(y)
             Kd.append(k)
+            counts.append(self.last)
         Ya, Ka = np.array(Y), np.array(Kd)
-        return Ya[:, :3], Ya[:, 3:], Ka[:, 3:]
+        return Ya[:, :3], Ya[:, 3:], Ka[:, 3:], np.array(counts, dtype=np.int64)
 
 
 class DMPStepper:
@@ -777,7 +1018,10 @@ class DMPStepper:
     -----
     ``step(state, dt, out=state)`` updates in place and, without obstacles, allocates no
     arrays; without ``out`` it returns a new :class:`DMPState`. The goal may be moved between
-    steps with :meth:`set_goal`.
+    steps with :meth:`set_goal`. A stepper runs compiled unless it is constructed inside
+    :func:`reference_implementation` or its obstacles include a potential the kernels do not
+    compute; states whose arrays are not float64 take the reference's code (module
+    docstring).
     """
 
     def __init__(
@@ -798,8 +1042,11 @@ class DMPStepper:
         self.K, self.D, self.alpha_s = cfg.K, cfg.D, float(cfg.alpha_s)
         self.tau = T
         self.tau_s = cfg.phase_tau_ratio * T
-        kernel = make_point_force(tuple(obstacles))
+        obstacles = tuple(obstacles)
+        kernel = make_point_force(obstacles)
         self._integrator: _ObstacleIntegrator | None = None
+        self._kernels = _kernels()  # None: the reference implementation
+        d, nb = dmp.dim, cfg.n_basis
         if kernel is not None:
             if dmp.dim != 3:
                 raise DimensionError(
@@ -808,8 +1055,17 @@ class DMPStepper:
             self._integrator = _ObstacleIntegrator(dmp, self.start, self.goal, self.tau, kernel,
                                                    _tolerance(tolerance),
                                                    _max_substeps(max_substeps))  # fmt: skip
-        d, nb = dmp.dim, cfg.n_basis
+            self._rows = None if self._kernels is None else kernel_rows(obstacles)
+            if self._rows is None:
+                self._kernels = None  # a potential the kernels do not compute
+            else:
+                self._model = _obstacle_model(cfg, T)
+                self._state = _substep_state(self._integrator.tol, self._integrator.max_substeps)
+        elif self._kernels is not None:
+            self._work = np.empty(13 * d + nb)
         self._c, self._negh, self._W = dmp._c, -dmp._h, dmp.weights
+        if self._kernels is not None:
+            self._W = _buffer(dmp.weights)
         self._S = np.empty((3, 1))  # phases at t, t + dt/2, t + dt
         self._psi = np.empty((3, nb))
         self._den = np.empty(3)
@@ -895,7 +1151,9 @@ class DMPStepper:
             self._e1 = self._eh * self._eh
             self._last_dt = dt
         s, t = state.s, state.t
-        if self._integrator is not None:
+        if self._kernels is not None and all(map(_is_buffer, (state.x, state.v, out.x, out.v))):
+            self._step_compiled(state, dt, out)
+        elif self._integrator is not None:
             self._step_obstacles(state, dt, out)
             out.s = s * self._e1
         else:  # m RK4 steps of dt / m
@@ -909,15 +1167,44 @@ class DMPStepper:
         out.t = t + dt
         return out
 
+    def _step_compiled(self, state: DMPState, dt: float, out: DMPState) -> None:
+        """:meth:`step` by :func:`kernels.step_obstacles` or :func:`kernels.step_linear`, for
+        states of C-ordered float64 arrays (others take the reference's numpy code, which
+        rounds to their type where it stores: slower, the same answers)."""
+        kernels = self._kernels
+        assert kernels is not None
+        s = float(state.s)
+        if self._integrator is not None:
+            integ = self._integrator
+            status, err, m = kernels.step_obstacles(
+                state.x, state.v, s, float(dt), self._model, self.goal, self.start, self._c,
+                self.dmp._h, self._W, self._rows, integ.tol, integ.max_substeps, self._state,
+                out.x, out.v,
+            )  # fmt: skip
+            if status != 0:
+                raise _failure(kernels, status, err, m, s, integ.rate, integ.tol)
+            out.s = s * self._e1
+        else:
+            out.s = kernels.step_linear(state.x, state.v, s, dt / self._m, self._m, self._eh,
+                                        self._e1, self.K, self.D, self.tau, self._Kg,
+                                        self._Kgx0, self._c, self.dmp._h, self._W, self._work,
+                                        out.x, out.v)  # fmt: skip
+
     def _step_obstacles(self, state: DMPState, dt: float, out: DMPState) -> None:
         integ = self._integrator
         assert integ is not None
+        evaluations = integ.evaluations
+        if self._kernels is not None:  # a compiled stepper's: share its step control
+            integ.m = int(self._state[0])
         b = integ.inputs(state.s, dt, 1)
         y = (*state.x.tolist(), *(state.v * self.tau).tolist())
         y1, _ = integ.interval(y, integ.deriv(b[0], y), state.s, dt, b)
         out.x[:] = y1[:3]
         out.v[:] = y1[3:]
         out.v *= 1.0 / self.tau
+        if self._kernels is not None:
+            self._state[0], self._state[2] = integ.m, integ.last
+            self._state[1] += integ.evaluations - evaluations
 
     def _step_linear(self, state: DMPState, dt: float, out: DMPState) -> None:
         self._inputs(state.s)
@@ -1101,6 +1388,21 @@ _DENSE_SAVGOL = 400  # up to this many samples, the filter is one cached (3n, n)
 
 
 @lru_cache(maxsize=16)
+def _savgol_windows(window: int, polyorder: int) -> np.ndarray:
+    """(3, w, w): row ``i`` of ``[k]`` maps a window's samples to the k-th derivative (unit
+    spacing) of their least-squares polynomial at the window's sample ``i``. Read-only,
+    cached."""
+    x, C = _savgol_fit(window, polyorder)
+    E = _savgol_rows(x, polyorder, window // 2).dot(C)
+    E.setflags(write=False)
+    return E
+
+
+_NO_WINDOWS = np.empty((3, 0, 0))  # kernels.fit: the filtered demonstration is given
+_NO_WINDOWS.setflags(write=False)
+
+
+@lru_cache(maxsize=16)
 def _savgol_operator(n: int, window: int, polyorder: int) -> np.ndarray:
     """The Savitzky-Golay filter of an ``n``-sample signal as one (3n, n) matrix (unit
     spacing): rows ``k n .. (k + 1) n`` give the value (k = 0) and the first and second
@@ -1108,8 +1410,7 @@ def _savgol_operator(n: int, window: int, polyorder: int) -> np.ndarray:
     ``m`` samples the polynomial fitted to the first and last window (scipy's
     ``mode="interp"``). For ``n <= 400`` only (at most 3.8 MB each)."""
     m = window // 2
-    x, C = _savgol_fit(window, polyorder)
-    E = _savgol_rows(x, polyorder, m).dot(C)  # (3, w, w): sample i of a window, from it
+    E = _savgol_windows(window, polyorder)  # (3, w, w): sample i of a window, from it
     S = np.zeros((3, n, n))
     for k in range(3):
         for i in range(m, n - m):

@@ -707,3 +707,37 @@ def make_point_force(potentials: Sequence[Potential]) -> PointForce | None:
         return f1, f2, f3
 
     return force
+
+
+def _kernel_row(potential: object) -> np.ndarray | None:
+    """``potential`` as a row of the compiled force (:func:`kernel_rows`), or None."""
+    cls = type(potential)
+    own = getattr(cls, "point_force", None)
+    if own is DynamicPotential.point_force:
+        static, beta = False, float(potential.beta)  # type: ignore[attr-defined]
+    elif own is StaticPotential.point_force:
+        static, beta = True, 1.0  # unused by the static force
+    else:
+        return None
+    shape = getattr(potential, "shape", None)
+    if not isinstance(shape, Superquadric) or type(shape)._params is not Superquadric._params:
+        return None
+    from wholebody.kernels.dmp import obstacle_row  # numba loads on first use only
+
+    gain, eta, floor = (float(getattr(potential, a)) for a in ("gain", "eta", "floor"))
+    return obstacle_row(static, shape._params(), gain, beta, eta, floor)
+
+
+def kernel_rows(potentials: Sequence[object]) -> np.ndarray | None:
+    """The parameters of ``potentials`` for the compiled integrator (one row each, see
+    :mod:`wholebody.kernels.dmp`), or None when one of them is not a potential the kernels
+    compute: a user-written :class:`Potential`, or a subclass with its own ``point_force``.
+    The planner then integrates with the Python closures of :func:`make_point_force`
+    (slower, the same answers)."""
+    rows = []
+    for p in potentials:
+        row = _kernel_row(p)
+        if row is None:
+            return None
+        rows.append(row)
+    return np.array(rows) if rows else None

@@ -168,13 +168,12 @@ def _objective_rows(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> N
             if objs[o, lay.OBJ_LEVEL] != k:
                 continue
             w = out[o, 0]
-            grad += w * grads[o]
+            for j in range(nu):
+                grad[j] += w * grads[o, j]
             if objs[o, lay.OBJ_HAS_CURV] and w > 0:
-                if have_curv:
-                    curv[:] = w * curvs[o] + curv
-                else:
-                    curv[:] = w * curvs[o]
-                    have_curv = True
+                for j in range(nu):
+                    curv[j] = w * curvs[o, j] + curv[j] if have_curv else w * curvs[o, j]
+                have_curv = True
         gain = lf[k, lay.LEVEL_GAIN]
         sw = math.sqrt(lf[k, lay.LEVEL_OBJECTIVE_WEIGHT])
         lf[k, lay.LEVEL_IDENTITY] = 0.0 if levels[k, lay.LEVEL_HAS_TASKS] else sw
@@ -239,11 +238,13 @@ def _box(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> None:
         if c < counts[0]:
             position_box(jp, pos[c, 0], pos[c, 1], pos[c, 2, 0], dt, blo, bhi)
         elif c < counts[0] + counts[1]:
-            bhi[:] = vel[c - counts[0]]
-            blo[:] = -bhi
+            for j in range(nu):
+                bhi[j] = vel[c - counts[0], j]
+                blo[j] = -bhi[j]
         else:
-            blo[:] = py[c - counts[0] - counts[1], 0]
-            bhi[:] = py[c - counts[0] - counts[1], 1]
+            for j in range(nu):
+                blo[j] = py[c - counts[0] - counts[1], 0, j]
+                bhi[j] = py[c - counts[0] - counts[1], 1, j]
         for j in range(nu):
             lo[j] = blo[j] if first else _nan_max(lo[j], blo[j])
             hi[j] = bhi[j] if first else _nan_min(hi[j], bhi[j])

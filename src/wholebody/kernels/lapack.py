@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 _ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dgeqrf": 8, "dorgqr": 9, "dgels": 11,
-         "dgesdd": 14, "dsyevd": 11, "dgetrf": 6, "dgetrs": 9}
+         "dgesdd": 14, "dsyevd": 11, "dgetrf": 6, "dgetrs": 9}  # fmt: skip
 
 
 def _external(name: str):

@@ -18,7 +18,8 @@ import math
 import numpy as np
 
 from wholebody.kernels import kernel
-from wholebody.kernels.lapack import potrf, trtri
+from wholebody.kernels.lapack import getrf, getrs, potrf, trtri
+from wholebody.kernels.linalg import fortran, mm, mmt, mtm
 
 __all__ = [
     "AE_WIDTH",
@@ -118,17 +119,18 @@ def mlp_stiffness(net: np.ndarray, p: np.ndarray, grad: np.ndarray) -> float:
         e = math.exp(br) if br < 0 else math.exp(-br)
         k = (max(br, 0.0) + math.log1p(e)) / beta
         s = 1.0 / (1.0 + e) if br >= 0 else e / (1.0 + e)
-    g = w_out * s
+    g = np.empty(h.shape[0])
+    for c in range(h.shape[0]):
+        g[c] = w_out[c] * s
     for i in range(n_layers - 1, -1, -1):
         n_out = sizes[i]
         n_in = 3 if i == 0 else sizes[i - 1]
         Wl = net[starts[i] : starts[i] + n_out * n_in]
-        hi = hs[i, :n_out]
-        gi = g * (1.0 - hi * hi)
         nxt = np.zeros(n_in)
         for r in range(n_out):
+            gi = g[r] * (1.0 - hs[i, r] * hs[i, r])
             for c in range(n_in):
-                nxt[c] += Wl[r * n_in + c] * gi[r]
+                nxt[c] += Wl[r * n_in + c] * gi
         g = nxt
     grad[:] = g
     return k
@@ -229,7 +231,8 @@ def arm_energy(
         for r in range(6):
             cf = C[f, r]
             if cf != 0.0:
-                grad += cf * J[f, r]
+                for col in range(grad.shape[0]):
+                    grad[col] += cf * J[f, r, col]
     parts[0] = gravity + spring
     parts[1] = gravity
     parts[2] = spring
@@ -273,34 +276,48 @@ def manipulability(J: np.ndarray, mask: np.ndarray, grad: np.ndarray) -> float:
     from the kinematic-Hessian identity (:mod:`wholebody.robot.hessian`) with
     ``mask[l, k]``: column l supports column k. Zero where ``J J^T`` is singular."""
     F, _, nu = J.shape
-    Js = J.reshape(6 * F, nu)
-    G = Js.dot(Js.T)
-    L = np.asfortranarray(G)
+    n = 6 * F
+    Js = J.reshape(n, nu)
+    G = mmt(Js, Js)
+    L = fortran(G)
     info = potrf(L, True)
     top = 0.0
     low = np.inf
-    for i in range(6 * F):
+    for i in range(n):
         top = max(top, G[i, i])
         low = min(low, L[i, i] * L[i, i])
     grad[:] = 0.0
     if info == 0 and low > _PIVOT_FLOOR * top:
         logdet = 0.0
-        for i in range(6 * F):
+        for i in range(n):
             logdet += math.log(L[i, i])
         logdet *= 2.0
         if logdet < -200:
             return 0.0
         trtri(L, True)
-        Pm = L.T.dot(L.dot(Js))
-    else:
-        sign, logdet = np.linalg.slogdet(G)
-        if sign <= 0 or logdet < -200:
+        Pm = mtm(L, mm(L, Js))
+    else:  # LU with partial pivoting, as numpy's slogdet and solve
+        LU = fortran(G)
+        piv = np.zeros(n, np.int32)
+        if getrf(LU, piv) < 0:
             return 0.0
-        Pm = np.linalg.solve(G, Js)
+        negative = False
+        logdet = 0.0
+        for i in range(n):
+            d = LU[i, i]
+            if d == 0.0:  # singular: numpy.linalg.slogdet says sign 0
+                return 0.0
+            negative ^= (d < 0.0) ^ (piv[i] != i + 1)
+            logdet += math.log(abs(d))
+        if negative or logdet < -200:
+            return 0.0
+        Pm = fortran(Js)
+        getrs(LU, piv, Pm)
     h2 = math.exp(0.5 * logdet)
     for f in range(F):
         _contract(J[f], Pm[6 * f : 6 * f + 6], mask, grad)
-    grad *= h2
+    for k in range(nu):
+        grad[k] *= h2
     return h2
 
 

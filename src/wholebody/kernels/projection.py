@@ -19,14 +19,23 @@ import numpy as np
 
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
-from wholebody.kernels.lapack import geqrf, orgqr, potrf
+from wholebody.kernels.lapack import geqrf, gesdd, orgqr, potrf, syevd
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
     cholesky_inverse,
+    combine,
+    dot,
+    fortran,
     frobenius2,
     level_report,
+    mm,
+    mmt,
+    mtm,
+    mtv,
+    mv,
     normal_solve,
+    scatter_rows,
 )
 
 __all__ = ["PAR_WIDTH", "project"]
@@ -44,11 +53,51 @@ STATUS_OK, STATUS_BOUNDS, STATUS_SCALED, STATUS_INFEASIBLE, STATUS_FAILED = 0, 1
 
 # ---------------------------------------------------------------------- linear algebra
 @kernel
-def _damping(s: np.ndarray, eps: float, lam: float) -> np.ndarray:
-    """``mu_i = (1 - (s_i / eps)^2) lambda_max^2`` where ``s_i < eps``, else 0."""
-    x = s * (1.0 / eps)
-    x *= x
-    return np.maximum(1.0 - x, 0.0) * lam**2
+def _damping(s: float, eps: float, lam: float) -> float:
+    """``mu = (1 - (s / eps)^2) lambda_max^2`` where ``s < eps``, else 0."""
+    x = s / eps
+    return max(1.0 - x * x, 0.0) * lam * lam
+
+
+@kernel
+def _damped_solve(Vt: np.ndarray, U: np.ndarray, s: np.ndarray, squared: bool, keep: np.ndarray,
+                  R: np.ndarray, eps: float, lam: float) -> np.ndarray:  # fmt: skip
+    """``V_k diag(g) U_k^T R`` over the kept indices ``k`` (``keep``): the damped
+    pseudo-inverse of ``M = U diag(sigma) V^T`` applied to ``R`` (m x c), with ``g = sigma /
+    (sigma^2 + mu(sigma))``, or from eigenvalues ``s = sigma^2`` of ``M M^T`` (``squared``,
+    ``Vt`` then holding ``M^T U`` transposed, so ``g = 1 / (s + mu(sqrt s))``)."""
+    m, c = R.shape
+    r = Vt.shape[1]
+    Y = np.zeros((r, c))
+    for k in range(s.shape[0]):
+        if not keep[k]:
+            continue
+        if squared:
+            g = 1.0 / (s[k] + _damping(math.sqrt(s[k]), eps, lam))
+        else:
+            g = s[k] / (s[k] * s[k] + _damping(s[k], eps, lam))
+        for col in range(c):
+            t = 0.0
+            for i in range(m):
+                t += U[i, k] * R[i, col]
+            t *= g
+            for j in range(r):
+                Y[j, col] += Vt[k, j] * t
+    return Y
+
+
+@kernel
+def _rows_not_kept(Vt: np.ndarray, keep: np.ndarray, count: int) -> np.ndarray:
+    """The rows of ``Vt`` not in ``keep`` (``count`` of them), transposed: r x count."""
+    out = np.zeros((Vt.shape[1], count))
+    c = 0
+    for k in range(Vt.shape[0]):
+        if k < keep.shape[0] and keep[k]:
+            continue
+        for j in range(Vt.shape[1]):
+            out[j, c] = Vt[k, j]
+        c += 1
+    return out
 
 
 @kernel
@@ -58,34 +107,40 @@ def _gram_step(M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float
     directions): ``M^+_damped R`` (R: m x k) and a basis (r x .) of the directions it leaves
     unused, from the SVD of M where the reference's rows are tall (``tall``) or the
     eigen-decomposition of ``M M^T``, with its rank floors."""
-    m = M.shape[0]
+    m, r = M.shape
     if tall:
-        U, sv, Vt = np.linalg.svd(M, full_matrices=False)
-        top = sv[0] ** 2 if sv.size else 0.0
+        _, U, sv, Vt = gesdd(fortran(M), False)
+        top = sv[0] ** 2 if sv.shape[0] else 0.0
         floor = (rank_tol * max(1.0, math.sqrt(top))) ** 2
         if not exact:
             floor = max(floor, 10.0 * m * _EPS * top)
-        keep = sv * sv > floor
-        s_r = sv[keep]
-        c = np.ascontiguousarray(U[:, keep].T).dot(R)
-        gain = s_r / (s_r * s_r + _damping(s_r, eps, lam))
-        for k in range(s_r.shape[0]):
-            c[k] *= gain[k]
-        Y = np.ascontiguousarray(Vt[keep].T).dot(c)
-        return Y, np.ascontiguousarray(Vt[~keep].T)
-    lam_all, U = np.linalg.eigh(M.dot(M.T))
-    top = max(lam_all[-1], 0.0) if lam_all.size else 0.0
-    floor = max((rank_tol * max(1.0, math.sqrt(top))) ** 2, 10.0 * lam_all.size * _EPS * top)
-    keep = lam_all > floor
-    lam_r = lam_all[keep]
-    U_r = np.ascontiguousarray(U[:, keep])
-    MtU = M.T.dot(U_r)
-    c = U_r.T.dot(R)
-    gain = 1.0 / (lam_r + _damping(np.sqrt(lam_r), eps, lam))
-    for k in range(lam_r.shape[0]):
-        c[k] *= gain[k]
-    V_r = MtU / np.sqrt(lam_r)  # orthonormal: the directions the level uses
-    return MtU.dot(c), _null_basis(np.ascontiguousarray(V_r.T))
+        keep = np.zeros(sv.shape[0], np.bool_)
+        kept = 0
+        for k in range(sv.shape[0]):
+            keep[k] = sv[k] * sv[k] > floor
+            kept += keep[k]
+        Y = _damped_solve(Vt, U, sv, False, keep, R, eps, lam)
+        return Y, _rows_not_kept(Vt, keep, Vt.shape[0] - kept)
+    E = fortran(mmt(M, M))
+    _, w = syevd(E)
+    top = max(w[-1], 0.0) if w.shape[0] else 0.0
+    floor = max((rank_tol * max(1.0, math.sqrt(top))) ** 2, 10.0 * w.shape[0] * _EPS * top)
+    keep = np.zeros(w.shape[0], np.bool_)
+    kept = 0
+    for k in range(w.shape[0]):
+        keep[k] = w[k] > floor
+        kept += keep[k]
+    MtU = mtm(E, M)  # row k: (M^T u_k)^T
+    Y = _damped_solve(MtU, E, w, True, keep, R, eps, lam)
+    V_r = np.zeros((kept, r))  # orthonormal rows: the directions the level uses
+    c = 0
+    for k in range(w.shape[0]):
+        if keep[k]:
+            scale = 1.0 / math.sqrt(w[k])
+            for j in range(r):
+                V_r[c, j] = MtU[k, j] * scale
+            c += 1
+    return Y, _null_basis(V_r)
 
 
 @kernel
@@ -96,26 +151,24 @@ def _solve_ls(M: np.ndarray, R: np.ndarray, eps: float, lam: float,
     m, n = M.shape
     if m == 0 or n == 0:
         return np.zeros((n, R.shape[1])), np.eye(n), 0
-    U, s, Vt = np.linalg.svd(M, full_matrices=True)
-    smax = s[0] if s.size else 0.0
+    _, U, s, Vt = gesdd(fortran(M), True)
+    smax = s[0] if s.shape[0] else 0.0
+    keep = np.zeros(s.shape[0], np.bool_)
     rank = 0
-    for v in s:
-        if v > rank_tol * max(1.0, smax):
-            rank += 1
-    sr = s[:rank]
-    inv = sr / (sr * sr + _damping(sr, eps, lam))
-    c = np.ascontiguousarray(U[:, :rank].T).dot(R)
-    for k in range(rank):
-        c[k] *= inv[k]
-    Y = np.ascontiguousarray(Vt[:rank].T).dot(c)
-    return Y, np.ascontiguousarray(Vt[rank:].T), rank
+    for k in range(s.shape[0]):
+        keep[k] = s[k] > rank_tol * max(1.0, smax)
+        rank += keep[k]
+    for k in range(s.shape[0]):  # (the reference counts them and keeps the first rank)
+        keep[k] = k < rank
+    Y = _damped_solve(Vt, U, s, False, keep, R, eps, lam)
+    return Y, _rows_not_kept(Vt, keep, n - rank), rank
 
 
 # ---------------------------------------------------------------------- boxes
 @kernel
 def _inside(u: np.ndarray, lo_tol: np.ndarray, hi_tol: np.ndarray) -> bool:
     """Whether ``u`` lies in the tolerance-widened box (False for NaN)."""
-    for k in range(u.shape[0]):  # noqa: SIM110 (a loop, for numba)
+    for k in range(u.shape[0]):
         if not (u[k] >= lo_tol[k] and u[k] <= hi_tol[k]):
             return False
     return True
@@ -169,19 +222,61 @@ def _segment(u0: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> f
 
 # ---------------------------------------------------------------------- free directions
 @kernel
-def _basis(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (n x r) of the free directions: the mask's coordinate axes, or
-    ``Z`` itself."""
+def _rank(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> int:
+    """How many free directions there are: the mask's count, or Z's columns."""
     if not is_mask:
-        return Z
-    n = mask.shape[0]
-    out = np.zeros((n, int(np.sum(mask))))
+        return Z.shape[1]
+    r = 0
+    for j in range(mask.shape[0]):
+        r += mask[j]
+    return r
+
+
+@kernel
+def _restrict(A: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``A Zb`` (m x r) for the orthonormal basis ``Zb`` of the free directions: the mask's
+    columns of A in order, or ``A Z``."""
+    if not is_mask:
+        return mm(A, Z)
+    m = A.shape[0]
+    out = np.empty((m, _rank(Z, is_mask, mask)))
     c = 0
-    for j in range(n):
+    for j in range(mask.shape[0]):
         if mask[j]:
-            out[j, c] = 1.0
+            for i in range(m):
+                out[i, c] = A[i, j]
             c += 1
     return out
+
+
+@kernel
+def _lift(Y: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``Zb Y`` (n x k) for coordinates ``Y`` (r x k) on the free directions: Y's rows
+    placed at the mask's joints, or ``Z Y``."""
+    if not is_mask:
+        return mm(Z, Y)
+    return scatter_rows(Y, mask)
+
+
+@kernel
+def _project_free(d: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``Zb Zb^T d``: ``d`` projected on the free directions."""
+    if not is_mask:
+        return mv(Z, mtv(Z, d))
+    out = np.zeros(d.shape[0])
+    for j in range(d.shape[0]):
+        if mask[j]:
+            out[j] = d[j]
+    return out
+
+
+@kernel
+def _row_norm2(Z: np.ndarray, j: int) -> float:
+    """``|Z_j|^2``, row j's squared norm."""
+    s = 0.0
+    for k in range(Z.shape[1]):
+        s += Z[j, k] * Z[j, k]
+    return s
 
 
 @kernel
@@ -190,10 +285,10 @@ def _zero_fixed_rows(Z: np.ndarray) -> np.ndarray:
     exactly 0, as the reference's basis of the free directions."""
     out = Z
     for j in range(Z.shape[0]):
-        if Z[j].dot(Z[j]) <= _FIXED:
+        if _row_norm2(Z, j) <= _FIXED:
             if out is Z:
                 out = Z.copy()
-            out[j] = 0.0
+            out[j, :] = 0.0
     return out
 
 
@@ -203,12 +298,18 @@ def _null_basis(M: np.ndarray) -> np.ndarray:
     m <= r: the last columns of the complete Q of ``M^T = Q R``."""
     m, r = M.shape
     a = np.zeros((r, r)).T  # Fortran-ordered: M^T in the first m columns, then Q
-    a[:, :m] = M.T
+    for k in range(m):
+        for j in range(r):
+            a[j, k] = M[k, j]
     tau = np.zeros(max(m, 1))
     if m:
         geqrf(a[:, :m], tau[:m])
     orgqr(a, tau, m, 8 * r)
-    return np.ascontiguousarray(a[:, m:])
+    out = np.empty((r, r - m))
+    for j in range(r):
+        for k in range(r - m):
+            out[j, k] = a[j, m + k]
+    return out
 
 
 @kernel
@@ -216,13 +317,24 @@ def _deflate(Z: np.ndarray, j: int) -> np.ndarray:
     """The basis of ``{Z y : (Z y)_j = 0}`` (n x (r - 1)) by one Householder reflection of
     Z's coordinates: ``Z H`` without its first column, row j exactly zero. Its projector is
     the reference's rank-one update ``F - F e_j e_j^T F / F_jj``."""
-    v = Z[j].copy()
-    norm = math.sqrt(v.dot(v))
+    n, r = Z.shape
+    v = np.empty(r)
+    for k in range(r):
+        v[k] = Z[j, k]
+    norm = math.sqrt(dot(v, v))
     v[0] += norm if v[0] >= 0 else -norm
-    vv = v.dot(v)
-    ZH = Z - np.outer(Z.dot(v), v * (2.0 / vv))
-    out = np.ascontiguousarray(ZH[:, 1:])
-    out[j] = 0.0
+    c = 2.0 / dot(v, v)
+    out = np.empty((n, r - 1))
+    for i in range(n):
+        if i == j:
+            out[i, :] = 0.0
+            continue
+        t = 0.0
+        for k in range(r):
+            t += Z[i, k] * v[k]
+        t *= c
+        for k in range(1, r):
+            out[i, k - 1] = Z[i, k] - t * v[k]
     return out
 
 
@@ -240,25 +352,33 @@ def _fixed(j: int, value: float, base: np.ndarray, Z: np.ndarray, is_mask: bool,
         nm = mask.copy()
         nm[j] = False
         return nb, Z, nm
-    z = Z[j]
-    fjj = z.dot(z)
+    fjj = _row_norm2(Z, j)
     if fjj <= _FIXED:  # |row j of an orthonormal basis| <= 1e-9: the joint cannot move
         return base, Z, mask
-    nb = base + Z.dot(z) * ((value - base[j]) / fjj)
+    z = np.empty(Z.shape[1])
+    for k in range(Z.shape[1]):
+        z[k] = Z[j, k]
+    nb = combine(base, (value - base[j]) / fjj, mv(Z, z))
     nb[j] = value
     return nb, _deflate(Z, j), mask
 
 
 # ---------------------------------------------------------------------- a level's step
 @kernel
+def _trace(G: np.ndarray) -> float:
+    """``trace(G)``."""
+    t = 0.0
+    for k in range(G.shape[0]):
+        t += G[k, k]
+    return t
+
+
+@kernel
 def _certify_wide(M: np.ndarray, eps: float, rank_tol: float):
     """The reference's certificate of ``G = M M^T`` (m x m): ``(ok, L^-1)``."""
     dummy = np.zeros((0, 0)).T
-    G = M.dot(M.T)
-    top = 0.0
-    for k in range(G.shape[0]):
-        top += G[k, k]
-    if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, top):
+    G = mmt(M, M)
+    if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, _trace(G)):
         return False, dummy
     ok, Linv = cholesky_inverse(G)
     if not ok or not _exceeds(G, Linv, eps):
@@ -274,14 +394,11 @@ def _certify_tall(M: np.ndarray, eps: float, floor: float):
     dummy = np.zeros((0, 0)).T
     if M.shape[1] == 0 or not eps * eps > floor:
         return False, dummy, 0.0
-    G = M.T.dot(M)
-    top = 0.0
-    for k in range(G.shape[0]):
-        top += G[k, k]
+    G = mtm(M, M)
     ok, Linv = cholesky_inverse(G)
     if not ok or not _exceeds(G, Linv, eps):
         return False, dummy, 0.0
-    k2 = frobenius2(Linv) * top
+    k2 = frobenius2(Linv) * _trace(G)
     if k2 > NORMAL_KAPPA * NORMAL_KAPPA:
         return False, dummy, 0.0
     return True, Linv, k2
@@ -293,19 +410,19 @@ def _exceeds(G: np.ndarray, Linv: np.ndarray, eps: float) -> bool:
     Cholesky factor (the reference's two tests)."""
     if frobenius2(Linv) * eps * eps <= 1.0:
         return True
-    S = np.asfortranarray(G)
+    S = fortran(G)
     for k in range(S.shape[0]):
         S[k, k] -= eps**2
     return potrf(S, True) == 0
 
 
 @kernel
-def _step(A: np.ndarray, R: np.ndarray, Zb: np.ndarray, is_mask: bool, par: np.ndarray,
-          sns: bool):  # fmt: skip
-    """A level's least-squares step on its free directions ``Zb`` (n x r):
-    ``(Y, M, Nf, route, rank)`` with ``Y = Zb M^+_damped R`` (``M = A Zb``, R: m x k), what
-    :func:`_leftover` needs for the basis of the directions the level leaves free, and the
-    rank the reference reports.
+def _step(A: np.ndarray, R: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray,
+          par: np.ndarray, sns: bool):  # fmt: skip
+    """A level's least-squares step on its free directions (``Z``, ``is_mask``, ``mask``:
+    see :func:`_restrict`), ``Zb`` (n x r): ``(Y, M, Nf, route, rank)`` with ``Y = Zb
+    M^+_damped R`` (``M = A Zb``, R: m x k), what :func:`_leftover` needs for the basis of
+    the directions the level leaves free, and the rank the reference reports.
 
     The route is the reference's: its certified Cholesky where it certifies (``G = M M^T``,
     m <= r; ``M^T M`` when the level has more rows than nu and nothing is fixed), else its
@@ -315,19 +432,17 @@ def _step(A: np.ndarray, R: np.ndarray, Zb: np.ndarray, is_mask: bool, par: np.n
     damped or dropped, well conditioned) takes the normal equations, which is what those
     routes then compute, at a fraction of the cost."""
     eps, lam, rank_tol = par[PAR_THRESHOLD], par[PAR_DAMPING], par[PAR_RANK]
-    n, r = Zb.shape
-    m = A.shape[0]
+    n, m = mask.shape[0], A.shape[0]
+    r = _rank(Z, is_mask, mask)
     if r == 0:  # nothing left to move (the reference's routes all give 0)
         return np.zeros((n, R.shape[1])), np.zeros((m, 0)), np.zeros((0, 0)), ROUTE_ALL, 0
-    M = A.dot(Zb)
+    M = _restrict(A, Z, is_mask, mask)
     if m <= n and m <= r:  # the reference certifies G = M M^T
         ok, Linv = _certify_wide(M, eps, rank_tol)
         if ok:
-            Y = Zb.dot(M.T.dot(Linv.T.dot(Linv.dot(R))))
+            Y = _lift(mtm(M, mtm(Linv, mm(Linv, R))), Z, is_mask, mask)
             return Y, M, np.zeros((0, 0)), ROUTE_WIDE, m
-    top = 0.0
-    for v in M.ravel():
-        top += v * v
+    top = frobenius2(M)
     tall_ref = m > n
     if sns:
         floor = (rank_tol**2) * max(1.0, top)
@@ -335,29 +450,31 @@ def _step(A: np.ndarray, R: np.ndarray, Zb: np.ndarray, is_mask: bool, par: np.n
         floor = (rank_tol * max(1.0, math.sqrt(top))) ** 2
         if not (tall_ref and is_mask):
             floor = max(floor, 10.0 * m * _EPS * top)
-    if sns:  # the reference's SVD takes a basis whose rows of fixed joints are exactly 0
-        Zb = _zero_fixed_rows(Zb)
-        M = A.dot(Zb)
+    if sns and not is_mask:  # the reference's SVD takes a basis whose fixed rows are 0
+        Z = _zero_fixed_rows(Z)
+        M = mm(A, Z)
     if m > r or (tall_ref and r == n):  # (m <= r: M^T M singular, or M M^T certified)
         ok, Linv, k2 = _certify_tall(M, eps, floor)
         if ok:
-            return Zb.dot(normal_solve(M, Linv, R, k2)), M, np.zeros((0, 0)), ROUTE_ALL, r
+            Y = _lift(normal_solve(M, Linv, R, k2), Z, is_mask, mask)
+            return Y, M, np.zeros((0, 0)), ROUTE_ALL, r
     if sns:
         Y, Nf, rank = _solve_ls(M, R, eps, lam, rank_tol)
     else:
         Y, Nf = _gram_step(M, R, tall_ref, is_mask, eps, lam, rank_tol)
         rank = 0
-    return Zb.dot(Y), M, Zb.dot(Nf), ROUTE_BASIS, rank
+    return _lift(Y, Z, is_mask, mask), M, _lift(Nf, Z, is_mask, mask), ROUTE_BASIS, rank
 
 
 @kernel
-def _leftover(Zb: np.ndarray, M: np.ndarray, N: np.ndarray, route: int) -> np.ndarray:
+def _leftover(Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: np.ndarray,
+              route: int) -> np.ndarray:  # fmt: skip
     """The basis (n x .) of the free directions a level's step leaves (see :func:`_step`):
-    those of ``Zb`` that ``M = A Zb`` does not move, none, or the given ``N``."""
+    those that ``M = A Zb`` does not move, none, or the given ``N``."""
     if route == ROUTE_WIDE:
-        return Zb.dot(_null_basis(M))
+        return _lift(_null_basis(M), Z, is_mask, mask)
     if route == ROUTE_ALL:
-        return np.zeros((Zb.shape[0], 0))
+        return np.zeros((mask.shape[0], 0))
     return N
 
 
@@ -367,24 +484,28 @@ def _level(A, b, rs, ids, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol, nee
            saturate, par):  # fmt: skip
     """One level on top of the state of the levels above (the reference's ``_level``):
     ``(u, Z, is_mask, mask, saturated, scale)``."""
-    n = u0.shape[0]
-    if A.shape[0] == 0:
+    n, m = u0.shape[0], A.shape[0]
+    if m == 0:
         return u0, Z, is_mask, mask, sat, 1.0
     if rs != 1.0:  # damping decided independently of a common scale
-        c = 1.0 / rs
-        A, b = A * c, b * c
+        A = A * (1.0 / rs)
+        b = b * (1.0 / rs)
     nothing = np.zeros(n, np.bool_)
     empty = np.zeros((n, 0))
-    Zb = _basis(Z, is_mask, mask)
     if ids > 0:
-        d = b / ids - u0
-        u = u0 + Zb.dot(Zb.T.dot(d))
+        d = np.empty(n)
+        for j in range(n):
+            d[j] = b[j] / ids - u0[j]
+        u = combine(u0, 1.0, _project_free(d, Z, is_mask, mask))
         nZ, n_mask, n_free = empty, True, nothing
     else:
-        R = (b - A.dot(u0)).reshape((A.shape[0], 1))
-        Y, M, N, route, _ = _step(A, R, Zb, is_mask, par, False)
-        u = u0 + Y[:, 0]
-        nZ = _leftover(Zb, M, N, route) if need_next else empty
+        Au = mv(A, u0)
+        R = np.empty((m, 1))
+        for k in range(m):
+            R[k, 0] = b[k] - Au[k]
+        Y, M, N, route, _ = _step(A, R, Z, is_mask, mask, par, False)
+        u = combine(u0, 1.0, Y[:, 0])
+        nZ = _leftover(Z, is_mask, mask, M, N, route) if need_next else empty
         n_mask, n_free = False, nothing
     if not saturate or _inside(u, lo_tol, hi_tol):
         return u, nZ, n_mask, n_free, sat, 1.0
@@ -403,56 +524,75 @@ def _saturate(A, b, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol, par):  # 
     skip = sat.copy()
     best_s = -np.inf
     best_rest, best_a = u0, u0
-    best_Zb, best_M, best_N, best_route = Z, A, Z, ROUTE_ALL
+    best_Z, best_mask, best_M, best_N, best_route = Z, mask, A, Z, ROUTE_ALL
     R = np.empty((m, 2))
-    R[:, 0] = b
     for it in range(n + 1):
-        R[:, 1] = -A.dot(base)
-        Zb = _basis(Z, is_mask, mask)
-        Y, M, N, route, rank = _step(A, R, Zb, is_mask, par, True)
-        a, rest = Y[:, 0].copy(), base + Y[:, 1]
+        Ab = mv(A, base)
+        for k in range(m):
+            R[k, 0] = b[k]
+            R[k, 1] = -Ab[k]
+        Y, M, N, route, rank = _step(A, R, Z, is_mask, mask, par, True)
+        a, rest = Y[:, 0].copy(), combine(base, 1.0, Y[:, 1])
         if needed < 0:
             needed = rank
         s_max, critical = _scaling(a, rest, lo, hi, skip)
         if it == 0 or s_max > best_s:
             best_s, best_rest, best_a = s_max, rest, a
-            best_Zb, best_M, best_N, best_route = Zb, M, N, route
-        cand = rest + a
+            best_Z, best_mask, best_M, best_N, best_route = Z, mask, M, N, route
+        cand = combine(rest, 1.0, a)
         if _inside(cand, lo_tol, hi_tol):
-            return cand, _leftover(Zb, M, N, route), False, mask, skip, 1.0
+            return cand, _leftover(Z, is_mask, mask, M, N, route), False, mask, skip, 1.0
         if rank < needed or critical < 0:
             break  # out of free directions: scale the level by the best factor found
         skip[critical] = True
         bound = hi[critical] if cand[critical] > hi[critical] else lo[critical]
         base, Z, mask = _fixed(critical, bound, base, Z, is_mask, mask)
-    u = best_rest + best_s * best_a
-    if not _inside(u, lo_tol, hi_tol):  # last guard: a feasible point on the segment from u0
-        u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
-    return u, _leftover(best_Zb, best_M, best_N, best_route), False, mask, skip, best_s
+    u = _guard(u0, combine(best_rest, best_s, best_a), lo, hi, lo_tol, hi_tol)
+    nZ = _leftover(best_Z, is_mask, best_mask, best_M, best_N, best_route)
+    return u, nZ, False, mask, skip, best_s
+
+
+@kernel
+def _guard(u0, u, lo, hi, lo_tol, hi_tol) -> np.ndarray:  # fmt: skip
+    """``u``, or where it is outside the box (the last guard) the last point of the segment
+    from ``u0`` towards it inside the tolerance-widened box, clipped to the box (the
+    reference's guard)."""
+    if _inside(u, lo_tol, hi_tol):
+        return u
+    d = combine(u, -1.0, u0)
+    out = combine(u0, _segment(u0, d, lo_tol, hi_tol), d)
+    for j in range(out.shape[0]):
+        out[j] = min(max(out[j], lo[j]), hi[j])
+    return out
 
 
 @kernel
 def _saturate_identity(b, s, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol):  # fmt: skip
     """SNS for a level of objectives only (rows ``s I``): its move is ``F b / s`` on the
-    free directions ``F`` (the reference's ``_saturate_identity``); it leaves nothing free."""
+    free directions ``F`` (the reference's ``_saturate_identity``, joints with ``F_jj <=
+    1e-18`` held exactly); it leaves nothing free."""
     n = u0.shape[0]
     base = u0
-    c = 1.0 / s
-    Zb = _basis(Z, is_mask, mask)
-    needed = Zb.shape[1]
+    needed = _rank(Z, is_mask, mask)
     skip = sat.copy()
     best_s = -np.inf
     best_rest, best_a, best_none = u0, u0, False
     nothing = np.zeros(n, np.bool_)
     empty = np.zeros((n, 0))
     for it in range(n + 1):
-        rank = Zb.shape[1]
-        a = c * Zb.dot(Zb.T.dot(b))
-        rest = base - Zb.dot(Zb.T.dot(base))
+        rank = _rank(Z, is_mask, mask)
+        a = _project_free(b, Z, is_mask, mask)
+        for j in range(n):
+            a[j] *= 1.0 / s
+        rest = combine(base, -1.0, _project_free(base, Z, is_mask, mask))
+        if not is_mask:  # a joint the directions do not move stays: 0, not rounding
+            for j in range(n):
+                if _row_norm2(Z, j) <= _FIXED:
+                    a[j], rest[j] = 0.0, base[j]
         s_max, critical = _scaling(a, rest, lo, hi, skip)
         if it == 0 or s_max > best_s:  # (rank > 0: the reference's P None, free none)
             best_s, best_rest, best_a, best_none = s_max, rest, a, rank > 0
-        cand = rest + a
+        cand = combine(rest, 1.0, a)
         if _inside(cand, lo_tol, hi_tol):
             return cand, empty, rank > 0, nothing, skip, 1.0
         if rank < needed or critical < 0:
@@ -460,10 +600,7 @@ def _saturate_identity(b, s, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol):
         skip[critical] = True
         bound = hi[critical] if cand[critical] > hi[critical] else lo[critical]
         base, Z, mask = _fixed(critical, bound, base, Z, is_mask, mask)
-        Zb = _basis(Z, is_mask, mask)
-    u = best_rest + best_s * best_a
-    if not _inside(u, lo_tol, hi_tol):
-        u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
+    u = _guard(u0, combine(best_rest, best_s, best_a), lo, hi, lo_tol, hi_tol)
     return u, empty, best_none, nothing, skip, best_s
 
 
@@ -486,9 +623,12 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
             out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_EMPTY_BOX
             _report(f, i, h, np.zeros(n), par[PAR_TOLERANCE])
             return
-    u_start = np.minimum(np.maximum(0.0, lo), hi)
-    wide_lo = lo - _INSIDE_TOL * (np.abs(lo) + 1.0)
-    wide_hi = hi + _INSIDE_TOL * (np.abs(hi) + 1.0)
+    u_start = np.empty(n)
+    wide_lo, wide_hi = np.empty(n), np.empty(n)
+    for j in range(n):
+        u_start[j] = min(max(0.0, lo[j]), hi[j])
+        wide_lo[j] = lo[j] - _INSIDE_TOL * (abs(lo[j]) + 1.0)
+        wide_hi[j] = hi[j] + _INSIDE_TOL * (abs(hi[j]) + 1.0)
     u = np.zeros(n)
     Z = np.zeros((n, 0))
     is_mask = True
@@ -501,8 +641,11 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
             is_mask, free, sat, lo, hi, wide_lo, wide_hi, k + 1 < L, False, par,
         )  # fmt: skip
     if par[PAR_SATURATE] != 0.0 and not _inside(u, wide_lo, wide_hi):
-        sat = lo == hi
-        u, Z, is_mask, free = u_start.copy(), np.zeros((n, 0)), True, ~sat
+        u, Z, is_mask = u_start.copy(), np.zeros((n, 0)), True
+        sat, free = np.empty(n, np.bool_), np.empty(n, np.bool_)
+        for j in range(n):
+            sat[j] = lo[j] == hi[j]
+            free[j] = not sat[j]
         for k in range(L):
             r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
             u, Z, is_mask, free, sat, s = _level(
@@ -510,9 +653,12 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
                 Z, is_mask, free, sat, lo, hi, wide_lo, wide_hi, k + 1 < L, True, par,
             )  # fmt: skip
             lev_out[k, 1] = s
-    if not math.isfinite(u.dot(u)) and not np.all(np.isfinite(u)):
-        out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_NON_FINITE
-        u = u_start
+    if not math.isfinite(dot(u, u)):
+        for j in range(n):
+            if not math.isfinite(u[j]):
+                out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_NON_FINITE
+                u = u_start
+                break
     _report(f, i, h, u, par[PAR_TOLERANCE])
 
 
@@ -528,8 +674,9 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
     infeasible, active = ivec(i, h, lay.I_INFEASIBLE), ivec(i, h, lay.I_ACTIVE)
     U = fmat(f, h, lay.F_U)
     n = u.shape[0]
-    U[0] = u
-    U[1] = D * u
+    for j in range(n):
+        U[0, j] = u[j]
+        U[1, j] = D[j] * u[j]
     top_unmet = False
     t0 = 0
     for k in range(levels.shape[0]):
@@ -559,10 +706,19 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
         status = STATUS_FAILED
     elif scales.shape[0] and scales[0] >= 1.0 and top_unmet:
         status = STATUS_INFEASIBLE
-    elif np.any(scales < 1.0):
+    elif _any_below_one(scales):
         status = STATUS_SCALED
     elif any_active:
         status = STATUS_BOUNDS
     else:
         status = STATUS_OK
     out[lay.OUT_STATUS] = status
+
+
+@kernel
+def _any_below_one(x: np.ndarray) -> bool:
+    """Whether some ``x_k < 1``."""
+    for k in range(x.shape[0]):
+        if x[k] < 1.0:
+            return True
+    return False

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 
+from wholebody import kernels
 from wholebody.kernels import hqp as kernel
 from wholebody.kernels import layout as lay
 from wholebody.solvers.plan import Arena, first_call
@@ -76,8 +78,8 @@ class Workspace:
         qb = self._qb
         lb = qb[2, :nv] if has_box else None
         ub = qb[3, :nv] if has_box else None
-        return (self._H[: nv * nv].reshape(nv, nv), self._g[0, :nv],
-                self._Q[: rows * nv].reshape(rows, nv), qb[0, :rows], qb[1, :rows], lb, ub)  # fmt: skip
+        H, Q = self._H[: nv * nv].reshape(nv, nv), self._Q[: rows * nv].reshape(rows, nv)
+        return H, self._g[0, :nv], Q, qb[0, :rows], qb[1, :rows], lb, ub
 
     def padded(self, x: np.ndarray | None) -> np.ndarray:
         """An engine's answer as the kernels take it (zeros where there is none)."""
@@ -95,11 +97,40 @@ def _solve(engine, ws: Workspace) -> tuple[object, bool]:
 def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     """The cascade on the evaluated ``arena`` (see the module docstring); its outcome is in
     the arena and the workspace."""
+    if _READY:
+        _cascade(solver, arena, ws)
+    else:
+        first_call("hqp", "the hierarchical QP kernels", _compile_then, solver, arena, ws)
+
+
+_READY = False  # whether every stage is compiled in this process
+
+
+def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
+    """The first cascade of a process: every stage compiled (or loaded from the cache)
+    first, so that no later step pays for a stage this one did not need."""
+    global _READY
+    if not kernels.DISABLED:
+        a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver._par)
+        sol, w = ws.padded(None), (ws.f, ws.i, ws.h)
+        stages = ((kernel.begin, a), (kernel.advance, a), (kernel.finish, a),
+                  (kernel.after_qp, (*a, sol, True)), (kernel.proximal, (*a, sol, True)),
+                  (kernel.tie_done, (*w, sol, True)), (kernel.bump, (*w, 1)))  # fmt: skip
+        for stage, args in stages:
+            stage.compile(tuple(numba.typeof(v) for v in args))
+    _READY = True
+    _cascade(solver, arena, ws)
+
+
+def _cascade(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver._par)
-    code = first_call("hqp", "the hierarchical QP kernels", kernel.begin, *a)
+    code = kernel.begin(*a)
     report = ws.report
     L = report.shape[0]
     while code != kernel.DONE:
+        if code == kernel.NEXT:
+            code = kernel.advance(*a)
+            continue
         k = int(ws.state[kernel.S_K])
         if code == kernel.NEED_TIE:
             sol, ok = _solve(solver._engine(L), ws)

@@ -400,7 +400,8 @@ class HierarchicalQPSolver(Solver):
         if ws is None or ws.arena is not arena:
             ws = self._workspace = compiled_hqp.Workspace(arena)
         self._par[:] = (self.tolerance, self.rank_tolerance, self.regularization,
-                        self.bound_relaxation, self.active_tolerance, self.proximal_steps)  # fmt: skip
+                        self.bound_relaxation, self.active_tolerance,
+                        self.proximal_steps)  # fmt: skip
         compiled_hqp.run(self, arena, ws)
         self._pending = (arena, ws)
         result = compiled_hqp.result(self, arena, ws, 0.0)

@@ -22,7 +22,8 @@ never wrong.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -66,7 +67,7 @@ def sqrt_weights(task: Task, w: object) -> np.ndarray:
     return np.sqrt(wa)
 
 
-def first_call(name: str, what: str, call, *args):  # noqa: ANN201 (the kernel's result)
+def first_call(name: str, what: str, call: Callable[..., Any], *args: Any) -> Any:
     """``call(*args)``, telling the user when its first call in this process compiles."""
     if _WARM.get(name):
         return call(*args)

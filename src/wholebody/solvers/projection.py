@@ -436,14 +436,16 @@ class ProjectionSolver(Solver):
         s, rest, a, free_b, null_b = best
         u = rest + s * a
         if not box.inside(u):  # last guard: a feasible point on the segment from u0
-            u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
+            u = np.clip(u0 + _segment(u0, u - u0, box.lo_tol, box.hi_tol) * (u - u0), lo, hi)
         return _Level(u, _null_projector(free_b, null_b), s, skip)
 
     def _saturate_identity(self, lp: LevelProblem, prev: _Level, box: _Box) -> _Level:
         """SNS for a level of objectives only (rows ``s I``, ``s > 0``): with ``F`` the free
         directions, the level's move is ``F b / s`` and the compensation of ``base``
         ``-F base`` (no damping: ``s I`` is never singular, and without bounds the move is
-        the same ``F (b/s - base)``); the rank is ``rank(F)``."""
+        the same ``F (b/s - base)``); the rank is ``rank(F)``. A joint the free directions do
+        not move (``F_jj <= 1e-18``) has both exactly 0, not rounding: otherwise a motion of
+        1e-15 could pick it as the critical joint and decide the scale."""
         lo, hi = box.lo, box.hi
         u0, sat, b = prev.u, prev.saturated, lp.b
         s = lp.identity_scale
@@ -457,6 +459,10 @@ class ProjectionSolver(Solver):
             rank = free.rank()
             a = c * free.apply(b)
             rest = base - free.apply(base)
+            if free.F is not None:
+                stuck = free.F.diagonal() <= _FIXED
+                a[stuck] = 0.0
+                rest[stuck] = base[stuck]
             s_max, critical = _scaling(a, rest, box, skip)
             null = None if rank else free.matrix()  # what the level leaves free
             if best is None or s_max > best[0]:
@@ -473,7 +479,7 @@ class ProjectionSolver(Solver):
         s_b, rest, a, null = best
         u = rest + s_b * a
         if not box.inside(u):
-            u = u0 + _segment(u0, u - u0, lo, hi) * (u - u0)
+            u = np.clip(u0 + _segment(u0, u - u0, box.lo_tol, box.hi_tol) * (u - u0), lo, hi)
         return _Level(u, null, s_b, skip, _none(u0.size, null))
 
     # ------------------------------------------------------------------ solve
@@ -743,7 +749,10 @@ def _scaling(a: np.ndarray, rest: np.ndarray, box: _Box, skip: np.ndarray) -> tu
 
 
 def _segment(u0: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
-    """Largest ``t`` in [0, 1] with ``u0 + t d`` in the box (u0 inside it)."""
+    """Largest ``t`` in [0, 1] with ``u0 + t d`` in the box ``[lo, hi]`` (u0 inside it). The
+    solver passes the tolerance-widened box of its inside test, then clips the point to the
+    exact box: a joint on its bound that rounding moves outwards by 1e-16 must not stop the
+    whole segment at t = 0."""
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(d > 0, (hi - u0) / d, np.where(d < 0, (lo - u0) / d, np.inf))
     return float(np.clip(np.min(t), 0.0, 1.0)) if t.size else 1.0

@@ -87,6 +87,7 @@ class _KernelCacheLocator(caching._CacheLocator):
 
     def __init__(self, py_func: Callable, py_file: str, path: str) -> None:
         self._lineno = py_func.__code__.co_firstlineno
+        self._py_file = py_file  # (numba reads it to warn about what it cannot cache)
         self._stamp = _digest(Path(py_file).name)
         self._path = path
 

@@ -34,6 +34,7 @@ from wholebody.kernels.lapack import gels, geqp3, gesdd, orgqr, potrf, trtri, tr
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
+    cholesky_inverse,
     combine,
     dot,
     fortran,
@@ -41,10 +42,12 @@ from wholebody.kernels.linalg import (
     gather_rows,
     level_report,
     mm,
+    mmt,
     mtm,
     mtv,
     mv,
     normal_solve,
+    null_basis,
 )
 
 __all__ = [
@@ -362,11 +365,27 @@ def _pivot_norm(M: np.ndarray) -> float:
 
 
 @kernel
+def _full_row_rank(Nz: np.ndarray, rtol: float, floor: float) -> bool:
+    """Whether ``Nz`` (q x r, q <= r) certainly has q singular values above
+    ``max(rtol s_max, floor)`` (the reference's ``_full_row_rank``)."""
+    ok, Linv = cholesky_inverse(mmt(Nz, Nz))
+    if not ok:
+        return False
+    inv2 = frobenius2(Linv)
+    margin = _MARGIN * rtol
+    return inv2 * frobenius2(Nz) * margin * margin < 1.0 and inv2 * (_MARGIN * floor) ** 2 < 1.0
+
+
+@kernel
 def _null_space(Nz: np.ndarray, Z: np.ndarray, identity: bool, rtol: float,
                 floor: float) -> np.ndarray:  # fmt: skip
     """Basis of ``{Z y : Nz y = 0}`` (``identity``: Z = I); singular values at most
-    ``max(rtol s_max, floor)`` count as zero (the reference's ``_null_space``)."""
-    r = Nz.shape[1]
+    ``max(rtol s_max, floor)`` count as zero (the reference's ``_null_space``, with its
+    certified QR route)."""
+    q, r = Nz.shape
+    if 0 < q <= r and _full_row_rank(Nz, rtol, floor):
+        V2 = null_basis(Nz)
+        return V2 if identity else mm(Z, V2)
     _, _, S, Vt = gesdd(fortran(Nz), True)
     rank = 0
     if S.shape[0] and S[0] > floor:
@@ -963,7 +982,11 @@ def _finish_level(f, i, h, wf, wi, wh, par, y) -> int:  # fmt: skip
     if m:
         _bound_limited(f, i, h, wf, wi, wh, par, k, xq)
     x[:] = xq
-    _close(f, i, h, wf, wi, wh, par, k)
+    r_level, identity_level = st[S_R], st[S_ZI] == 1
+    Z_level = Z[:, :r_level].copy() if not identity_level else np.zeros((x.shape[0], 0))
+    _close_rows(wf, wi, wh)
+    _pin(f, i, h, wf, wi, wh, par, k, Z_level, r_level, identity_level)
+    _close_rest(f, i, h, wf, wi, wh, par, k)
     st[S_K] += 1
     return NEXT
 
@@ -1021,38 +1044,59 @@ def _set_Z(Z: np.ndarray, Znew: np.ndarray) -> None:
 
 @kernel
 def _close(f, i, h, wf, wi, wh, par, k) -> None:  # fmt: skip
-    """The level's optimal set: its rows fixed (the basis Z times its own null space), the
-    constraints its optimum presses on fixed too, its inequality rows inherited, the relaxed
-    box widened to contain x (the reference's end of a level)."""
-    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
-    rep = imat(wi, wh, W_REPORT)
-    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
-    n, r, identity, m, p, rank = x.shape[0], st[S_R], st[S_ZI] == 1, st[S_M], st[S_P], st[S_RANK]
-    Z_level = Z[:, :r].copy() if not identity else np.zeros((n, 0))
-    was_identity = identity
+    """The level's optimal set where no QP ran (the reference's end of a level): its rows
+    fixed, its inequality rows inherited, the relaxed box widened to contain x."""
+    _close_rows(wf, wi, wh)
+    _close_rest(f, i, h, wf, wi, wh, par, k)
+
+
+@kernel
+def _close_rows(wf, wi, wh) -> None:  # fmt: skip
+    """The level's rows fixed: the basis Z times the level's own null space."""
+    st, x, _, Z, _, _, _ = _state(wf, wi, wh)
+    n, r, identity, rank = x.shape[0], st[S_R], st[S_ZI] == 1, st[S_RANK]
     if rank:
         cols = max(st[S_NULL], 0)
         null = fmat(wf, wh, W_NULL)[:r, :cols]
-        _set_Z(Z, null.copy() if identity else mm(Z_level, null))
+        _set_Z(Z, null.copy() if identity else mm(Z[:, :r], null))
         r, identity = cols, False
-    if rep[k, R_QP] and m and (identity or r > 0):
-        smax = fvec(wf, wh, W_SCAL)[C_SMAX]
-        delta = par[P_REG] * (smax * smax if smax > 0 else 1.0)
-        pins = _strongly_active(A, b, C, clo, chi, x, Z_level, st[S_R], was_identity, box[0],
-                                box[1], G, gb[0], gb[1], delta, par)  # fmt: skip
-        if pins.shape[0]:
-            floor = par[P_RANK] * _max_abs(pins)
-            Znew = _null_space(_restrict(pins, Z, r, identity), Z[:, :r], identity,
-                               par[P_RANK], floor)  # fmt: skip
-            r, identity = Znew.shape[1], False
-            _set_Z(Z, Znew)
     st[S_R], st[S_ZI] = (n, 1) if identity else (r, 0)
-    if p:
+
+
+@kernel
+def _pin(f, i, h, wf, wi, wh, par, k, Z_level, r_level, identity_level) -> None:  # fmt: skip
+    """After a QP: the constraints the level's optimum presses on fixed too (their rows
+    removed from the free directions), found at the level's basis ``Z_level``."""
+    st, x, box, Z, G, gb, _ = _state(wf, wi, wh)
+    A, b, C, clo, chi, _, _ = _rows(f, i, h, k)
+    r, identity = st[S_R], st[S_ZI] == 1
+    if not (imat(wi, wh, W_REPORT)[k, R_QP] and st[S_M] and (identity or r > 0)):
+        return
+    smax = fvec(wf, wh, W_SCAL)[C_SMAX]
+    delta = par[P_REG] * (smax * smax if smax > 0 else 1.0)
+    pins = _strongly_active(A, b, C, clo, chi, x, Z_level, r_level, identity_level, box[0],
+                            box[1], G, gb[0], gb[1], delta, par)  # fmt: skip
+    if pins.shape[0]:
+        floor = par[P_RANK] * _max_abs(pins)
+        Znew = _null_space(_restrict(pins, Z, r, identity), Z[:, :r], identity, par[P_RANK],
+                           floor)  # fmt: skip
+        _set_Z(Z, Znew)
+        st[S_R], st[S_ZI] = Znew.shape[1], 0
+
+
+@kernel
+def _close_rest(f, i, h, wf, wi, wh, par, k) -> None:  # fmt: skip
+    """The level's inequality rows inherited by the levels below and the relaxed box widened
+    to contain x."""
+    st, x, box, _, _, _, _ = _state(wf, wi, wh)
+    _, _, C, clo, chi, _, _ = _rows(f, i, h, k)
+    if C.shape[0]:
         Cx = mv(C, x)
-        viol = _violated(f, i, h, wi, wh, k, Cx, clo, chi, par[P_TOL], rep[k, R_QP] == 1)
+        qp = imat(wi, wh, W_REPORT)[k, R_QP] == 1
+        viol = _violated(f, i, h, wi, wh, k, Cx, clo, chi, par[P_TOL], qp)
         _inherit(wf, wi, wh, C, Cx, clo, chi, viol, par[P_RELAX])
     if k != imat(i, h, lay.I_LEVEL).shape[0] - 1 or st[S_ANYQP]:
-        for j in range(n):
+        for j in range(x.shape[0]):
             box[0, j] = min(box[0, j], x[j])
             box[1, j] = max(box[1, j], x[j])
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from wholebody.kernels import kernel
-from wholebody.kernels.lapack import potrf, trtri
+from wholebody.kernels.lapack import geqrf, orgqr, potrf, trtri
 
 __all__ = [
     "NORMAL_KAPPA",
@@ -33,6 +33,7 @@ __all__ = [
     "mtv",
     "mv",
     "normal_solve",
+    "null_basis",
     "scatter_rows",
 ]
 
@@ -197,6 +198,26 @@ def normal_solve(M: np.ndarray, H: np.ndarray, c: np.ndarray, kappa2: float) -> 
     if kappa2 > REFINE_KAPPA * REFINE_KAPPA:
         y += mtm(H, mm(H, mtm(M, c - mm(M, y))))
     return y
+
+
+@kernel
+def null_basis(M: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (r x (r - m)) of the null space of ``M`` (m x r) of full row rank
+    m <= r: the last columns of the complete Q of ``M^T = Q R``."""
+    m, r = M.shape
+    a = np.zeros((r, r)).T  # Fortran-ordered: M^T in the first m columns, then Q
+    for k in range(m):
+        for j in range(r):
+            a[j, k] = M[k, j]
+    tau = np.zeros(max(m, 1))
+    if m:
+        geqrf(a[:, :m], tau[:m])
+    orgqr(a, tau, m, 8 * r)
+    out = np.empty((r, r - m))
+    for j in range(r):
+        for k in range(r - m):
+            out[j, k] = a[j, m + k]
+    return out
 
 
 @kernel

@@ -19,7 +19,7 @@ import numpy as np
 
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
-from wholebody.kernels.lapack import geqrf, gesdd, orgqr, potrf, syevd
+from wholebody.kernels.lapack import gesdd, potrf, syevd
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
@@ -35,6 +35,7 @@ from wholebody.kernels.linalg import (
     mtv,
     mv,
     normal_solve,
+    null_basis,
     scatter_rows,
 )
 
@@ -140,7 +141,7 @@ def _gram_step(M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float
             for j in range(r):
                 V_r[c, j] = MtU[k, j] * scale
             c += 1
-    return Y, _null_basis(V_r)
+    return Y, null_basis(V_r)
 
 
 @kernel
@@ -289,26 +290,6 @@ def _zero_fixed_rows(Z: np.ndarray) -> np.ndarray:
             if out is Z:
                 out = Z.copy()
             out[j, :] = 0.0
-    return out
-
-
-@kernel
-def _null_basis(M: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (r x (r - m)) of the null space of ``M`` (m x r) of full row rank
-    m <= r: the last columns of the complete Q of ``M^T = Q R``."""
-    m, r = M.shape
-    a = np.zeros((r, r)).T  # Fortran-ordered: M^T in the first m columns, then Q
-    for k in range(m):
-        for j in range(r):
-            a[j, k] = M[k, j]
-    tau = np.zeros(max(m, 1))
-    if m:
-        geqrf(a[:, :m], tau[:m])
-    orgqr(a, tau, m, 8 * r)
-    out = np.empty((r, r - m))
-    for j in range(r):
-        for k in range(r - m):
-            out[j, k] = a[j, m + k]
     return out
 
 
@@ -472,7 +453,7 @@ def _leftover(Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: 
     """The basis (n x .) of the free directions a level's step leaves (see :func:`_step`):
     those that ``M = A Zb`` does not move, none, or the given ``N``."""
     if route == ROUTE_WIDE:
-        return _lift(_null_basis(M), Z, is_mask, mask)
+        return _lift(null_basis(M), Z, is_mask, mask)
     if route == ROUTE_ALL:
         return np.zeros((mask.shape[0], 0))
     return N

@@ -18,12 +18,44 @@ from wholebody.kernels import kernel
 from wholebody.kernels.so3 import jlog3, log3
 
 __all__ = [
+    "POSE_FINE",
+    "POSE_LAST_ROW",
+    "POSE_NON_FINITE",
+    "POSE_NOT_ROTATION",
     "half_space_row",
+    "pose_defect",
     "pose_rows",
     "position_box",
     "posture_rows",
     "relative_pose",
 ]
+
+
+POSE_FINE, POSE_NON_FINITE, POSE_LAST_ROW, POSE_NOT_ROTATION = 0, 1, 2, 3
+
+
+@kernel
+def pose_defect(T: np.ndarray) -> int:
+    """What is wrong with the 4x4 homogeneous transform ``T``: POSE_FINE, a NaN or inf
+    (POSE_NON_FINITE), a last row other than ``[0, 0, 0, 1]`` within 1e-9 (POSE_LAST_ROW), or
+    a rotation part with ``det < 0`` or ``|R^T R - I| > 1e-6`` (POSE_NOT_ROTATION)."""
+    for i in range(4):
+        for j in range(4):
+            if not math.isfinite(T[i, j]):
+                return POSE_NON_FINITE
+    if abs(T[3, 0]) + abs(T[3, 1]) + abs(T[3, 2]) + abs(T[3, 3] - 1.0) > 1e-9:
+        return POSE_LAST_ROW
+    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[1, 2] * T[2, 1])
+           - T[0, 1] * (T[1, 0] * T[2, 2] - T[1, 2] * T[2, 0])
+           + T[0, 2] * (T[1, 0] * T[2, 1] - T[1, 1] * T[2, 0]))  # fmt: skip
+    if det < 0:
+        return POSE_NOT_ROTATION
+    for a in range(3):
+        for b in range(a, 3):
+            g = T[0, a] * T[0, b] + T[1, a] * T[1, b] + T[2, a] * T[2, b]
+            if abs(g - (1.0 if a == b else 0.0)) > 1e-6:
+                return POSE_NOT_ROTATION
+    return POSE_FINE
 
 
 @kernel

@@ -1427,11 +1427,37 @@ def _lower_mask(m: int, k: int) -> np.ndarray:
     return mask
 
 
+def _full_row_rank(Nz: np.ndarray, rtol: float, floor: float) -> bool:
+    """Whether ``Nz`` (q x r, q <= r) certainly has q singular values above
+    ``max(rtol s_max, floor)``: with ``Nz Nz^T = L L^T``, ``sigma_min >= 1 / ||L^-1||_F`` and
+    ``s_max <= ||Nz||_F``, so it does when ``||L^-1||_F ||Nz||_F rtol`` and
+    ``||L^-1||_F floor`` are below 1, here with the certificates' margin of 1e3."""
+    L, info = _potrf(Nz.dot(Nz.T), lower=1)
+    if info != 0:
+        return False
+    Li, info = _trtri(L, lower=1)
+    if info != 0:
+        return False
+    fi, fn = Li.ravel(), Nz.ravel()
+    inv2 = fi.dot(fi)
+    margin = _CERTIFY_MARGIN * rtol
+    return bool(inv2 * fn.dot(fn) * margin * margin < 1.0
+                and inv2 * (_CERTIFY_MARGIN * floor) ** 2 < 1.0)  # fmt: skip
+
+
 def _null_space(Nz: np.ndarray, Z: np.ndarray | None, rank_tolerance: float,
                 floor: float = 0.0) -> np.ndarray:  # fmt: skip
     """Basis of ``{Z y : Nz y = 0}`` (``Z = None``: the identity); singular values at most
     ``max(rank_tolerance s_max, floor)`` count as zero (``floor``: the size of a row of
-    ``Nz`` that is round-off, a constraint on directions it does not move)."""
+    ``Nz`` that is round-off, a constraint on directions it does not move).
+
+    Where that rule certainly keeps every row (:func:`_full_row_rank`), the basis is the
+    complement of the rows from the complete QR of ``Nz^T``, the same subspace as the SVD's
+    (5 us against 30 us for the SVD of the 10 x 11 pins of the tight peers level)."""
+    q, r = Nz.shape
+    if 0 < q <= r and _full_row_rank(Nz, rank_tolerance, floor):
+        V2 = np.linalg.qr(Nz.T, mode="complete")[0][:, q:]
+        return V2 if Z is None else Z.dot(V2)
     _, S, Vt = np.linalg.svd(Nz, full_matrices=True)
     thr = max(rank_tolerance * S[0], floor) if S.size else 0.0
     rank = int(np.count_nonzero(thr < S)) if S.size and S[0] > floor else 0

@@ -33,7 +33,7 @@ import pinocchio as pin
 
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError
-from wholebody.kernels.rows import pose_rows
+from wholebody.kernels.rows import POSE_LAST_ROW, POSE_NON_FINITE, pose_defect, pose_rows
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
@@ -48,37 +48,30 @@ __all__ = [
 
 
 def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
-    """A 4x4 homogeneous transform with an orthonormal rotation, or DimensionError."""
+    """A 4x4 homogeneous transform with an orthonormal rotation (a new array), or
+    DimensionError."""
     T = np.array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
     if T.shape != (4, 4):
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    (a0, a1, a2, p0), (b0, b1, b2, p1), (c0, c1, c2, p2), (d0, d1, d2, d3) = T.tolist()
-    # A NaN or inf anywhere makes the sum non-finite (an overflow of it: the exact test).
-    total = a0 + a1 + a2 + p0 + b0 + b1 + b2 + p1 + c0 + c1 + c2 + p2 + d0 + d1 + d2 + d3
-    if not math.isfinite(total) and not np.isfinite(T).all():
+    defect = pose_defect(T)
+    if defect == POSE_NON_FINITE:
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    if abs(d0) + abs(d1) + abs(d2) + abs(d3 - 1.0) > 1e-9:
+    if defect == POSE_LAST_ROW:
         raise DimensionError(f"{what}: the last row of a 4x4 pose must be [0, 0, 0, 1], got "
                              f"{T[3].tolist()} (a transposed matrix?)")  # fmt: skip
-    det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
-    # R^T R - I, entry by entry (its six distinct entries)
-    gram = (
-        a0 * a0 + b0 * b0 + c0 * c0 - 1.0,
-        a1 * a1 + b1 * b1 + c1 * c1 - 1.0,
-        a2 * a2 + b2 * b2 + c2 * c2 - 1.0,
-        a0 * a1 + b0 * b1 + c0 * c1,
-        a0 * a2 + b0 * b2 + c0 * c2,
-        a1 * a2 + b1 * b2 + c1 * c2,
-    )
-    if det < 0 or max(map(abs, gram)) > 1e-6:
+    if defect:
         raise DimensionError(f"{what}: the rotation part is not a rotation matrix")
     return T
 
 
+_NO_TWIST = np.zeros(6)
+_NO_TWIST.setflags(write=False)
+
+
 def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
-    """A finite 6-vector [linear (m/s), angular (rad/s)] (zeros when None)."""
+    """A finite 6-vector [linear (m/s), angular (rad/s)] (read-only zeros when None)."""
     if twist is None:
-        return np.zeros(6)
+        return _NO_TWIST
     t = np.array(twist, dtype=float)
     if t.shape != (6,) or (not math.isfinite(t @ t) and not np.isfinite(t).all()):
         raise DimensionError(f"{what}: expected a finite twist of shape (6,), got {t.shape}")

@@ -144,6 +144,7 @@ def pose_error(T, Td):
     return np.linalg.norm(Td[:3, 3] - T[:3, 3]), np.linalg.norm(pin.log3(Td[:3, :3] @ T[:3, :3].T))
 
 
+@pytest.mark.slow
 def test_random_reachable_targets(humanoid):
     """200 seeded targets, paper's stack (hands; arm energy and joint-limit avoidance), 1 s
     of closed loop from home at 50 Hz each, both backends on the same targets. Measured:

@@ -18,6 +18,7 @@ def test_info(capsys):
     assert "nu = 15" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_run_writes_the_log_metrics_and_figures(tmp_path, capsys):
     out = tmp_path / "obstacles"
     assert main(["run", "obstacle_avoidance", "--out", str(out)]) == 0
@@ -76,6 +77,7 @@ def test_errors_are_reported_without_a_traceback(tmp_path, capsys):
     assert "cannot make the directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_demo_runs_headless_without_a_display(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
@@ -84,3 +86,9 @@ def test_demo_runs_headless_without_a_display(tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "headless" in out and "closed chain" in out
     assert (tmp_path / "demo" / "hands.png").is_file()
+
+
+def test_warmup_compiles_every_kernel_and_says_where_they_are_cached(capsys):
+    assert main(["warmup"]) == 0
+    out = capsys.readouterr().out
+    assert "kernels ready in" in out or "nothing to compile" in out

@@ -28,6 +28,7 @@ def _run(*argv: str) -> int:
     return args.func(args)
 
 
+@pytest.mark.slow
 def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     ds_path = tmp_path / "ds.npz"
     assert _run("dataset", "--no-real", "--synthetic-participants", "3", "--records", "300",

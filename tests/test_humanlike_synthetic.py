@@ -123,6 +123,7 @@ def test_synthetic_recordings_are_labelled_and_reproducible():
     assert np.all(np.diff(r.time_s) > 0) and r.time_s[1] == pytest.approx(1 / 30)
 
 
+@pytest.mark.slow
 def test_calibration_on_real_reaches():
     """On a subset of the real reaches the fitted target explains the arm angle better than
     Kim et al.'s head-centre target, which puts the elbow far too lateral."""
@@ -152,6 +153,7 @@ def test_synthetic_tabletop_matches_real_arm_angles():
     assert W[:, 0].min() > 0.1 and W[:, 2].max() < 0.0
 
 
+@pytest.mark.slow
 def test_synthetic_out_writes_the_recordings_the_dataset_was_built_from(humanoid, tmp_path):
     """With --calibrate the synthetic participants come from the re-fitted model: the files
     written beside the dataset must be those recordings."""

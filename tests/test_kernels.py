@@ -91,3 +91,21 @@ def test_frame_kinematics_equal_pinocchios_frame_jacobians(name, humanoid, torso
             np.testing.assert_allclose(p[k], state.position(frame), rtol=0, atol=1e-15)
             np.testing.assert_allclose(R[k], state.rotation(frame), rtol=0, atol=1e-15)
         np.testing.assert_allclose(jp, state.joint_positions(), rtol=0, atol=1e-15)
+
+
+def test_the_cache_falls_back_to_the_user_directory_when_the_package_one_is_not_writable(
+    tmp_path, monkeypatch
+):
+    """An installed package directory that cannot be written (a file where the cache
+    directory would go: refused even for root) sends the cache to the next candidate."""
+    import wholebody.kernels as kernels
+
+    blocked = tmp_path / "site-packages"
+    blocked.write_text("not a directory")
+    user = tmp_path / "user-cache"
+    monkeypatch.setattr(kernels, "_cache_bases", lambda py_file: [str(blocked / "sub"), str(user)])
+    where = kernels.cache_directory()
+    assert where is not None and where.is_dir()
+    assert where.is_relative_to(user)
+    monkeypatch.setattr(kernels, "_cache_bases", lambda py_file: [str(blocked / "sub")])
+    assert kernels.cache_directory() is None  # nothing writable: compile in memory, no crash

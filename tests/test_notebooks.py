@@ -11,6 +11,8 @@ import pytest
 nbformat = pytest.importorskip("nbformat", reason="notebooks need the 'dev' extra")
 nbclient = pytest.importorskip("nbclient", reason="notebooks need the 'dev' extra")
 
+pytestmark = pytest.mark.slow
+
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 
 

@@ -171,6 +171,7 @@ planner = "hold"
     assert back.meta["trial"] == 3 and back.meta["gain"] == 0.5
 
 
+@pytest.mark.slow
 def test_outputs_follow_the_robots_own_groups(tmp_path):
     """On a robot without a waist and with a torso group, the velocity plot shows every group
     and the comparison table has no waist column (it read nan)."""

@@ -16,6 +16,8 @@ import pytest
 from wholebody.resources import tasks_dir
 from wholebody.scenarios import load_scenario, run_scenario
 
+pytestmark = pytest.mark.slow
+
 SCENARIOS = ["reach_generalisation", "obstacle_avoidance", "independent_dual_arm",
              "coordinated_carry"]  # fmt: skip
 SHAPED = ["projection", "hqp"]

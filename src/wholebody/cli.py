@@ -130,6 +130,18 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _warmup(args: argparse.Namespace) -> int:
+    from wholebody.warmup import warmup
+
+    done = warmup()
+    if not done.compiled:
+        print("NUMBA_DISABLE_JIT=1: the kernels run as plain Python, nothing to compile")
+        return 0
+    where = done.cache or "nowhere (no writable cache directory: every process compiles)"
+    print(f"kernels ready in {done.seconds:.1f} s, cached in {where}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from wholebody.scenarios.spec import BACKENDS
 
@@ -174,6 +186,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--viz", action="store_true")
     demo.add_argument("--out", default=None, help="output directory (default runs/demo)")
     demo.set_defaults(func=_demo)
+    warm = sub.add_parser("warmup", help="compile the kernels now (once per machine, cached)")
+    warm.set_defaults(func=_warmup)
     from wholebody.humanlike.cli import add_stiffness_parser
 
     add_stiffness_parser(sub)

@@ -19,10 +19,13 @@ without the log's own recording and monitoring.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from wholebody.control.log import ArmTrace, RunLog
 from wholebody.errors import DimensionError, WholebodyError
@@ -102,17 +105,20 @@ class Controller:
         self.monitors = list(monitors)
         self.feedforward = feedforward
 
-    def _set_targets(self, t: float) -> None:
+    def _sampled_targets(self, k0: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each reference's poses at steps ``k0 .. k0+n-1`` and its twists at the same steps
+        (at mid-step with ``feedforward="midpoint"``), sampled in one vectorised call."""
+        t = (k0 + np.arange(n)) * self.dt
         t_ff = t + 0.5 * self.dt if self.feedforward == "midpoint" else t
-        # One evaluation per reference: the pose at t and the twist at t_ff sampled together.
-        times = np.array([t, t_ff]) if t_ff != t else np.array([t])
-        k = times.size - 1
-        for task, traj in self.references.items():
-            s = traj.sample_many(times)
-            pose = np.eye(4)
-            pose[:3, :3] = s.rotations[0]
-            pose[:3, 3] = s.positions[0]
-            task.set_target(pose, np.concatenate((s.linear_velocities[k], s.angular_velocities[k])))
+        out = []
+        for traj in self.references.values():
+            s = traj.sample_many(np.concatenate((t, t_ff)))
+            poses = np.zeros((n, 4, 4))
+            poses[:, :3, :3] = s.rotations[:n]
+            poses[:, :3, 3] = s.positions[:n]
+            poses[:, 3, 3] = 1.0
+            out.append((poses, np.hstack((s.linear_velocities[n:], s.angular_velocities[n:]))))
+        return out
 
     def run(
         self,
@@ -135,22 +141,8 @@ class Controller:
         log = _Recorder(robot, self.stack, self.monitors, tracked, n)
         self.stack.reset()
         bar = _progress(n, progress)
-        for k in range(n):
-            t = k * self.dt
-            start = time.perf_counter()
-            self._set_targets(t)
-            state = robot.update(q)
-            result = self.solver.solve(self.stack, state, self.dt)
-            compute = time.perf_counter() - start
-            log.record(k, t, q, state, result)  # before the next update invalidates state
-            start = time.perf_counter()
-            self.stack.advance(state, self.dt, saturated=result.limit_hit)
-            q = robot.integrate(q, result.u, self.dt)
-            log.step_time[k] = compute + (time.perf_counter() - start)
-            if callback is not None:
-                callback(k, t + self.dt, q)
-            if bar is not None:
-                bar.update(1)
+        with threadpool_limits(1), _gc_paused():  # no BLAS threads, no collection mid-step
+            q = self._loop(q, n, log, callback, bar)
         if bar is not None:
             bar.close()
         info = {
@@ -166,6 +158,53 @@ class Controller:
             **(meta or {}),
         }
         return log.finish(info)
+
+    def _loop(
+        self,
+        q: np.ndarray,
+        n: int,
+        log: _Recorder,
+        callback: Callable[[int, float, np.ndarray], None] | None,
+        bar: object,
+    ) -> np.ndarray:
+        """The ``n`` control steps from ``q``; the references sampled a block at a time."""
+        robot, tasks = self.robot, list(self.references)
+        for k in range(n):
+            if k % _BLOCK == 0:
+                targets = self._sampled_targets(k, min(_BLOCK, n - k))
+            t, j = k * self.dt, k % _BLOCK
+            start = time.perf_counter()
+            for task, (poses, twists) in zip(tasks, targets, strict=True):
+                task.set_target(poses[j], twists[j])
+            state = robot.update(q)
+            result = self.solver.solve(self.stack, state, self.dt)
+            compute = time.perf_counter() - start
+            log.record(k, t, q, state, result)  # before the next update invalidates state
+            start = time.perf_counter()
+            self.stack.advance(state, self.dt, saturated=result.limit_hit)
+            q = robot.integrate(q, result.u, self.dt)
+            log.step_time[k] = compute + (time.perf_counter() - start)
+            if callback is not None:
+                callback(k, t + self.dt, q)
+            if bar is not None:
+                bar.update(1)  # type: ignore[attr-defined]
+        return q
+
+
+_BLOCK = 1024  # steps of reference sampled at once (memory: 176 bytes a step a reference)
+
+
+@contextlib.contextmanager
+def _gc_paused() -> Iterator[None]:
+    """The cyclic garbage collector off while the loop runs, so
+    that no collection lands inside a control step; restored after."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 class _Recorder:

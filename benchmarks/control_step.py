@@ -108,6 +108,20 @@ def hqp_three_levels(engine):
     return factory
 
 
+def hierarchy(backend: str, scale: float) -> Factory:
+    """Hands above posture, velocity limits scaled by ``scale``: 0.05 makes a bound active on
+    almost every step (the tight case: saturation in the projection, pins in the HQP)."""
+
+    def factory(robot, hands):
+        limits = [JointPositionLimits(robot), VelocityLimits(robot, scale=scale)]
+        stack = Stack(robot, [Level(hands, name="hands"), Level([PostureTask(robot, kp=1.0)])],
+                      limits)  # fmt: skip
+        solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
+        return stack, solver
+
+    return factory
+
+
 CASES: list[tuple[str, Factory]] = [
     ("pinv (plain pseudo-inverse)", pinv),
     ("projection (paper's stack)", projection),
@@ -119,6 +133,10 @@ CASES: list[tuple[str, Factory]] = [
     ("hqp daqp (3 levels)", hqp_three_levels("daqp")),
     ("hqp proxsuite (3 levels)", hqp_three_levels("proxsuite")),
     ("hqp osqp (3 levels)", hqp_three_levels("osqp")),
+    ("projection (hierarchy, free)", hierarchy("projection", 1.0)),
+    ("projection (hierarchy, tight)", hierarchy("projection", 0.05)),
+    ("hqp daqp (hierarchy, free)", hierarchy("daqp", 1.0)),
+    ("hqp daqp (hierarchy, tight)", hierarchy("daqp", 0.05)),
 ]
 
 
@@ -155,8 +173,14 @@ def run(steps: int, repeat: int) -> None:
                      "cold": [], "warm": []})  # fmt: skip
     samples = [forth_and_back(refs, k * DT) for k in range(steps)]
 
+    placo = placo_case()
+    if placo is not None:
+        runs.append({"name": "placo (peers.py hierarchy)", "peer": placo, "cold": [], "warm": []})
+
     def steps_of(r: dict, ks: range, out: list[float]) -> None:
         """Steps ``ks`` of case ``r`` from its current state (``r["q"]``)."""
+        if "peer" in r:
+            return peer_steps(r["peer"], ks, out)
         hands, stack, solver = r["hands"], r["stack"], r["solver"]
         q = r["q"]
         for k in ks:
@@ -168,13 +192,17 @@ def run(steps: int, repeat: int) -> None:
             stack.advance(state, DT, result.limit_hit)
             q = robot.integrate(q, result.u, DT)
             out.append(time.perf_counter() - start)
+            r["bounds"] = r.get("bounds", 0) + result.limit_hit
         r["q"] = q
 
     for _ in range(repeat):
         for schedule in ("cold", "warm"):
             for r in runs:
                 r["q"] = q0.copy()
-                r["stack"].reset()
+                if "peer" in r:
+                    r["peer"].reset()
+                else:
+                    r["stack"].reset()
             size = 1 if schedule == "cold" else BLOCK
             for k in range(0, steps, size):
                 for r in runs:
@@ -184,20 +212,47 @@ def run(steps: int, repeat: int) -> None:
         f"{steps} steps x {repeat}, {platform.processor() or platform.machine()}, "
         f"Python {platform.python_version()}"
     )
-    cols = f"{'median us':>10s} {'p90 us':>9s} {'x pinv':>7s} {'Hz':>7s}"
+    cols = f"{'median us':>10s} {'p90 us':>9s} {'x pinv':>7s} {'Hz':>7s} {'x placo':>8s}"
     print(f"{'':42s} {'step-interleaved (cold)':^36s}  {'block-interleaved (warm)':^36s}".rstrip())
     print(f"{'case':42s} {cols}  {cols}")
     base = {sch: float(np.median(runs[0][sch])) * 1e6 for sch in ("cold", "warm")}
+    ref = {sch: float(np.median(runs[-1][sch])) * 1e6 if placo else np.nan
+           for sch in ("cold", "warm")}  # fmt: skip
     for r in runs:
-        cells = []
+        line = f"{r['name']:42s}"
         for sch in ("cold", "warm"):
             t = np.asarray(r[sch]) * 1e6
             med = float(np.median(t))
-            cells.append((med, float(np.percentile(t, 90)), med / base[sch]))
-        (cm, cp, cx), (wm, wp, wx) = cells
-        print(f"{r['name']:42s} {cm:10.1f} {cp:9.1f} {cx:7.2f} {1e6 / cm:7.0f}  "
-              f"{wm:10.1f} {wp:9.1f} {wx:7.2f} {1e6 / wm:7.0f}")  # fmt: skip
+            line += (f" {med:10.1f} {np.percentile(t, 90):9.1f} {med / base[sch]:7.2f} "
+                     f"{1e6 / med:7.0f} {med / ref[sch]:8.2f} ")  # fmt: skip
+        if "bounds" in r:
+            line += f" bounds on {100 * r['bounds'] / (2 * steps * repeat):.0f} % of steps"
+        print(line.rstrip())
+    if placo is None:
+        print("placo not installed (pip install '.[bench]'): no x placo column")
     print("paper (Table 2 / Sec. 5.2): pseudo-inverse 343.46 Hz, paper's method 40.55 Hz")
+
+
+def placo_case():
+    """placo on peers.py's 2-level hierarchy (hands strictly above posture, same robot), or
+    None when placo is not installed: the yardstick of the "x placo" column."""
+    import peers
+
+    if peers.peer_available("placo") is not None:
+        return None
+    setup = peers.make_setup()
+    case = peers.build_case(setup, "placo", "eiquadprog", peers.HIERARCHY)
+    case.targets = [setup.targets(k) for k in range(2 * peers.PERIOD)]
+    return case
+
+
+def peer_steps(case, ks: range, out: list[float]) -> None:
+    """Steps ``ks`` of a peers.py case along its own reference (forth and back)."""
+    for k in ks:
+        targets = case.targets[k % len(case.targets)]
+        start = time.perf_counter()
+        case.step(targets)
+        out.append(time.perf_counter() - start)
 
 
 def main() -> None:

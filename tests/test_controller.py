@@ -198,3 +198,22 @@ def test_runs_with_different_periods_are_not_joined_and_an_empty_log_has_no_metr
                    np.zeros((0, 1)), meta=dict(a.meta))  # fmt: skip
     with pytest.raises(DataError, match="no steps"):
         summary(empty)
+
+
+def test_references_sampled_in_blocks_are_the_trajectory_at_every_step(humanoid):
+    """The controller samples its references a block of steps at a time: over more than one
+    block, every step's target is the trajectory at that step's time."""
+    from wholebody.control import controller as module
+
+    robot = humanoid
+    hand = FrameTask(robot, "right_tool", kp=20.0)
+    start = robot.frame_pose(robot.home(), "right_tool")
+    end = start.copy()
+    end[:3, 3] += (0.1, 0.0, 0.1)
+    duration = (module._BLOCK + 76) * 0.01
+    traj = MinimumJerkTrajectory(start, end, duration)
+    ctrl = Controller(robot, paper_stack(robot, [hand], objectives=False), ProjectionSolver(),
+                      dt=0.01, references={hand: traj})  # fmt: skip
+    log = ctrl.run(robot.home(), duration)
+    expected = np.array([traj.sample(t).pose[:3, 3] for t in log.t])
+    np.testing.assert_allclose(log.reference_positions[hand.name], expected, atol=1e-12)

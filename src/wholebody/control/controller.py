@@ -170,10 +170,10 @@ class Controller:
         """The ``n`` control steps from ``q``; the references sampled a block at a time."""
         robot, tasks = self.robot, list(self.references)
         for k in range(n):
+            start = time.perf_counter()  # the step's time includes its share of the sampling
             if k % _BLOCK == 0:
                 targets = self._sampled_targets(k, min(_BLOCK, n - k))
             t, j = k * self.dt, k % _BLOCK
-            start = time.perf_counter()
             for task, (poses, twists) in zip(tasks, targets, strict=True):
                 task.set_target(poses[j], twists[j])
             state = robot.update(q)
@@ -196,8 +196,8 @@ _BLOCK = 1024  # steps of reference sampled at once (memory: 176 bytes a step a 
 
 @contextlib.contextmanager
 def _gc_paused() -> Iterator[None]:
-    """The cyclic garbage collector off while the loop runs, so
-    that no collection lands inside a control step; restored after."""
+    """The cyclic garbage collector off while the loop runs, so that no collection lands
+    inside a control step; restored after."""
     was = gc.isenabled()
     gc.disable()
     try:

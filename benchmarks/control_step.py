@@ -175,12 +175,14 @@ def run(steps: int, repeat: int) -> None:
 
     placo = placo_case()
     if placo is not None:
-        runs.append({"name": "placo (peers.py hierarchy)", "peer": placo, "cold": [], "warm": []})
+        case, targets = placo
+        runs.append({"name": "placo (peers.py hierarchy)", "peer": case, "targets": targets,
+                     "cold": [], "warm": []})  # fmt: skip
 
     def steps_of(r: dict, ks: range, out: list[float]) -> None:
         """Steps ``ks`` of case ``r`` from its current state (``r["q"]``)."""
         if "peer" in r:
-            return peer_steps(r["peer"], ks, out)
+            return peer_steps(r["peer"], r["targets"], ks, out)
         hands, stack, solver = r["hands"], r["stack"], r["solver"]
         q = r["q"]
         for k in ks:
@@ -234,24 +236,24 @@ def run(steps: int, repeat: int) -> None:
 
 
 def placo_case():
-    """placo on peers.py's 2-level hierarchy (hands strictly above posture, same robot), or
-    None when placo is not installed: the yardstick of the "x placo" column."""
+    """placo on peers.py's 2-level hierarchy (hands strictly above posture, same robot) and
+    its reference's targets (one reach forth and back), or None when placo is not installed:
+    the yardstick of the "x placo" column."""
     import peers
 
     if peers.peer_available("placo") is not None:
         return None
     setup = peers.make_setup()
     case = peers.build_case(setup, "placo", "eiquadprog", peers.HIERARCHY)
-    case.targets = [setup.targets(k) for k in range(2 * peers.PERIOD)]
-    return case
+    return case, [setup.targets(k) for k in range(2 * peers.PERIOD)]
 
 
-def peer_steps(case, ks: range, out: list[float]) -> None:
-    """Steps ``ks`` of a peers.py case along its own reference (forth and back)."""
+def peer_steps(case, targets: list, ks: range, out: list[float]) -> None:
+    """Steps ``ks`` of a peers.py case along ``targets`` (repeated)."""
     for k in ks:
-        targets = case.targets[k % len(case.targets)]
+        target = targets[k % len(targets)]
         start = time.perf_counter()
-        case.step(targets)
+        case.step(target)
         out.append(time.perf_counter() - start)
 
 

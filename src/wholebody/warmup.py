@@ -2,7 +2,7 @@
 
 The kernels (:mod:`wholebody.kernels`) compile on their first call and are cached on disk
 (see there for where); the first control step of a process otherwise pays the compilation
-(about 2-3 minutes on a 2-core machine, once) and later processes only load the cache
+(2.5 to 5.5 minutes measured on a 2-core machine, once) and later processes only load the cache
 (about a second). Warming up runs, on the bundled humanoid, a few steps of each solver on a
 stack that reaches every compiled path (frame, relative and posture tasks, limits, the arm
 energy with the shipped stiffness network, h1, manipulability, bounds active), and the DMP
@@ -14,6 +14,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from wholebody.robot import Robot
 
 __all__ = ["Warmup", "warmup"]
 
@@ -29,11 +33,10 @@ class Warmup:
     compiled: bool  # False under NUMBA_DISABLE_JIT=1 (nothing to compile)
 
 
-def _steps(solver: object, tight: bool) -> None:
-    """Three closed-loop steps of ``solver``, the hands moving: the paper's stack with the
-    closed chain above it, or (``tight``) a hierarchy whose velocity box binds."""
-    import wholebody
-    from wholebody.presets import paper_stack
+def _steps(robot: Robot, solver: object, tight: bool) -> None:
+    """Three closed-loop steps of ``solver``, the hands moving: the paper's stack (h2 on) with
+    the closed chain above it, or (``tight``) a hierarchy whose velocity box binds."""
+    from wholebody.presets import PaperWeights, paper_stack
     from wholebody.solvers import Level, Stack
     from wholebody.tasks import (
         FrameTask,
@@ -43,14 +46,14 @@ def _steps(solver: object, tight: bool) -> None:
         VelocityLimits,
     )
 
-    robot = wholebody.load_robot("mobile_humanoid")
     hands = [FrameTask(robot, "left_tool", kp=20.0), FrameTask(robot, "right_tool", kp=20.0)]
-    chain = RelativeFrameTask(robot, "left_tool", "right_tool", kp=20.0, name="chain")
     if tight:  # a box that binds on every step: the saturation and pinning paths
         stack = Stack(robot, [Level(hands), Level([PostureTask(robot)])],
                       [JointPositionLimits(robot), VelocityLimits(robot, scale=0.05)])  # fmt: skip
     else:
-        stack = paper_stack(robot, hands, first=[chain])
+        chain = RelativeFrameTask(robot, "left_tool", "right_tool", kp=20.0, name="chain")
+        stack = paper_stack(robot, hands, weights=PaperWeights(manipulability=0.05),
+                            first=[chain])  # fmt: skip
     q = robot.home()
     for k in range(3):
         for hand in hands:
@@ -65,14 +68,16 @@ def _steps(solver: object, tight: bool) -> None:
 
 def warmup() -> Warmup:
     """Compile (or load from the cache) every kernel of the package; safe to call again."""
+    import wholebody
     from wholebody import kernels
     from wholebody.planning import dmp
     from wholebody.solvers import ProjectionSolver
     from wholebody.solvers.hqp import HierarchicalQPSolver
 
     start = time.perf_counter()
+    robot = wholebody.load_robot("mobile_humanoid")
     for tight in (False, True):
-        _steps(ProjectionSolver(), tight)
-        _steps(HierarchicalQPSolver("daqp"), tight)
+        _steps(robot, ProjectionSolver(), tight)
+        _steps(robot, HierarchicalQPSolver("daqp"), tight)
     dmp.warmup()
     return Warmup(time.perf_counter() - start, kernels.cache_directory(), not kernels.DISABLED)

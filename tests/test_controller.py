@@ -3,6 +3,8 @@ and the run log."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -65,6 +67,20 @@ def test_energy_objective_moves_more_arm_and_less_waist_than_the_pseudo_inverse(
     # the arm angle stays in a human range where it is defined (paper: mostly 0-0.8 rad)
     assert paper["arm_angle_rad"]["right"]["min"] >= 0.0
     assert paper["arm_angle_rad"]["right"]["max"] < 1.2
+
+
+def test_monitored_energies_are_the_objective_at_every_logged_configuration(humanoid, runs):
+    """With the energies in the stack the log takes the solve's own values; without them
+    (the pseudo-inverse run) the monitor evaluates them: both are the objective's value."""
+    monitors = [ArmPotentialEnergy(humanoid, arm, 0.1) for arm in ("left", "right")]
+    for log in runs.values():
+        for k in range(0, 500, 37):
+            state = humanoid.update(log.q[k])
+            for m in monitors:
+                v, trace = m.evaluate(state), log.arms[m.arm.name]
+                logged = np.array(dataclasses.astuple(trace))[:, k]
+                expected = [v.value, v.gravity, v.spring, v.arm_angle, v.stiffness, v.rho]
+                np.testing.assert_allclose(logged, expected, rtol=0, atol=1e-12)
 
 
 def test_run_log_round_trip(runs, tmp_path):

@@ -219,6 +219,7 @@ class _Recorder:
         n: int,
     ) -> None:
         self.robot, self.monitors, self.tracked = robot, monitors, tracked
+        self.stack = stack
         self.tasks: list[Task] = stack.tasks
         self.t = np.zeros(n)
         self.q = np.zeros((n, robot.nq))
@@ -253,16 +254,10 @@ class _Recorder:
         for task in self.tracked:
             self.pos[task.name][k] = state.position(task.frame)
             self.ref[task.name][k] = task.target[:3, 3] if task.target is not None else np.nan
-        for m in self.monitors:
-            v = m.evaluate(state)
-            self.arms[m.arm.name][k] = (
-                v.value,
-                v.gravity,
-                v.spring,
-                v.arm_angle,
-                v.stiffness,
-                v.rho,
-            )
+        plan = self.stack.current_plan
+        for m in self.monitors:  # the solve's own value when the stack has the same energy
+            parts = plan.arm_parts(m, state) if plan is not None else None
+            self.arms[m.arm.name][k] = parts if parts is not None else m.parts(state)
 
     def finish(self, meta: dict) -> RunLog:
         return RunLog(

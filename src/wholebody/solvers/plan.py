@@ -298,6 +298,7 @@ class Plan(Arena):
         self._problem: StackProblem | None = None
         self.metric_version = -1
         self.stale = False
+        self.evaluated: RobotState | None = None  # the state of the last kernel evaluation
 
     # ------------------------------------------------------------------ layout
     def _frame(self, frame: Frame) -> int:
@@ -583,6 +584,7 @@ class Plan(Arena):
         """After a kernel evaluated the rows at ``state``: the pose tasks' errors are theirs."""
         for pose in self._pose:
             pose.written(state)
+        self.evaluated = state
 
     def evaluate(self, state: RobotState, dt: float) -> None:
         """Sync and evaluate every row and the box at ``state`` (scaled, in the arena)."""
@@ -643,6 +645,17 @@ class Plan(Arena):
                 curv = curvs[j].copy() if has_curv else None
                 out[o.name] = ObjectiveValue(float(self._obj[j, 1]), grads[j].copy(), curv)
         return out
+
+    def arm_parts(self, energy: ArmPotentialEnergy, state: RobotState) -> np.ndarray | None:
+        """``energy``'s parts (:meth:`ArmPotentialEnergy.parts`) as the last kernel evaluation
+        computed them for an arm energy of the stack with the same value, if that evaluation
+        was at ``state``; else None."""
+        if state is not self.evaluated:
+            return None
+        for k, arm in enumerate(self.arms):
+            if arm.same_energy(energy):
+                return self.view(lay.F_ARM_PARTS)[k]
+        return None
 
 
 def is_compiled(entry: Task | InequalityTask | Objective | Constraint) -> bool:

@@ -328,6 +328,11 @@ class Stack:
                 self._relayout()
                 return
 
+    @property
+    def current_plan(self) -> Plan | None:
+        """The plan of the last compiled evaluation, if any (:meth:`plan` lays one out)."""
+        return self._plan
+
     def plan(self) -> Plan:
         """The stack compiled for the kernels (:mod:`wholebody.solvers.plan`), laid out at the
         first use and again whenever levels or entries were replaced."""

@@ -170,12 +170,24 @@ class ArmPotentialEnergy(Objective):
         return packed() if callable(packed) else None
 
     def evaluate(self, state: RobotState) -> ArmEnergyValue:
-        frames = self._frames_base
+        grad = np.empty(self.robot.nu)
+        parts = self._energy(state, state.jacobians(self._frames_base), grad)
+        value, gravity, spring, alpha, k, rho = parts.tolist()
+        return ArmEnergyValue(value=value, gradient=grad, gravity=gravity, spring=spring,
+                              arm_angle=alpha, stiffness=k, rho=rho)  # fmt: skip
+
+    def parts(self, state: RobotState) -> np.ndarray:
+        """``(value, gravity, spring, arm_angle, stiffness, rho)`` (J, J, J, rad, N m/rad, m)
+        at ``state``, without the gradient (no Jacobians: what a monitor logs)."""
+        return self._energy(state, _NO_JACOBIAN, _NO_GRADIENT)
+
+    def _energy(self, state: RobotState, J: np.ndarray, grad: np.ndarray) -> np.ndarray:
+        """The kernel's ``ARM_PARTS`` at ``state``, its gradient into ``grad`` (``J``: the
+        frames' Jacobians, one column per entry of ``grad``)."""
         P = np.empty((6, 3))
         R = np.empty((6, 3, 3))
-        for i, f in enumerate(frames):
+        for i, f in enumerate(self._frames_base):
             R[i], P[i] = state.rotation_translation(f)
-        J = state.jacobians(frames)
         par = self.parameters()
         nets = self.network()
         stiffness = self.stiffness
@@ -191,13 +203,23 @@ class ArmPotentialEnergy(Objective):
                 par[AE_NET] = AE_CONSTANT
             else:
                 par[AE_NET], par[AE_DK : AE_DK + 3] = AE_GIVEN, dk
-        grad = np.empty(self.robot.nu)
         parts = np.empty(ARM_PARTS)
         arm_energy(P, R, J, par, _NO_NETWORK if nets is None else nets, grad, parts)
-        value, gravity, spring, alpha, k, rho = parts.tolist()
-        return ArmEnergyValue(value=value, gradient=grad, gravity=gravity, spring=spring,
-                              arm_angle=alpha, stiffness=k, rho=rho)  # fmt: skip
+        return parts
+
+    def same_energy(self, other: object) -> bool:
+        """Whether ``other`` is an arm energy with the same value as this one at every state
+        (same arm, stiffness and settings; the weight and name may differ)."""
+        if not isinstance(other, ArmPotentialEnergy):
+            return False
+        a, b = self.stiffness, other.stiffness
+        same_k = a is b or (type(a) is type(b) is ConstantStiffness and a.k == b.k)
+        return (same_k and self.arm is other.arm and self.robot is other.robot
+                and (self.smoothing, self.fade, self.reference, self.g)
+                == (other.smoothing, other.fade, other.reference, other.g))  # fmt: skip
 
 
 _NO_NETWORK = np.zeros(1)
 _NO_NETWORK.setflags(write=False)
+_NO_JACOBIAN = np.zeros((6, 6, 0))  # parts(): the gradient has no columns
+_NO_GRADIENT = np.zeros(0)

@@ -195,6 +195,56 @@ CASES = [
     ),
     ("not TOML", "robot.toml", "[robot]\n", "[robot\n", ConfigError, ["not valid TOML"]),
     (
+        "URDF mass NaN",
+        "robot.urdf",
+        '<mass value="40.0"/>',
+        '<mass value="nan"/>',
+        ModelError,
+        ["<mass value>", "expected 1 finite numbers, got 'nan'"],
+    ),
+    (
+        "URDF mass negative",
+        "robot.urdf",
+        '<mass value="40.0"/>',
+        '<mass value="-4"/>',
+        ModelError,
+        ["mass -4 kg is negative"],
+    ),
+    (
+        "URDF inertia inf",
+        "robot.urdf",
+        'ixx="0.5466666666666667"',
+        'ixx="inf"',
+        ModelError,
+        ["<inertia ixx>"],
+    ),
+    (
+        "URDF velocity negative",
+        "robot.urdf",
+        'effort="150.0" velocity="1.0"',
+        'effort="150.0" velocity="-1"',
+        ModelError,
+        ["joint 'waist_pitch'", "<limit velocity> = -1 is negative"],
+    ),
+    (
+        "URDF zero axis",
+        "robot.urdf",
+        '<origin xyz="0.0 0.377 0.0" rpy="0.0 -1.5707963267948966 '
+        '-1.5707963267948966"/>\n    <axis xyz="0.0 0.0 1.0"/>',
+        '<origin xyz="0.0 0.377 0.0" '
+        'rpy="0.0 -1.5707963267948966 -1.5707963267948966"/>\n    <axis xyz="0 0 0"/>',
+        ModelError,
+        ["joint 'waist_yaw'", "<axis xyz> is zero"],
+    ),
+    (
+        "URDF origin NaN",
+        "robot.urdf",
+        '<origin xyz="0.0 0.377 0.0"',
+        '<origin xyz="0.0 nan 0.0"',
+        ModelError,
+        ["joint 'waist_yaw' <origin xyz>"],
+    ),
+    (
         "URDF not XML",
         "robot.urdf",
         "<robot name=",
@@ -282,6 +332,14 @@ def test_malformed_robot_is_rejected_with_a_precise_message(tmp_path, file, old,
         assert part in message, f"{part!r} not in {message!r}"
     if file == "robot.toml":
         assert str(d / "robot.toml") in message
+
+
+def test_a_robot_toml_that_is_not_utf8_is_named(tmp_path):
+    d = copy_robot(tmp_path)
+    toml = d / "robot.toml"
+    toml.write_bytes(toml.read_bytes() + "# café\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"robot.toml: robot configuration is not UTF-8 text.*byte 0xe9"):
+        wholebody.load_robot(d)
 
 
 def test_massless_arm_body_is_rejected(tmp_path):

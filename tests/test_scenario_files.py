@@ -119,6 +119,12 @@ CASES = [
         ["[objects[0].size]", "> 0"],
     ),
     (
+        "rotation in degrees",
+        "rotate = [0.0, 0.0, -1.5708]",
+        "rotate = [0.0, 0.0, -90.0]",
+        ["rotate]", "angle of at most pi", "90 deg = 1.5708 rad"],
+    ),
+    (
         "phase defined twice",
         'name = "grasp"',
         'name = "approach"',

@@ -9,18 +9,32 @@ from __future__ import annotations
 
 import numpy as np
 
+from wholebody.errors import DimensionError
+
 try:
     from numpy._core.multiarray import count_nonzero
 except ImportError:  # pragma: no cover - numpy < 2
     count_nonzero = np.count_nonzero
 
-__all__ = ["NORMAL_KAPPA", "REFINE_KAPPA", "count_nonzero", "normal_solve"]
+__all__ = ["NORMAL_KAPPA", "REFINE_KAPPA", "count_nonzero", "float_array", "normal_solve"]
 
 NORMAL_KAPPA = 1e4
 """Largest condition bound ``kappa_F`` for which a solver may use a tall level's normal
 equations (:func:`normal_solve`) instead of a QR or an SVD."""
 REFINE_KAPPA = 1e3
 """Above this ``kappa_F``, :func:`normal_solve` refines its answer once."""
+
+
+def float_array(value: object, what: str) -> np.ndarray:
+    """``value`` as a float array (itself when it already is one); strings and other
+    non-numbers give a :class:`DimensionError` naming ``what`` (numpy would parse ``"1.5"``
+    silently, or raise a bare ``ValueError``)."""
+    if value.__class__ is np.ndarray and value.dtype == np.float64:  # type: ignore[union-attr]
+        return value  # type: ignore[return-value]
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise DimensionError(f"{what} must be numbers, got {arr.dtype} values: {value!r}")
+    return arr.astype(float)
 
 
 def normal_solve(M: np.ndarray, H: np.ndarray, c: np.ndarray, kappa2: float) -> np.ndarray:

@@ -114,15 +114,31 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _compare(args: argparse.Namespace) -> int:
     from wholebody.scenarios import load_scenario, run_scenario
-    from wholebody.scenarios.outputs import comparison, comparison_markdown, write_comparison
+    from wholebody.scenarios.outputs import (
+        comparison,
+        comparison_markdown,
+        write_comparison,
+        write_run,
+    )
 
     path = _scenario_path(args.scenario)
     spec = load_scenario(path)
     out = _output_dir(Path(args.out) if args.out else Path("runs") / f"{path.stem}_comparison")
     runs = []
-    for backend in args.backends:
-        print(f"running {spec.name} with {backend} ...")
-        runs.append(run_scenario(spec, backend=backend, progress=True))
+    try:
+        for backend in args.backends:  # each run's log and metrics kept as soon as it ends
+            print(f"running {spec.name} with {backend} ...")
+            run = run_scenario(spec, backend=backend, progress=True)
+            write_run(run, out / backend, figures=False)
+            runs.append(run)
+    except KeyboardInterrupt:
+        missing = args.backends[len(runs) :]
+        if runs:
+            write_comparison(runs, out)
+        done = ", ".join(r.backend for r in runs) or "none"
+        print(f"wholebody: interrupted: not run: {', '.join(missing)}; finished: {done} "
+              f"(their logs, metrics and comparison are in {out})", file=sys.stderr)  # fmt: skip
+        return 130
     files = write_comparison(runs, out)
     print(comparison_markdown(comparison(runs), spec.title or spec.name))
     for name, f in files.items():
@@ -202,6 +218,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WholebodyError as exc:
         print(f"wholebody: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:
+        print(f"wholebody: {_interrupted(exc)}", file=sys.stderr)
+        return 130
+
+
+def _interrupted(exc: KeyboardInterrupt) -> str:
+    """What a Ctrl-C left: the files written (each complete) and those not written."""
+    written: dict[str, Path] = getattr(exc, "written", {})
+    missing: list[str] = getattr(exc, "missing", [])
+    if not missing:
+        return "interrupted before any output was written (existing files are unchanged)"
+    done = ", ".join(str(p) for p in written.values()) or "none"
+    return f"interrupted: written, complete: {done}; not written: {', '.join(missing)}"
 
 
 if __name__ == "__main__":

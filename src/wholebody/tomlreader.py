@@ -26,9 +26,13 @@ def config_error(path: Path, key: str, message: str) -> ConfigError:
 def load_toml(path: Path, what: str) -> dict[str, Any]:
     """Parse a TOML file; a :class:`ConfigError` naming the file if unreadable or invalid."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read {what} ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        byte = exc.object[exc.start]
+        raise ConfigError(f"{path}: {what} is not UTF-8 text (TOML must be): byte {byte:#04x} "
+                          f"at offset {exc.start}") from None  # fmt: skip
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
+import numbers
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 
@@ -134,6 +136,8 @@ class Controller:
         (e.g. live visualisation). Returns the :class:`RunLog`."""
         robot = self.robot
         q = robot.check_configuration(q0).copy()
+        if not (isinstance(duration, numbers.Real) and math.isfinite(duration)):
+            raise DimensionError(f"duration must be a finite number of seconds, got {duration!r}")
         n = round(duration / self.dt)
         if n < 1:
             raise DimensionError(f"duration {duration} s is shorter than one step of {self.dt} s")

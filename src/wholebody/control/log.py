@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.errors import DataError
+from wholebody.files import read_npz, write_npz
 
 __all__ = ["ArmTrace", "RunLog", "concatenate"]
 
@@ -127,20 +128,13 @@ class RunLog:
             for f in ARM_FIELDS:
                 arrays[f"arm/{arm}/{f}"] = getattr(trace, f)
         arrays["meta"] = np.array(json.dumps(self.meta, default=json_default))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        return path
+        return write_npz(path, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> RunLog:
         """Read a log written by :meth:`save`."""
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{path}: not a run log (.npz): {exc}") from exc
+        data = read_npz(path, "run log (.npz)")
         required = (
             "t",
             "q",
@@ -169,15 +163,45 @@ class RunLog:
             elif head == "arm":
                 arm, _, f = rest.partition("/")
                 arms.setdefault(arm, {})[f] = value
+        for arm, fields in arms.items():
+            lacking = [f for f in ARM_FIELDS if f not in fields]
+            if lacking:
+                raise DataError(f"{path}: arm trace {arm!r} lacks {', '.join(lacking)}")
+        _check_lengths(path, data)
         return cls(
             **{k: data[k] for k in required if k != "meta"},
             task_errors=tables["task_error"],
             frame_positions=tables["frame_position"],
             reference_positions=tables["reference_position"],
             arms={a: ArmTrace(**{f: v[f] for f in ARM_FIELDS}) for a, v in arms.items()},
-            meta=json.loads(str(data["meta"])),
+            meta=_meta(path, data["meta"]),
             failed=data.get("failed"),
         )
+
+
+def _meta(path: Path, value: np.ndarray) -> dict:
+    """A log's metadata: a JSON object in a 0-d string array."""
+    if value.ndim != 0 or value.dtype.kind != "U":
+        raise DataError(f"{path}: key 'meta': expected a 0-d string, got {value.dtype} "
+                        f"{value.shape}")  # fmt: skip
+    try:
+        meta = json.loads(str(value))
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise DataError(f"{path}: key 'meta' must be a JSON object, got {type(meta).__name__}")
+    return meta
+
+
+def _check_lengths(path: Path, data: dict[str, np.ndarray]) -> None:
+    """Every per-step array has one row per entry of ``t``."""
+    n = data["t"].shape[0] if data["t"].ndim == 1 else -1
+    if n < 0:
+        raise DataError(f"{path}: key 't': expected shape (T,), got {data['t'].shape}")
+    for key, value in data.items():
+        if key != "meta" and (value.ndim == 0 or value.shape[0] != n):
+            raise DataError(f"{path}: key {key!r} has {value.shape[0] if value.ndim else 0} "
+                            f"rows, 't' has {n}")  # fmt: skip
 
 
 def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:

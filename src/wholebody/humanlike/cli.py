@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 from dataclasses import replace
 from pathlib import Path
 from shlex import quote
@@ -24,6 +23,7 @@ from shlex import quote
 import numpy as np
 
 from wholebody.errors import DataError
+from wholebody.files import write_json, write_text
 from wholebody.humanlike.training import DEFAULT_HIDDEN
 
 __all__ = ["add_stiffness_parser"]
@@ -173,8 +173,7 @@ def _fit(args: argparse.Namespace) -> int:
         final = replace(config, hidden=tuple(tr["hidden"]), weight_decay=tr["weight_decay"])
         cmds = card_commands(args, ds.meta, path, final)
         text = data_card(net, ds, date=args.date, commands=cmds, paper_scores=PAPER_SCORES)
-        Path(args.card).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.card).write_text(text)
+        write_text(args.card, text)
         print(f"data card written to {args.card}")
     return 0
 
@@ -264,7 +263,7 @@ def _report(args: argparse.Namespace) -> int:
         steps = tqdm(steps, desc="report", unit="step")
     for step, _ in steps:
         if step == "scores":
-            (out / "scores.json").write_text(json.dumps(report, indent=2, sort_keys=True))
+            write_json(out / "scores.json", report, indent=2, sort_keys=True)
         else:
             plot_workspace(net, out / "k_workspace.png", ds)
     stored = report["stored"]["scores_held_out_participants"] or {}

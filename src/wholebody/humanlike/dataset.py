@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.errors import DataError
+from wholebody.files import read_npz, write_npz
 from wholebody.humanlike.labels import (
     MAX_FOREARM_DEVIATION,
     MIN_ELBOW_OFFSET,
@@ -134,30 +135,26 @@ class StiffnessDataset:
 
     def save(self, path: str | Path) -> Path:
         """Write the dataset; returns the file written (``.npz`` appended if missing)."""
-        path = npz_path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         arrays = {name: getattr(self, name) for name in _ARRAYS}
         meta = {"format": FORMAT, **self.meta}
-        np.savez_compressed(path, **arrays, meta=np.array(json.dumps(meta, sort_keys=True)))
-        return path
+        arrays["meta"] = np.array(json.dumps(meta, sort_keys=True))
+        return write_npz(npz_path(path), arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> StiffnessDataset:
         """Read a dataset file; raises :class:`DataError` naming the file and key at fault."""
         path = Path(path)
+        z = read_npz(path, "stiffness dataset")
+        missing = [k for k in (*_ARRAYS, "meta") if k not in z]
+        if missing:
+            raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
+        arrays = {k: z[k] for k in _ARRAYS}
         try:
-            z = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{path}: not a readable stiffness dataset ({exc})") from None
-        with z:
-            missing = [k for k in (*_ARRAYS, "meta") if k not in z.files]
-            if missing:
-                raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
-            arrays = {k: z[k] for k in _ARRAYS}
-            try:
-                meta = json.loads(str(z["meta"]))
-            except json.JSONDecodeError as exc:
-                raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
+            meta = json.loads(str(z["meta"]))
+        except json.JSONDecodeError as exc:
+            raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
+        if not isinstance(meta, dict):
+            raise DataError(f"{path}: key 'meta' must be a JSON object, got {meta!r}")
         n = len(arrays["k"])
         for name, v in arrays.items():
             want = (n, 3) if name in ("wrist", "human_wrist") else (n,)

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.errors import DataError, DimensionError
+from wholebody.files import read_npz, write_npz
 from wholebody.humanlike.stiffness import StiffnessModel
 from wholebody.resources import npz_path, robots_dir
 
@@ -101,6 +102,12 @@ class NetworkStiffness(StiffnessModel):
             raise DimensionError("NetworkStiffness: x_scale, k_scale and floor_beta must be > 0")
         self.input_low = None if input_low is None else _vector3(input_low, "input_low")
         self.input_high = None if input_high is None else _vector3(input_high, "input_high")
+        numbers = [*self.weights, *self.biases, self.x_mean, self.x_scale,
+                   np.array([self.k_mean, self.k_scale, self.floor_beta])]  # fmt: skip
+        numbers += [v for v in (self.input_low, self.input_high) if v is not None]
+        if not all(np.isfinite(a).all() for a in numbers):
+            raise DimensionError("NetworkStiffness: weights, biases and normalisations must be "
+                                 "finite (a NaN here makes every control step fail)")  # fmt: skip
         self.meta = dict(meta or {})
         # Fold the normalisations into the first and last layers for the control loop:
         # W_1 z + b_1 = (W_1 / x_scale) p + (b_1 - (W_1 / x_scale) x_mean)
@@ -201,15 +208,12 @@ class NetworkStiffness(StiffnessModel):
     def save(self, path: str | Path) -> Path:
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it, as numpy does)."""
-        path = npz_path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         arrays: dict[str, np.ndarray] = {}
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             arrays[f"W{i}"], arrays[f"b{i}"] = w, b
         if self.input_low is not None and self.input_high is not None:  # else: no range stored
             arrays["input_low"], arrays["input_high"] = self.input_low, self.input_high
-        np.savez(
-            path,
+        header = dict(
             format=np.array(FORMAT),
             n_layers=np.array(len(self.weights)),
             activation=np.array("tanh"),
@@ -219,9 +223,8 @@ class NetworkStiffness(StiffnessModel):
             k_scale=np.array(self.k_scale),
             floor_beta=np.array(self.floor_beta),
             meta=np.array(json.dumps(self.meta, sort_keys=True)),
-            **arrays,
         )
-        return path
+        return write_npz(npz_path(path), {**header, **arrays}, compress=False)
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkStiffness:
@@ -233,24 +236,20 @@ class NetworkStiffness(StiffnessModel):
             Not a network file, a missing key, or inconsistent shapes (named).
         """
         path = Path(path)
+        z = read_npz(path, "stiffness network")
         try:
-            z = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
-        try:
-            with z:
-                return cls._read(path, z)
+            return cls._read(path, z)
         except DataError:
             raise
         except (ValueError, TypeError) as exc:  # e.g. an object array (never unpickled)
             raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
 
     @classmethod
-    def _read(cls, path: Path, z: np.lib.npyio.NpzFile) -> NetworkStiffness:
+    def _read(cls, path: Path, z: dict[str, np.ndarray]) -> NetworkStiffness:
         """The network in an open file (:meth:`load`)."""
         need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
                 "floor_beta")  # fmt: skip
-        missing = [k for k in need if k not in z.files]
+        missing = [k for k in need if k not in z]
         if missing:
             raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
         if str(z["format"]) != FORMAT:
@@ -259,16 +258,16 @@ class NetworkStiffness(StiffnessModel):
             raise DataError(f"{path}: activation {str(z['activation'])!r} is not supported")
         n = int(z["n_layers"])
         keys = [f"{p}{i}" for i in range(n) for p in ("W", "b")]
-        missing = [k for k in keys if k not in z.files]
+        missing = [k for k in keys if k not in z]
         if missing:
             raise DataError(f"{path}: missing layer key(s) {', '.join(missing)}")
-        extra = [k for k in z.files if k[:1] in "Wb" and k[1:].isdigit() and k not in keys]
+        extra = [k for k in z if k[:1] in "Wb" and k[1:].isdigit() and k not in keys]
         if extra:
             raise DataError(f"{path}: layer key(s) {', '.join(extra)} beyond n_layers = {n}")
-        lo = z["input_low"] if "input_low" in z.files else None
-        hi = z["input_high"] if "input_high" in z.files else None
+        lo = z.get("input_low")
+        hi = z.get("input_high")
         try:
-            meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+            meta = json.loads(str(z["meta"])) if "meta" in z else {}
         except json.JSONDecodeError as exc:
             raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
         try:

@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.errors import DataError
+from wholebody.files import read_npz, write_npz
 from wholebody.resources import data_dir, npz_path
 
 __all__ = [
@@ -169,6 +170,9 @@ class Participant:
     stature: float
 
 
+_STATURE_M = (0.5, 2.6)  # m: the heights a participants table may hold
+
+
 def load_participants(path: str | Path | None = None) -> dict[str, Participant]:
     """The participants table (``participants.csv`` of the bundled data: columns
     ``participant``, ``sex``, ``height_m``), keyed by id."""
@@ -187,6 +191,10 @@ def load_participants(path: str | Path | None = None) -> dict[str, Participant]:
                     raise DataError(
                         f"{path}: row {r}, column 'height_m': {row['height_m']!r} is not a number"
                     ) from None
+                if not _STATURE_M[0] <= h <= _STATURE_M[1]:  # (NaN fails too)
+                    lo, hi = _STATURE_M
+                    raise DataError(f"{path}: row {r}, column 'height_m': {h} is not a person's "
+                                    f"height in metres ({lo}-{hi} m)")  # fmt: skip
                 out[row["participant"]] = Participant(row["participant"], row["sex"], h)
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
@@ -426,8 +434,8 @@ def load_csv_recording(
     return _recording(path, t, P, units, ident, source, "", sternum, facing)
 
 
-def _npz_str(path: Path, z: np.lib.npyio.NpzFile, key: str, default: str | None) -> str | None:
-    if key not in z.files:
+def _npz_str(path: Path, z: dict[str, np.ndarray], key: str, default: str | None) -> str | None:
+    if key not in z:
         return default
     v = z[key]
     if v.ndim != 0 or v.dtype.kind not in "US":
@@ -447,65 +455,60 @@ def load_npz_recording(
         (rows then mean frame indices, 1-based).
     """
     path = Path(path)
+    z = read_npz(path, "recording (.npz)")
+    required = ("time_s", *JOINTS, "units", "side")
+    missing = [k for k in required if k not in z]
+    if missing:
+        raise DataError(
+            f"{path}: missing key(s) {', '.join(map(repr, missing))} (required: "
+            f"{', '.join(required)})"
+        )
     try:
-        z = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{path}: not a readable .npz file ({exc})") from None
-    with z:
-        required = ("time_s", *JOINTS, "units", "side")
-        missing = [k for k in required if k not in z.files]
-        if missing:
+        t = np.asarray(z["time_s"], dtype=float)
+        P = {j: np.asarray(z[j], dtype=float) for j in JOINTS}
+    except ValueError as exc:
+        raise DataError(f"{path}: positions and time must be numeric arrays ({exc})") from None
+    if t.ndim != 1:
+        raise DataError(f"{path}: key 'time_s': expected shape (T,), got {t.shape}")
+    for j, v in P.items():
+        if v.shape != (len(t), 3):
             raise DataError(
-                f"{path}: missing key(s) {', '.join(map(repr, missing))} (required: "
-                f"{', '.join(required)})"
+                f"{path}: key {j!r}: expected shape ({len(t)}, 3) to match 'time_s', got {v.shape}"
             )
-        try:
-            t = np.asarray(z["time_s"], dtype=float)
-            P = {j: np.asarray(z[j], dtype=float) for j in JOINTS}
-        except ValueError as exc:
-            raise DataError(f"{path}: positions and time must be numeric arrays ({exc})") from None
-        if t.ndim != 1:
-            raise DataError(f"{path}: key 'time_s': expected shape (T,), got {t.shape}")
-        for j, v in P.items():
-            if v.shape != (len(t), 3):
-                raise DataError(
-                    f"{path}: key {j!r}: expected shape ({len(t)}, 3) to match 'time_s', got "
-                    f"{v.shape}"
-                )
-        for key, v in (("time_s", t[:, None]), *P.items()):
-            bad = np.argwhere(~np.isfinite(v))
-            if bad.size:
-                r, c = bad[0]
-                col = key if key == "time_s" else f"{key}_{'xyz'[c]}"
-                raise DataError(f"{path}: row {r + 1}, column {col!r}: value {v[r, c]} is not "
-                                "finite")  # fmt: skip
-        file_units = _npz_str(path, z, "units", None)
-        if file_units not in ("m", "mm"):
-            raise DataError(f"{path}: key 'units': expected 'm' or 'mm', got {file_units!r}")
-        if units not in ("auto", file_units):
-            raise DataError(f"{path}: the file is in {file_units!r}, the caller declared {units!r}")
-        name = parse_trial_name(path) if _NAME.match(path.stem) else {}
-        ident: dict[str, object] = {
-            "participant": _npz_str(path, z, "participant", name.get("participant", "unknown")),
-            "task": _npz_str(path, z, "task", name.get("task", "unknown")),
-            "side": _npz_str(path, z, "side", None),
-            "trial": name.get("trial", 1),
-        }
-        if "trial" in z.files:
-            tr = z["trial"]
-            if tr.ndim != 0 or tr.dtype.kind not in "iu":
-                raise DataError(f"{path}: key 'trial': expected a 0-d integer, got {tr.dtype}")
-            ident["trial"] = int(tr)
-        if ident["side"] not in ("R", "L"):
-            raise DataError(f"{path}: key 'side': expected 'R' or 'L', got {ident['side']!r}")
-        src = source or _npz_str(path, z, "source", "real")
-        note = _npz_str(path, z, "note", "") or ""
-        sternum = None
-        if "sternum" in z.files:
-            sternum = np.asarray(z["sternum"], dtype=float)
-            if sternum.shape != (len(t), 3) or not np.isfinite(sternum).all():
-                raise DataError(f"{path}: key 'sternum': expected finite values of shape "
-                                f"({len(t)}, 3), got {sternum.shape}")  # fmt: skip
+    for key, v in (("time_s", t[:, None]), *P.items()):
+        bad = np.argwhere(~np.isfinite(v))
+        if bad.size:
+            r, c = bad[0]
+            col = key if key == "time_s" else f"{key}_{'xyz'[c]}"
+            raise DataError(f"{path}: row {r + 1}, column {col!r}: value {v[r, c]} is not "
+                            "finite")  # fmt: skip
+    file_units = _npz_str(path, z, "units", None)
+    if file_units not in ("m", "mm"):
+        raise DataError(f"{path}: key 'units': expected 'm' or 'mm', got {file_units!r}")
+    if units not in ("auto", file_units):
+        raise DataError(f"{path}: the file is in {file_units!r}, the caller declared {units!r}")
+    name = parse_trial_name(path) if _NAME.match(path.stem) else {}
+    ident: dict[str, object] = {
+        "participant": _npz_str(path, z, "participant", name.get("participant", "unknown")),
+        "task": _npz_str(path, z, "task", name.get("task", "unknown")),
+        "side": _npz_str(path, z, "side", None),
+        "trial": name.get("trial", 1),
+    }
+    if "trial" in z:
+        tr = z["trial"]
+        if tr.ndim != 0 or tr.dtype.kind not in "iu":
+            raise DataError(f"{path}: key 'trial': expected a 0-d integer, got {tr.dtype}")
+        ident["trial"] = int(tr)
+    if ident["side"] not in ("R", "L"):
+        raise DataError(f"{path}: key 'side': expected 'R' or 'L', got {ident['side']!r}")
+    src = source or _npz_str(path, z, "source", "real")
+    note = _npz_str(path, z, "note", "") or ""
+    sternum = None
+    if "sternum" in z:
+        sternum = np.asarray(z["sternum"], dtype=float)
+        if sternum.shape != (len(t), 3) or not np.isfinite(sternum).all():
+            raise DataError(f"{path}: key 'sternum': expected finite values of shape "
+                            f"({len(t)}, 3), got {sternum.shape}")  # fmt: skip
     return _recording(path, t, P, str(file_units), ident, str(src), note, sternum, facing)
 
 
@@ -550,10 +553,7 @@ def load_recordings(
 def save_npz_recording(rec: Recording, path: str | Path) -> Path:
     """Write ``rec`` in the NPZ layout (metres), with its identity and source; returns the
     file written (``.npz`` appended if missing)."""
-    path = npz_path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(
-        path,
+    arrays = dict(
         time_s=rec.time_s,
         shoulder=rec.shoulder,
         elbow=rec.elbow,
@@ -568,4 +568,4 @@ def save_npz_recording(rec: Recording, path: str | Path) -> Path:
         **({} if rec.sternum is None else {"sternum": rec.sternum}),
         frame=np.array(json.dumps({"x": "participant's right", "y": "forward", "z": "up"})),
     )
-    return path
+    return write_npz(npz_path(path), arrays)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wholebody.files import save_figure
 from wholebody.humanlike.dataset import StiffnessDataset
 from wholebody.humanlike.network import NetworkStiffness
 
@@ -262,6 +263,6 @@ def plot_workspace(
         ax.axis("off")
     fig.suptitle("Stiffness network over the workspace (wrist relative to the shoulder, "
                  "canonical axes; dots: training records)")  # fmt: skip
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

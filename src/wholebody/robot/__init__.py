@@ -46,6 +46,10 @@ def load_robot(name_or_path: str | Path) -> Robot:
     ModelError
         A URDF that cannot be loaded.
     """
+    if not isinstance(name_or_path, (str, Path)) or not str(name_or_path):
+        raise ConfigError(f"load_robot: expected a bundled robot name "
+                          f"({', '.join(available_robots()) or 'none installed'}), a robot "
+                          f"directory or a robot.toml path, got {name_or_path!r}")  # fmt: skip
     path = Path(name_or_path)
     if path.suffix == ".toml":
         return Robot(read_robot_config(path))

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import numbers
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -31,6 +32,7 @@ from typing import TypeVar
 import numpy as np
 import pinocchio as pin
 
+from wholebody._numeric import float_array
 from wholebody.errors import DimensionError, FrameError, ModelError, WholebodyError
 from wholebody.robot.base import BaseModel, base_model
 from wholebody.robot.compiled import RobotKinematics
@@ -249,6 +251,7 @@ class Robot:
         # the zero configuration, every joint whose range excludes 0 at its nearer limit
         # where q holds (cos, sin) pairs: the planar root's yaw, every continuous joint
         self._pairs = np.concatenate(([2] if base.mobile else [], self._cont_q)).astype(int)
+        self._pair_list: list[int] = self._pairs.tolist()
         self._neutral = pin.neutral(model)
         self._neutral[self._scalar_q] = np.clip(0.0, lower[self._scalar], upper[self._scalar])
         self._neutral.setflags(write=False)
@@ -541,6 +544,11 @@ class Robot:
                     raise self.config.error(f"home.{name}", msg)
                 raise FrameError(msg)
             k = self._u_index[name]
+            if not isinstance(value, numbers.Real) or isinstance(value, bool):
+                msg = f"expected a number (rad or m), got {value!r}"
+                if where == "home":
+                    raise self.config.error(f"home.{name}", msg)
+                raise DimensionError(f"joint {name!r}: {msg}")
             if not lower[k] <= value <= upper[k]:
                 msg = f"{value} rad is outside the joint's limits [{lower[k]}, {upper[k]}]"
                 if where == "home":
@@ -560,7 +568,12 @@ class Robot:
                     f"robot {self.name!r} has a fixed base: base_pose must be (0, 0, 0)"
                 )
             return
-        x, y, yaw = pose
+        values = tuple(pose) if isinstance(pose, (tuple, list, np.ndarray)) else ()
+        if len(values) != 3 or not all(isinstance(v, numbers.Real) and math.isfinite(v)
+                                       for v in values):  # fmt: skip
+            raise DimensionError(f"base_pose must be three finite numbers (x m, y m, yaw rad), "
+                                 f"got {pose!r}")  # fmt: skip
+        x, y, yaw = map(float, values)
         q[0:4] = x, y, math.cos(yaw), math.sin(yaw)
 
     def random_configuration(
@@ -570,6 +583,12 @@ class Robot:
         (fraction of each range on each side; a joint without a limit on one side within 2 pi
         (rad or m) of the other, without any in [-pi, pi]), wheels at random angles, base
         uniform in ``[-base_range, base_range]^2`` with any heading."""
+        if not (isinstance(margin, numbers.Real) and 0.0 <= margin < 0.5):
+            raise DimensionError("random_configuration: margin is the fraction of each range kept "
+                                 f"clear on each side, in [0, 0.5); got {margin!r}")  # fmt: skip
+        if not (isinstance(base_range, numbers.Real) and 0.0 <= base_range < math.inf):
+            raise DimensionError(f"random_configuration: base_range must be a finite distance "
+                                 f">= 0 (m), got {base_range!r}")  # fmt: skip
         lower, upper = self.position_limits
         q = self.neutral()
         s = self._scalar
@@ -606,7 +625,7 @@ class Robot:
     # ------------------------------------------------------------------ kinematics
     def check_configuration(self, q: np.ndarray) -> np.ndarray:
         """``q`` as a float array of shape (nq,), or a :class:`DimensionError`."""
-        q = np.asarray(q, dtype=float)
+        q = float_array(q, f"configuration of robot {self.name!r}")
         if q.shape != (self.nq,):
             raise DimensionError(
                 f"configuration of robot {self.name!r} has shape {q.shape}; expected ({self.nq},)"
@@ -625,18 +644,34 @@ class Robot:
             )
         return q
 
-    def update(self, q: np.ndarray) -> RobotState:
-        """Forward kinematics and all joint Jacobians at ``q``; a view valid until the next
-        call."""
-        # Fast acceptance of the common case (a finite float vector of the right shape; a NaN
-        # or inf makes q.q non-finite, an overflow of q.q only sends q to the full check).
-        if not (
+    def _accept(self, q: np.ndarray) -> np.ndarray:
+        """``q`` checked: the common case (a finite float vector of the right shape with unit
+        (cos, sin) pairs) accepted fast, anything else through :meth:`check_configuration`.
+        A NaN or inf makes ``q.q`` non-finite; an overflow of it only sends q to the full
+        check."""
+        if (
             q.__class__ is np.ndarray
             and q.dtype == _FLOAT
             and q.shape == self._q_shape
             and math.isfinite(q.dot(q))
+            and self._unit_pairs(q)
         ):
-            q = self.check_configuration(q)
+            return q
+        return self.check_configuration(q)
+
+    def _unit_pairs(self, q: np.ndarray) -> bool:
+        """Whether every (cos, sin) pair of ``q`` is a unit vector (to 1e-6; about 0.2 us a
+        pair, cheaper than :meth:`check_configuration`'s arrays)."""
+        for i in self._pair_list:
+            c, s = q.item(i), q.item(i + 1)
+            if abs(c * c + s * s - 1.0) > 1e-6:
+                return False
+        return True
+
+    def update(self, q: np.ndarray) -> RobotState:
+        """Forward kinematics and all joint Jacobians at ``q``; a view valid until the next
+        call."""
+        q = self._accept(q)
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
         self._version += 1
@@ -659,12 +694,17 @@ class Robot:
     def integrate(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """Configuration reached from ``q`` by applying ``u`` for ``dt`` seconds (exact on
         the configuration manifold: the planar base follows the SE(2) exponential)."""
-        u = np.asarray(u, dtype=float)
+        q = self._accept(q)
+        u = float_array(u, f"actuated velocity of robot {self.name!r}")
         if u.shape != (self.nu,):
             raise DimensionError(
                 f"actuated velocity of robot {self.name!r} has shape "
                 f"{u.shape}; expected ({self.nu},)"
             )
+        if not math.isfinite(u.dot(u)):
+            raise DimensionError(f"actuated velocity of robot {self.name!r} is not finite: {u}")
+        if not (isinstance(dt, numbers.Real) and math.isfinite(dt)):
+            raise DimensionError(f"integrate: dt must be a finite number of seconds, got {dt!r}")
         return pin.integrate(self.model, q, self.actuation.dot(u * dt))
 
     # ------------------------------------------------------------------ presentation
@@ -904,6 +944,65 @@ def _suggest(name: object, candidates) -> str:
     return f"; known: {', '.join(names)}" if names else ""
 
 
+def _numbers(path: Path, where: str, text: str, size: int) -> np.ndarray:
+    """``size`` finite numbers from a URDF attribute, or :class:`ModelError`."""
+    try:
+        values = np.array([float(v) for v in text.split()])
+    except ValueError as exc:
+        raise ModelError(f"{path}: {where}: {text!r} is not {size} numbers") from exc
+    if values.shape != (size,) or not np.isfinite(values).all():
+        raise ModelError(f"{path}: {where}: expected {size} finite numbers, got {text!r}")
+    return values
+
+
+def _inertial(path: Path, link: str, inertial: ET.Element | None) -> tuple[float, np.ndarray]:
+    """A link's mass (kg, finite, >= 0) and centre of mass (link frame, m); 0 without
+    ``<inertial>``. The inertia tensor's entries must be finite."""
+    mass, com = 0.0, np.zeros(3)
+    if inertial is not None:
+        where = f"link {link!r} <inertial>"
+        m, o, inertia = inertial.find("mass"), inertial.find("origin"), inertial.find("inertia")
+        if m is not None:
+            mass = float(_numbers(path, f"{where} <mass value>", m.get("value", "0"), 1)[0])
+            if mass < 0:
+                raise ModelError(f"{path}: {where}: mass {mass:g} kg is negative")
+        if o is not None:
+            com = _numbers(path, f"{where} <origin xyz>", o.get("xyz", "0 0 0"), 3)
+        if inertia is not None:
+            for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                _numbers(path, f"{where} <inertia {key}>", inertia.get(key, "0"), 1)
+    com.setflags(write=False)
+    return mass, com
+
+
+def _check_joint(path: Path, joint: ET.Element) -> None:
+    """A joint's origin is finite; a moving joint has a non-zero axis and finite limits with
+    a velocity limit >= 0 (0: not given). A negative one would be read as no limit at all."""
+    name, kind = joint.get("name"), joint.get("type")
+    where = f"joint {name!r}"
+    origin = joint.find("origin")
+    if origin is not None:
+        _numbers(path, f"{where} <origin xyz>", origin.get("xyz", "0 0 0"), 3)
+        _numbers(path, f"{where} <origin rpy>", origin.get("rpy", "0 0 0"), 3)
+    if kind in ("fixed", "floating", "planar"):
+        return
+    axis = joint.find("axis")
+    if axis is not None:
+        xyz = _numbers(path, f"{where} <axis xyz>", axis.get("xyz", "1 0 0"), 3)
+        if not np.linalg.norm(xyz) > 1e-9:
+            raise ModelError(f"{path}: {where}: <axis xyz> is zero: the joint would move "
+                             "nothing; give its axis or make it fixed")  # fmt: skip
+    limit = joint.find("limit")
+    if limit is None:
+        return
+    for key in ("lower", "upper", "effort", "velocity"):
+        if key in limit.attrib:
+            value = float(_numbers(path, f"{where} <limit {key}>", limit.get(key, ""), 1)[0])
+            if key in ("effort", "velocity") and value < 0:
+                raise ModelError(f"{path}: {where}: <limit {key}> = {value:g} is negative "
+                                 "(0 means not given)")  # fmt: skip
+
+
 def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], str]:
     """Mass and centre of mass (link frame) of every link of a URDF, and the root link.
 
@@ -923,25 +1022,13 @@ def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], s
             "would be an independent joint; make them fixed or drop their <mimic>"
         )
     links: dict[str, tuple[float, np.ndarray]] = {}
-    for link in root.iter("link"):
+    for link in root.findall("link"):
         name = link.get("name")
         if not name:
             raise ModelError(f"{path}: a <link> has no name attribute")
-        mass, com = 0.0, np.zeros(3)
-        inertial = link.find("inertial")
-        if inertial is not None:
-            m = inertial.find("mass")
-            o = inertial.find("origin")
-            try:
-                mass = float(m.get("value", "0")) if m is not None else 0.0
-                if o is not None:
-                    com = np.array([float(v) for v in o.get("xyz", "0 0 0").split()])
-            except ValueError as exc:
-                raise ModelError(f"{path}: link {name!r}: bad <inertial>: {exc}") from exc
-            if com.shape != (3,):
-                raise ModelError(f"{path}: link {name!r}: <inertial><origin xyz> needs 3 numbers")
-        com.setflags(write=False)
-        links[name] = (mass, com)
+        links[name] = _inertial(path, name, link.find("inertial"))
+    for joint in root.findall("joint"):
+        _check_joint(path, joint)
     children = {c.get("link") for c in root.iter("child")}
     roots = [name for name in links if name not in children]
     if len(roots) != 1:

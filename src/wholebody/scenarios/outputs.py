@@ -5,21 +5,28 @@ and the figures ``hands.png``, ``joint_velocities.png``, ``arm_energy.png``.
 ``comparison`` builds the Table 2 rows (plain pseudo-inverse, the paper's projection, the
 hierarchical QP) from runs of one scenario; ``write_comparison`` writes them as
 ``comparison.md`` and ``comparison.json``.
+
+Each file is written atomically (:mod:`wholebody.files`), the log and the metrics first. A
+Ctrl-C while writing raises :class:`OutputsInterrupted` (a ``KeyboardInterrupt``) naming the
+files that were written, each complete, and those that were not.
 """
 
 from __future__ import annotations
 
-import json
 import math
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from wholebody.control.log import json_default
+from wholebody.files import write_json, write_text
 from wholebody.scenarios import plots
 from wholebody.scenarios.runner import ScenarioRun
 
-__all__ = ["comparison", "comparison_markdown", "write_comparison", "write_run"]
+__all__ = ["OutputsInterrupted", "comparison", "comparison_markdown", "write_comparison",
+           "write_run"]  # fmt: skip
 
 BACKEND_LABELS = {
     "pinv": "pseudo-inverse (paper's baseline)",
@@ -28,24 +35,57 @@ BACKEND_LABELS = {
 }
 
 
-def write_run(run: ScenarioRun, out: Path) -> dict[str, Path]:
-    """Write the log, the metrics and the figures of a run into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    spec = run.spec
-    title = f"{spec.title or spec.name} [{run.backend}]"
-    files = {
-        "log": run.log.save(out / "run.npz"),
-        "metrics": out / "metrics.json",
-        "hands": plots.hand_paths(
-            run.log, out / "hands.png", spec.objects, run.object_poses, title=title
-        ),
-        "joint_velocities": plots.joint_velocities(
-            run.log, out / "joint_velocities.png", title=title
-        ),
-        "arm_energy": plots.arm_energy(run.log, out / "arm_energy.png", title=title),
-    }
-    files["metrics"].write_text(json.dumps(run.metrics, indent=2, default=json_default))
+class OutputsInterrupted(KeyboardInterrupt):
+    """Ctrl-C while outputs were written: ``written`` (name -> path, each file complete) and
+    ``missing`` (the names not written)."""
+
+    def __init__(self, written: dict[str, Path], missing: list[str]) -> None:
+        super().__init__(f"interrupted: not written: {', '.join(missing)}")
+        self.written, self.missing = written, missing
+
+
+def _write_all(jobs: list[tuple[str, Callable[[], Path]]]) -> dict[str, Path]:
+    """Run the writers in order; on Ctrl-C, :class:`OutputsInterrupted` with what is done."""
+    files: dict[str, Path] = {}
+    try:
+        for name, job in jobs:
+            files[name] = job()
+    except KeyboardInterrupt:
+        raise OutputsInterrupted(files, [n for n, _ in jobs if n not in files]) from None
     return files
+
+
+def write_run(run: ScenarioRun, out: Path, *, figures: bool = True) -> dict[str, Path]:
+    """Write the log, the metrics and (``figures``) the figures of a run into ``out``."""
+    spec, log = run.spec, run.log
+    title = f"{spec.title or spec.name} [{run.backend}]"
+    jobs: list[tuple[str, Callable[[], Path]]] = [
+        ("log", partial(log.save, out / "run.npz")),
+        (
+            "metrics",
+            partial(write_json, out / "metrics.json", run.metrics, indent=2, default=json_default),
+        ),
+    ]
+    if figures:
+        jobs += [
+            (
+                "hands",
+                partial(
+                    plots.hand_paths,
+                    log,
+                    out / "hands.png",
+                    spec.objects,
+                    run.object_poses,
+                    title=title,
+                ),
+            ),
+            (
+                "joint_velocities",
+                partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
+            ),
+            ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title)),
+        ]
+    return _write_all(jobs)
 
 
 def comparison(runs: list[ScenarioRun]) -> list[dict]:
@@ -116,11 +156,16 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
 
 def write_comparison(runs: list[ScenarioRun], out: Path) -> dict[str, Path]:
     """``comparison.md`` and ``comparison.json`` for runs of one scenario."""
-    out.mkdir(parents=True, exist_ok=True)
     rows = comparison(runs)
     spec = runs[0].spec
-    md = out / "comparison.md"
-    md.write_text(comparison_markdown(rows, spec.title or spec.name))
-    js = out / "comparison.json"
-    js.write_text(json.dumps({"scenario": spec.name, "rows": rows}, indent=2, default=json_default))
-    return {"markdown": md, "json": js}
+    table = {"scenario": spec.name, "rows": rows}
+    md = comparison_markdown(rows, spec.title or spec.name)
+    return _write_all(
+        [
+            ("markdown", partial(write_text, out / "comparison.md", md)),
+            (
+                "json",
+                partial(write_json, out / "comparison.json", table, indent=2, default=json_default),
+            ),
+        ]
+    )

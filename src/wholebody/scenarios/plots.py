@@ -20,6 +20,7 @@ from matplotlib.patches import Circle, Rectangle
 
 from wholebody.control.log import RunLog
 from wholebody.control.metrics import ARM_ANGLE_MIN_RHO
+from wholebody.files import save_figure
 from wholebody.scenarios.spec import ObjectSpec
 
 __all__ = ["arm_energy", "hand_paths", "joint_velocities"]
@@ -118,7 +119,7 @@ def hand_paths(
     if obstacles:
         _obstacle_detail(fig.add_subplot(1, 2, 2), log, obstacles)
     fig.tight_layout()
-    fig.savefig(out, dpi=120)
+    save_figure(fig, out, dpi=120)
     return out
 
 
@@ -196,7 +197,7 @@ def joint_velocities(log: RunLog, out: Path, title: str = "") -> Path:
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title or "joint velocities")
     fig.tight_layout()
-    fig.savefig(out, dpi=120)
+    save_figure(fig, out, dpi=120)
     return out
 
 
@@ -226,5 +227,5 @@ def arm_energy(log: RunLog, out: Path, title: str = "") -> Path:
         row[2].grid(alpha=0.3)
     fig.suptitle(title or "arm potential energy")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     return out

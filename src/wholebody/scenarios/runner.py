@@ -35,7 +35,8 @@ import pinocchio as pin
 from wholebody.control import Controller, RunLog, summary
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
-from wholebody.errors import ConfigError
+from wholebody.errors import ConfigError, DataError
+from wholebody.files import read_npz
 from wholebody.humanlike.stiffness import StiffnessModel
 from wholebody.planning import obstacles as ob
 from wholebody.planning.demonstration import align_to_chord
@@ -111,8 +112,12 @@ class _Planners:
         to the demonstration carried onto it (``"aligned"``) or to a minimum-jerk straight
         line on the demonstration's time grid (``"straight"``)."""
         if self._demo is None:
-            with np.load(self.spec.planner.demo, allow_pickle=False) as z:
-                self._demo = (z["positions"], z["times"])
+            z = read_npz(self.spec.planner.demo, "DMP demonstration")
+            missing = [k for k in ("positions", "times") if k not in z]
+            if missing:
+                raise DataError(f"{self.spec.planner.demo}: DMP demonstration lacks "
+                                f"{', '.join(missing)}")  # fmt: skip
+            self._demo = (z["positions"], z["times"])
         positions, times = self._demo
         config = DMPConfig(n_basis=self.spec.planner.n_basis, stiffness=self.spec.planner.stiffness)
         if shape == "aligned":

@@ -68,6 +68,7 @@ reference starts where it actually is.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -351,6 +352,11 @@ def _phase(
         if kind not in ("dmp", "min_jerk") and "rotate" in spec:
             raise r.fail(f"{w}.rotate", f"planner {kind!r} takes no rotate")
         rotate = r.vector(spec, "rotate", w, 3, (0.0, 0.0, 0.0))
+        angle = math.sqrt(sum(v * v for v in rotate))
+        if angle > math.pi + 1e-6:  # one turn at most: a larger vector is degrees, not rad
+            raise r.fail(f"{w}.rotate", f"a rotation vector in radians has an angle of at most "
+                         f"pi; this one's is {angle:g} (degrees? {angle:g} deg = "
+                         f"{math.radians(angle):.4f} rad)")  # fmt: skip
         out[hname] = HandPhase(kind, goal, rotate, avoid, carry, shape)  # type: ignore[arg-type]
     missing = [h for h in hands if h not in out]
     if missing:

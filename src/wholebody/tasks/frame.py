@@ -32,6 +32,7 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody._numeric import count_nonzero as _count_nonzero
+from wholebody._numeric import float_array
 from wholebody.errors import DimensionError
 from wholebody.kernels.rows import POSE_LAST_ROW, POSE_NON_FINITE, pose_defect, pose_rows
 from wholebody.robot import Frame, Robot, RobotState
@@ -50,7 +51,7 @@ __all__ = [
 def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
     """A 4x4 homogeneous transform with an orthonormal rotation (a new array), or
     DimensionError."""
-    T = np.array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, dtype=float)
+    T = float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, what).copy()
     if T.shape != (4, 4):
         raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
     defect = pose_defect(T)
@@ -72,7 +73,7 @@ def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
     """A finite 6-vector [linear (m/s), angular (rad/s)] (read-only zeros when None)."""
     if twist is None:
         return _NO_TWIST
-    t = np.array(twist, dtype=float)
+    t = float_array(twist, what).copy()
     if t.shape != (6,) or (not math.isfinite(t @ t) and not np.isfinite(t).all()):
         raise DimensionError(f"{what}: expected a finite twist of shape (6,), got {t.shape}")
     return t

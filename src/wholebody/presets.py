@@ -36,6 +36,7 @@ from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.robot import Robot
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import (
+    AccelerationLimits,
     ArmPotentialEnergy,
     JointLimitAvoidance,
     JointPositionLimits,
@@ -133,9 +134,11 @@ def paper_stack(
     weights: PaperWeights = PaperWeights(),
     stiffness: float | StiffnessModel | None = None,
     first: Sequence[Task] = (),
+    acceleration: bool = False,
 ) -> Stack:
     """The paper's stack: ``tasks`` on top, then ``H`` (omitted with ``objectives=False``:
-    the plain pseudo-inverse baseline), joint position and velocity limits, the metric.
+    the plain pseudo-inverse baseline), joint position and velocity limits (and with
+    ``acceleration`` the robot's acceleration limits), the metric.
 
     ``first`` puts tasks in a level above ``tasks``: for a carried object, the closed chain
     (the hands' relative pose) above the hands' absolute poses, the usual cooperative
@@ -154,6 +157,7 @@ def paper_stack(
     return Stack(
         robot,
         levels,
-        [JointPositionLimits(robot), VelocityLimits(robot)],
+        [JointPositionLimits(robot), VelocityLimits(robot)]
+        + ([AccelerationLimits(robot)] if acceleration else []),
         metric=paper_metric(robot, weights),
     )

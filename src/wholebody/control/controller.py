@@ -131,9 +131,12 @@ class Controller:
         callback: Callable[[int, float, np.ndarray], None] | None = None,
         phases: Mapping[str, tuple[float, float]] | None = None,
         meta: Mapping[str, object] | None = None,
+        u0: np.ndarray | None = None,
     ) -> RunLog:
         """Run for ``duration`` seconds from ``q0``; ``callback(k, t, q)`` after each step
-        (e.g. live visualisation). Returns the :class:`RunLog`."""
+        (e.g. live visualisation). ``u0``: the velocity the robot has at the start (default: at
+        rest), which constraints with a memory (acceleration limits) start from. Returns the
+        :class:`RunLog`."""
         robot = self.robot
         q = robot.check_configuration(q0).copy()
         if not (isinstance(duration, numbers.Real) and math.isfinite(duration)):
@@ -144,6 +147,12 @@ class Controller:
         tracked = [t for t in self.stack.tasks if isinstance(t, FrameTask)]
         log = _Recorder(robot, self.stack, self.monitors, tracked, n)
         self.stack.reset()
+        if u0 is not None:
+            u0 = np.asarray(u0, dtype=float)
+            if u0.shape != (robot.nu,) or not np.isfinite(u0).all():
+                raise DimensionError(f"u0 must be {robot.nu} finite velocities, got {u0!r}")
+            for c in self.stack.constraints:
+                c.advance(u0, self.dt)
         bar = _progress(n, progress)
         with threadpool_limits(1), _gc_paused():  # no BLAS threads, no collection mid-step
             q = self._loop(q, n, log, callback, bar)
@@ -185,7 +194,7 @@ class Controller:
             compute = time.perf_counter() - start
             log.record(k, t, q, state, result)  # before the next update invalidates state
             start = time.perf_counter()
-            self.stack.advance(state, self.dt, saturated=result.limit_hit)
+            self.stack.advance(state, self.dt, saturated=result.limit_hit, u=result.u)
             q = robot.integrate(q, result.u, self.dt)
             log.step_time[k] = compute + (time.perf_counter() - start)
             if callback is not None:

@@ -592,24 +592,20 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
     scale factor, per task its residuals and whether it is met, the active bounds and the
     status (``I_OUT``)."""
     box = fmat(f, h, lay.F_BOX)
-    lo, hi = box[0], box[1]
+    lo_box, hi_box = box[0], box[1]
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
     A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
     out, lev_out = ivec(i, h, lay.I_OUT), fmat(f, h, lay.F_LEVEL_OUT)
-    n, L = lo.shape[0], levels.shape[0]
+    n, L = lo_box.shape[0], levels.shape[0]
     out[:] = 0
     lev_out[:, 1] = 1.0
     for j in range(n):
-        if not lo[j] <= hi[j]:  # NaN compares false; evaluate never crosses the box
+        if not lo_box[j] <= hi_box[j]:  # NaN compares false; evaluate never crosses the box
             out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_EMPTY_BOX
             _report(f, i, h, np.zeros(n), par[PAR_TOLERANCE])
             return
-    u_start = np.empty(n)
-    wide_lo, wide_hi = np.empty(n), np.empty(n)
-    for j in range(n):
-        u_start[j] = min(max(0.0, lo[j]), hi[j])
-        wide_lo[j] = lo[j] - _INSIDE_TOL * (abs(lo[j]) + 1.0)
-        wide_hi[j] = hi[j] + _INSIDE_TOL * (abs(hi[j]) + 1.0)
+    lo, hi = lo_box, hi_box
+    wide_lo, wide_hi = _widened(lo, hi)
     u = np.zeros(n)
     Z = np.zeros((n, 0))
     is_mask = True
@@ -621,8 +617,17 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
             A[r0:r1], b[r0:r1], lf[k, lay.LEVEL_REFERENCE], lf[k, lay.LEVEL_IDENTITY], u, Z,
             is_mask, free, sat, lo, hi, wide_lo, wide_hi, k + 1 < L, False, par,
         )  # fmt: skip
+    u_c = np.zeros(n)  # SNS runs for d = u - u_c from d = 0 (the reference's shift)
     if par[PAR_SATURATE] != 0.0 and not _inside(u, wide_lo, wide_hi):
-        u, Z, is_mask = u_start.copy(), np.zeros((n, 0)), True
+        shifted = False
+        for j in range(n):
+            u_c[j] = min(max(0.0, lo_box[j]), hi_box[j])
+            shifted = shifted or u_c[j] != 0.0
+        if shifted:
+            lo, hi = combine(lo_box, -1.0, u_c), combine(hi_box, -1.0, u_c)
+            b = combine(b, -1.0, mv(A, u_c))
+            wide_lo, wide_hi = _widened(lo, hi)
+        u, Z, is_mask = np.zeros(n), np.zeros((n, 0)), True
         sat, free = np.empty(n, np.bool_), np.empty(n, np.bool_)
         for j in range(n):
             sat[j] = lo[j] == hi[j]
@@ -634,13 +639,26 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
                 Z, is_mask, free, sat, lo, hi, wide_lo, wide_hi, k + 1 < L, True, par,
             )  # fmt: skip
             lev_out[k, 1] = s
+    u = combine(u, 1.0, u_c)
     if not math.isfinite(dot(u, u)):
         for j in range(n):
             if not math.isfinite(u[j]):
                 out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_NON_FINITE
-                u = u_start
+                for m in range(n):
+                    u[m] = min(max(0.0, lo_box[m]), hi_box[m])
                 break
     _report(f, i, h, u, par[PAR_TOLERANCE])
+
+
+@kernel
+def _widened(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box widened by the tolerance of :func:`_inside`."""
+    n = lo.shape[0]
+    wide_lo, wide_hi = np.empty(n), np.empty(n)
+    for j in range(n):
+        wide_lo[j] = lo[j] - _INSIDE_TOL * (abs(lo[j]) + 1.0)
+        wide_hi[j] = hi[j] + _INSIDE_TOL * (abs(hi[j]) + 1.0)
+    return wide_lo, wide_hi
 
 
 @kernel

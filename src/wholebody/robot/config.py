@@ -35,6 +35,14 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
 
     [home]                       # optional; joint = angle (rad), others at 0 (or at
                                  # the nearer limit when 0 is outside their range)
+
+    [acceleration]               # optional; the hard bound |u - u_prev| <= a dt of
+                                 # wholebody.tasks.AccelerationLimits
+    joints = 10.0                # rad/s^2 (m/s^2 prismatic), default 10
+    wheels = 20.0                # rad/s^2, the base's wheels, default 20
+    base_linear = 2.0            # m/s^2, planar base, default 2
+    base_angular = 4.0           # rad/s^2, planar base, default 4
+    waist = 5.0                  # any group or joint name: its own (a joint's wins)
 """
 
 from __future__ import annotations
@@ -48,7 +56,16 @@ from wholebody.errors import ConfigError
 from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
 
-__all__ = ["ArmConfig", "BaseConfig", "RobotConfig", "read_robot_config"]
+__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "RobotConfig",
+           "read_robot_config"]  # fmt: skip
+
+ACCELERATION_DEFAULTS: Mapping[str, float] = {
+    "joints": 10.0,  # rad/s^2 (m/s^2 prismatic): a brisk arm, well inside cobots' 15-40
+    "wheels": 20.0,  # rad/s^2: about 2 m/s^2 at the rim of a 0.1 m wheel
+    "base_linear": 2.0,  # m/s^2
+    "base_angular": 4.0,  # rad/s^2
+}
+"""The acceleration limits of the classes of ``u`` that ``[acceleration]`` does not set."""
 
 BaseType = Literal["fixed", "mecanum", "differential", "planar"]
 BASE_TYPES: tuple[str, ...] = ("fixed", "mecanum", "differential", "planar")
@@ -97,6 +114,9 @@ class RobotConfig:
     groups: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
     arms: Mapping[str, ArmConfig] = field(default_factory=dict)
     home: Mapping[str, float] = field(default_factory=dict)
+    acceleration: Mapping[str, float] = field(default_factory=dict)
+    """``[acceleration]`` as written (rad/s^2, m/s^2); :attr:`Robot.acceleration_limits`
+    resolves it with the defaults :data:`ACCELERATION_DEFAULTS`."""
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
@@ -116,7 +136,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path)
     data = load_toml(path, "robot configuration")
 
-    r.only(data, "", ("robot", "base", "groups", "arms", "home"))
+    r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration"))
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description"))
     name = r.string(robot, "name", "robot")
@@ -166,6 +186,8 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     home: dict[str, float] = {}
     for joint in r.table(data, "home", "", required=False):
         home[joint] = r.number(data["home"], joint, "home")
+    acceleration = {key: r.number(data["acceleration"], key, "acceleration", positive=True)
+                    for key in r.table(data, "acceleration", "", required=False)}  # fmt: skip
 
     return RobotConfig(
         path=path,
@@ -176,6 +198,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         groups=groups,
         arms=arms,
         home=home,
+        acceleration=acceleration,
     )
 
 

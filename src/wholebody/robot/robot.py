@@ -36,7 +36,7 @@ from wholebody._numeric import float_array
 from wholebody.errors import DimensionError, FrameError, ModelError, WholebodyError
 from wholebody.robot.base import BaseModel, base_model
 from wholebody.robot.compiled import RobotKinematics
-from wholebody.robot.config import ArmConfig, RobotConfig
+from wholebody.robot.config import ACCELERATION_DEFAULTS, ArmConfig, RobotConfig
 
 __all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
 
@@ -158,10 +158,39 @@ class Robot:
             "arm", {a: self._arm(c) for a, c in config.arms.items()}
         )
         self._home = self._configuration_from(config.home, "home")
+        self.acceleration_limits: np.ndarray = self._acceleration_limits()
+        """Per actuated velocity, the largest change of ``u`` per second (rad/s^2, m/s^2;
+        ``[acceleration]`` of robot.toml over :data:`ACCELERATION_DEFAULTS`; read-only)."""
         self.kinematics = RobotKinematics(self)
         """What the compiled core reads (views of Pinocchio's data, actuation entries)."""
 
     # ------------------------------------------------------------------ construction
+    def _acceleration_limits(self) -> np.ndarray:
+        """``[acceleration]`` resolved per entry of ``u``: the class defaults, then groups,
+        then joints."""
+        given = dict(self.config.acceleration)
+        a = np.full(self.nu, given.pop("joints", ACCELERATION_DEFAULTS["joints"]))
+        wheels = given.pop("wheels", ACCELERATION_DEFAULTS["wheels"])
+        linear = given.pop("base_linear", ACCELERATION_DEFAULTS["base_linear"])
+        angular = given.pop("base_angular", ACCELERATION_DEFAULTS["base_angular"])
+        for k, name in enumerate(self.actuated_joints):
+            if name in self.base.wheel_joints:
+                a[k] = wheels
+            elif name not in self._joint_ids:  # a planar base's x, y, yaw
+                a[k] = angular if k == 2 else linear
+        groups = [n for n in given if n in self.groups]
+        for name in [*groups, *(n for n in given if n not in self.groups)]:
+            if name in self.groups:
+                a[self.groups[name].indices] = given[name]
+            elif name in self._u_index:
+                a[self._u_index[name]] = given[name]
+            else:
+                known = [*ACCELERATION_DEFAULTS, *self.groups, *self.actuated_joints]
+                raise self.config.error(f"acceleration.{name}", "not a group or joint of the "
+                                        "robot" + _suggest(name, known))  # fmt: skip
+        a.setflags(write=False)
+        return a
+
     def _build_actuation(self) -> None:
         model, base = self.model, self.base
         first = 2 if base.mobile else 1  # joint 0 = universe, 1 = planar root if mobile

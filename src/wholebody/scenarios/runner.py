@@ -229,6 +229,7 @@ def run_scenario(
             weights=weights,
             stiffness=stiffness,
             first=first,
+            acceleration=weights.acceleration,
         )
         controller = Controller(
             robot,
@@ -248,7 +249,8 @@ def run_scenario(
             if on_step is not None:
                 on_step(done + k, offset + t, qk)
 
-        log = controller.run(q, duration, callback=callback, meta={"phase": phase.name})
+        log = controller.run(q, duration, callback=callback, meta={"phase": phase.name},
+                             u0=logs[-1].u[-1] if logs else None)  # fmt: skip
         logs.append(log)
         q = np.asarray(log.meta["final_q"])
         state = robot.update(q)

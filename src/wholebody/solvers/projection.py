@@ -80,7 +80,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dtrtri
@@ -519,10 +519,8 @@ class ProjectionSolver(Solver):
             message = _EMPTY_BOX
             return self._result(problem, np.zeros(nu), np.ones(len(problem.levels)),
                                 time.perf_counter() - start, message, failed=True)  # fmt: skip
-        u_start = np.minimum(np.maximum(0.0, lo), hi)  # SNS starts here: 0 unless the box
-        # excludes it (the unsaturated solution starts from 0, the textbook u_0)
-        box = _Box.of(lo, hi)
         levels = problem.levels
+        box = _Box.of(lo, hi)
         scales = np.empty(len(levels))
         scales.fill(1.0)
         # The unsaturated solution of the whole stack first: when it is inside the box it is
@@ -534,15 +532,24 @@ class ProjectionSolver(Solver):
         state_k = _Level(np.zeros(nu), None, 1.0, free, ~free)
         for i, lp in enumerate(levels):
             state_k = self._level(lp, state_k, box, i + 1 < len(levels), False)
+        u_c = np.zeros(nu)
         if self.saturate and not box.inside(state_k.u):
+            # SNS for d = u - u_c from d = 0, u_c the box's point closest to 0 (not 0 where
+            # the box excludes it: acceleration limits, a joint past its limit), so that the
+            # search starts inside the box it saturates against
+            u_c = np.minimum(np.maximum(0.0, lo), hi)
+            if _count(u_c != 0.0):
+                levels = [replace(lp, b=lp.b - lp.A.dot(u_c)) for lp in levels]
+                box = _Box.of(lo - u_c, hi - u_c)
             pinned = lo == hi
-            state_k = _Level(u_start, None, 1.0, pinned, ~pinned)
+            state_k = _Level(np.zeros(nu), None, 1.0, pinned, ~pinned)
             for i, lp in enumerate(levels):
                 state_k = self._level(lp, state_k, box, i + 1 < len(levels), True)
                 scales[i] = state_k.scale
-        u_s = state_k.u
+        u_s = state_k.u + u_c
         if not math.isfinite(u_s.dot(u_s)) and not np.all(np.isfinite(u_s)):
             message = _NON_FINITE
+            u_start = np.minimum(np.maximum(0.0, lo), hi)
             return self._result(problem, u_start, scales, time.perf_counter() - start, message,
                                 failed=True)  # fmt: skip
         return self._result(problem, u_s, scales, time.perf_counter() - start, "")

@@ -469,15 +469,23 @@ class Stack:
             upper[crossed] = mid
         return StackProblem(self._buffers, lower / D, upper / D, D, values)
 
-    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        """Advance every task's internal state (PI integrals) by one step."""
+    def advance(
+        self, state: RobotState, dt: float, saturated: bool = False, u: np.ndarray | None = None
+    ) -> None:
+        """Advance every task's internal state (PI integrals) by one step, and tell the
+        constraints the velocity ``u`` that was applied (when given)."""
         for t in self._all_tasks:
             t.advance(state, dt, saturated)
+        if u is not None:
+            for c in self.constraints:
+                c.advance(u, dt)
 
     def reset(self) -> None:
-        """Reset every task's internal state."""
+        """Reset every task's and constraint's internal state."""
         for t in self.tasks:
             t.reset()
+        for c in self.constraints:
+            c.reset()
 
     def __repr__(self) -> str:
         parts = [f"{lv.name}: [{', '.join(e.name for e in lv.entries)}]" for lv in self.levels]

@@ -15,12 +15,13 @@ from wholebody.tasks.base import (
 )
 from wholebody.tasks.frame import FrameTask
 from wholebody.tasks.inequality import FrameHalfSpace
-from wholebody.tasks.limits import JointPositionLimits, VelocityLimits
+from wholebody.tasks.limits import AccelerationLimits, JointPositionLimits, VelocityLimits
 from wholebody.tasks.objectives import JointLimitAvoidance, Manipulability
 from wholebody.tasks.posture import PostureTask
 from wholebody.tasks.relative import RelativeFrameTask
 
 __all__ = [
+    "AccelerationLimits",
     "ArmEnergyValue",
     "ArmPotentialEnergy",
     "Bounds",

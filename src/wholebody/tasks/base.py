@@ -185,3 +185,10 @@ class Constraint(ABC):
     @abstractmethod
     def bounds(self, state: RobotState, dt: float) -> Bounds:
         """The box at ``state`` for a step of ``dt`` seconds."""
+
+    def advance(self, u: np.ndarray, dt: float) -> None:  # noqa: B027 - a hook
+        """After a step: the velocity ``u`` that was applied for ``dt`` s (a constraint with
+        a memory, such as :class:`~wholebody.tasks.AccelerationLimits`, keeps it)."""
+
+    def reset(self) -> None:  # noqa: B027 - a hook
+        """Forget what :meth:`advance` kept (a new run starts at rest)."""

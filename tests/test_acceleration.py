@@ -1,0 +1,110 @@
+"""Acceleration limits: ``[acceleration]`` of robot.toml, the box with its braking bound, and
+closed loops on both backends in which no step changes a velocity by more than ``a dt``."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+
+import numpy as np
+import pytest
+
+import wholebody
+from wholebody.control import Controller
+from wholebody.errors import ConfigError
+from wholebody.planning.trajectory import MinimumJerkTrajectory
+from wholebody.presets import paper_stack
+from wholebody.resources import robots_dir, tasks_dir
+from wholebody.scenarios import load_scenario, run_scenario
+from wholebody.solvers import ProjectionSolver
+from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.tasks import AccelerationLimits, FrameTask
+from wholebody.tasks.limits import _braking
+
+DT = 0.01
+
+
+def test_defaults_and_overrides_from_robot_toml(tmp_path, humanoid):
+    a = humanoid.acceleration_limits
+    wheels = [humanoid.index(w) for w in humanoid.base.wheel_joints]
+    assert np.all(a[wheels] == 20.0) and a[humanoid.index("waist_yaw")] == 10.0
+    d = tmp_path / "robot"
+    shutil.copytree(robots_dir() / "mobile_humanoid", d)
+    toml = d / "robot.toml"
+    toml.write_text(toml.read_text() + "\n[acceleration]\njoints = 8.0\nwheels = 30.0\n"
+                    "waist = 2.0\nwaist_yaw = 1.5\n")  # fmt: skip
+    r = wholebody.load_robot(d)
+    a = r.acceleration_limits
+    assert np.all(a[wheels] == 30.0) and a[r.index("right_elbow_flexion")] == 8.0
+    assert a[r.index("waist_pitch")] == 2.0 and a[r.index("waist_yaw")] == 1.5  # joint wins
+    for bad, message in (("waist = 0.0", "expected a number > 0"),
+                         ("wasit = 2.0", "not a group or joint of the robot")):  # fmt: skip
+        toml.write_text(toml.read_text().split("[acceleration]")[0] + f"[acceleration]\n{bad}\n")
+        with pytest.raises(ConfigError, match=message):
+            wholebody.load_robot(d)
+
+
+def test_the_braking_bound_is_invariant_and_stops_at_the_limit(rng):
+    a = rng.uniform(0.5, 50.0, 2000)
+    d = rng.uniform(0.0, 1.0, 2000) ** 3
+    v = _braking(d, a, DT)
+    assert np.all(v >= 0) and np.all(v * DT <= d + 1e-15)  # one step never passes the limit
+    after = _braking(d - v * DT, a, DT)
+    assert np.all(after >= v - a * DT - 1e-12)  # braking at a per step is always allowed
+    # and it is the largest such speed: braking from v, the distances sum to d
+    np.testing.assert_allclose(v * DT + v**2 / (2 * a), d, rtol=1e-9, atol=1e-15)
+
+
+def test_the_box_is_the_last_velocity_plus_minus_a_dt(humanoid, rng):
+    limit = AccelerationLimits(humanoid, scale=0.5)
+    state = humanoid.update(humanoid.random_configuration(rng, margin=0.3))
+    u = rng.uniform(-0.2, 0.2, humanoid.nu)
+    limit.advance(u, DT)
+    box = limit.bounds(state, DT)
+    step = 0.5 * humanoid.acceleration_limits * DT
+    assert np.all(box.lower <= u) and np.all(u <= box.upper)
+    free = [humanoid.index(w) for w in humanoid.base.wheel_joints]  # no position limits
+    np.testing.assert_allclose(box.upper[free] - u[free], step[free])
+    np.testing.assert_allclose(u[free] - box.lower[free], step[free])
+    assert np.all(box.upper - box.lower <= 2 * step + 1e-12)
+    limit.reset()
+    assert np.all(limit.bounds(state, DT).lower <= 0) and not np.any(limit.previous)
+
+
+def fast_reach(robot, solver, acceleration: bool):
+    """The right hand 40 cm forward and up in 0.6 s from rest: an abrupt start."""
+    hand = FrameTask(robot, "right_tool", kp=20.0)
+    q0 = robot.home()
+    start = robot.frame_pose(q0, hand.frame)
+    goal = start.copy()
+    goal[:3, 3] += (0.3, 0.1, 0.25)
+    stack = paper_stack(robot, [hand], stiffness=0.1, acceleration=acceleration)
+    refs = {hand: MinimumJerkTrajectory(start, goal, 0.6)}
+    return Controller(robot, stack, solver, dt=DT, references=refs).run(q0, 1.0)
+
+
+@pytest.mark.parametrize("solver", [ProjectionSolver(), HierarchicalQPSolver()],
+                         ids=["projection", "hqp"])  # fmt: skip
+def test_no_step_changes_a_velocity_by_more_than_a_dt(humanoid, solver):
+    a = humanoid.acceleration_limits
+    free = fast_reach(humanoid, solver, acceleration=False)
+    limited = fast_reach(humanoid, solver, acceleration=True)
+    rate = lambda log: np.abs(np.diff(np.vstack([np.zeros(humanoid.nu), log.u]), axis=0)) / DT  # noqa: E731
+    assert np.max(rate(free) / a) > 2.0  # the limits matter here
+    assert np.max(rate(limited) / a) <= 1.0 + 1e-9
+    err = np.linalg.norm(limited.frame_positions["right_tool"][-1] - free.frame_positions[
+        "right_tool"][-1])  # fmt: skip
+    assert err < 2e-3  # and the hand still gets there
+
+
+@pytest.mark.parametrize("backend", ["projection", "hqp"])
+def test_a_scenario_with_acceleration_limits_has_no_spike_across_its_phases(backend):
+    spec = load_scenario(tasks_dir() / "obstacle_avoidance.toml")
+    spec = dataclasses.replace(spec, stack=dataclasses.replace(spec.stack, acceleration=True))
+    run = run_scenario(spec, backend=backend)
+    robot = wholebody.load_robot(spec.robot)
+    rate = np.abs(np.diff(run.log.u, axis=0)) / spec.dt
+    assert np.max(rate / robot.acceleration_limits) <= 1.0 + 1e-9
+    assert run.metrics["limit_violations"] == 0
+    worst = max(v for hand in run.metrics["mae_m"].values() for v in hand.values())
+    assert worst < 1e-3

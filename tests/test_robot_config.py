@@ -338,7 +338,8 @@ def test_a_robot_toml_that_is_not_utf8_is_named(tmp_path):
     d = copy_robot(tmp_path)
     toml = d / "robot.toml"
     toml.write_bytes(toml.read_bytes() + "# café\n".encode("latin-1"))
-    with pytest.raises(ConfigError, match=r"robot.toml: robot configuration is not UTF-8 text.*byte 0xe9"):
+    message = r"robot.toml: robot configuration is not UTF-8 text.*byte 0xe9"
+    with pytest.raises(ConfigError, match=message):
         wholebody.load_robot(d)
 
 

@@ -179,6 +179,17 @@ class ScenarioSpec:
         return config_error(self.path, key, message)
 
 
+def _rotation_vector(r: TomlReader, spec: dict, where: str) -> tuple[float, float, float]:
+    """``rotate`` (rad): a rotation vector of angle at most pi (a larger one is degrees)."""
+    rotate = r.vector(spec, "rotate", where, 3, (0.0, 0.0, 0.0))
+    angle = math.sqrt(sum(v * v for v in rotate))
+    if angle > math.pi + 1e-6:
+        raise r.fail(f"{where}.rotate", f"a rotation vector in radians has an angle of at most "
+                     f"pi; this one's is {angle:g} (degrees? {angle:g} deg = "
+                     f"{math.radians(angle):.4f} rad)")  # fmt: skip
+    return rotate  # type: ignore[return-value]
+
+
 def load_scenario(path: str | Path) -> ScenarioSpec:
     """Read and check a scenario file (see the module docstring for the layout).
 
@@ -354,12 +365,7 @@ def _phase(
             raise r.fail(f"{w}.shape", "only the dmp planner has a shape")
         if kind not in ("dmp", "min_jerk") and "rotate" in spec:
             raise r.fail(f"{w}.rotate", f"planner {kind!r} takes no rotate")
-        rotate = r.vector(spec, "rotate", w, 3, (0.0, 0.0, 0.0))
-        angle = math.sqrt(sum(v * v for v in rotate))
-        if angle > math.pi + 1e-6:  # one turn at most: a larger vector is degrees, not rad
-            raise r.fail(f"{w}.rotate", f"a rotation vector in radians has an angle of at most "
-                         f"pi; this one's is {angle:g} (degrees? {angle:g} deg = "
-                         f"{math.radians(angle):.4f} rad)")  # fmt: skip
+        rotate = _rotation_vector(r, spec, w)
         out[hname] = HandPhase(kind, goal, rotate, avoid, carry, shape)  # type: ignore[arg-type]
     missing = [h for h in hands if h not in out]
     if missing:

@@ -27,7 +27,7 @@ DT = 0.01
 def test_defaults_and_overrides_from_robot_toml(tmp_path, humanoid):
     a = humanoid.acceleration_limits
     wheels = [humanoid.index(w) for w in humanoid.base.wheel_joints]
-    assert np.all(a[wheels] == 20.0) and a[humanoid.index("waist_yaw")] == 10.0
+    assert np.all(a[wheels] == 40.0) and a[humanoid.index("waist_yaw")] == 20.0
     d = tmp_path / "robot"
     shutil.copytree(robots_dir() / "mobile_humanoid", d)
     toml = d / "robot.toml"

@@ -21,6 +21,7 @@ backend = "pinv"
 rate_hz = 100.0
 [stack]
 stiffness = 0.1
+acceleration = false  # the phases here are 2-10 steps: abrupt on purpose
 [hands.right]
 frame = "right_tool"
 """

@@ -151,8 +151,7 @@ class Controller:
             u0 = np.asarray(u0, dtype=float)
             if u0.shape != (robot.nu,) or not np.isfinite(u0).all():
                 raise DimensionError(f"u0 must be {robot.nu} finite velocities, got {u0!r}")
-            for c in self.stack.constraints:
-                c.advance(u0, self.dt)
+            self.stack.set_velocity(u0, self.dt)
         bar = _progress(n, progress)
         with threadpool_limits(1), _gc_paused():  # no BLAS threads, no collection mid-step
             q = self._loop(q, n, log, callback, bar)

@@ -587,10 +587,12 @@ def _saturate_identity(b, s, u0, Z, is_mask, mask, sat, lo, hi, lo_tol, hi_tol):
 
 # ---------------------------------------------------------------------- the solve
 @kernel
-def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> None:
+def project(
+    f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray, anchor: np.ndarray
+) -> None:
     """Solve the evaluated stack: ``F_U`` (scaled and actuated), per level its residual and
     scale factor, per task its residuals and whether it is met, the active bounds and the
-    status (``I_OUT``)."""
+    status (``I_OUT``). ``anchor`` (scaled): the velocity SNS scales motions around."""
     box = fmat(f, h, lay.F_BOX)
     lo_box, hi_box = box[0], box[1]
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
@@ -621,7 +623,7 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
     if par[PAR_SATURATE] != 0.0 and not _inside(u, wide_lo, wide_hi):
         shifted = False
         for j in range(n):
-            u_c[j] = min(max(0.0, lo_box[j]), hi_box[j])
+            u_c[j] = min(max(anchor[j], lo_box[j]), hi_box[j])
             shifted = shifted or u_c[j] != 0.0
         if shifted:
             lo, hi = combine(lo_box, -1.0, u_c), combine(hi_box, -1.0, u_c)

@@ -38,8 +38,8 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
 
     [acceleration]               # optional; the hard bound |u - u_prev| <= a dt of
                                  # wholebody.tasks.AccelerationLimits
-    joints = 10.0                # rad/s^2 (m/s^2 prismatic), default 10
-    wheels = 20.0                # rad/s^2, the base's wheels, default 20
+    joints = 20.0                # rad/s^2 (m/s^2 prismatic), default 20
+    wheels = 40.0                # rad/s^2, the base's wheels, default 40
     base_linear = 2.0            # m/s^2, planar base, default 2
     base_angular = 4.0           # rad/s^2, planar base, default 4
     waist = 5.0                  # any group or joint name: its own (a joint's wins)
@@ -60,8 +60,8 @@ __all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "RobotConfig",
            "read_robot_config"]  # fmt: skip
 
 ACCELERATION_DEFAULTS: Mapping[str, float] = {
-    "joints": 10.0,  # rad/s^2 (m/s^2 prismatic): a brisk arm, well inside cobots' 15-40
-    "wheels": 20.0,  # rad/s^2: about 2 m/s^2 at the rim of a 0.1 m wheel
+    "joints": 20.0,  # rad/s^2 (m/s^2 prismatic): inside the 15-40 of common cobots
+    "wheels": 40.0,  # rad/s^2: 3.2 m/s^2 at the rim of the humanoid's 0.08 m wheels
     "base_linear": 2.0,  # m/s^2
     "base_angular": 4.0,  # rad/s^2
 }

@@ -21,7 +21,7 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     gain = 1.0                         # k
     wheel_metric = 0.01                # velocity metric of the wheels
     stiffness = "learned"              # "learned" (the robot's model) or a number (N m/rad)
-    acceleration = false               # true: the robot's acceleration limits as a hard box
+    acceleration = true                # the robot's acceleration limits as a hard box
 
     [hands.right]                      # any number of hands
     frame = "right_tool"
@@ -101,7 +101,7 @@ class StackSpec(PaperWeights):
     stiffness: a constant (N m/rad) or ``"learned"`` (the robot's stiffness network)."""
 
     stiffness: float | str = "learned"
-    acceleration: bool = False
+    acceleration: bool = True
 
 
 @dataclass(frozen=True)
@@ -227,7 +227,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         },
         wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
         stiffness=stiffness,
-        acceleration=r.boolean(st, "acceleration", "stack", default=False),
+        acceleration=r.boolean(st, "acceleration", "stack", default=True),
     )
     if stack.gain < 0:
         raise r.fail("stack.gain", f"expected a number >= 0, got {stack.gain}")

@@ -501,7 +501,7 @@ class ProjectionSolver(Solver):
         arena = ProblemArena(problem)
         self._set_par()
         first_call("projection problem", "the projection kernels", kernel.project, arena.f,
-                   arena.i, arena.h, self._par)  # fmt: skip
+                   arena.i, arena.h, self._par, _anchor(problem.anchor, problem.lower))  # fmt: skip
         code = int(arena.view(lay.I_OUT)[lay.OUT_MESSAGE])
         return arena.result(time.perf_counter() - start, _MESSAGES[code])
 
@@ -534,10 +534,12 @@ class ProjectionSolver(Solver):
             state_k = self._level(lp, state_k, box, i + 1 < len(levels), False)
         u_c = np.zeros(nu)
         if self.saturate and not box.inside(state_k.u):
-            # SNS for d = u - u_c from d = 0, u_c the box's point closest to 0 (not 0 where
-            # the box excludes it: acceleration limits, a joint past its limit), so that the
-            # search starts inside the box it saturates against
-            u_c = np.minimum(np.maximum(0.0, lo), hi)
+            # SNS for d = u - u_c from d = 0, u_c the box's point closest to the anchor (0,
+            # or the last velocity with acceleration limits), so that the search starts
+            # inside the box it saturates against and a scaled level slows its change of
+            # velocity rather than the velocity itself
+            anchor = 0.0 if problem.anchor is None else problem.anchor
+            u_c = np.minimum(np.maximum(anchor, lo), hi)
             if _count(u_c != 0.0):
                 levels = [replace(lp, b=lp.b - lp.A.dot(u_c)) for lp in levels]
                 box = _Box.of(lo - u_c, hi - u_c)
@@ -568,8 +570,9 @@ class ProjectionSolver(Solver):
         self._set_par()
         first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state))
         plan.written(state)
+        anchor = _anchor(stack.anchor, plan.view(lay.F_BOX)[0])
         first_call("projection", "the projection kernels", kernel.project, plan.f, plan.i,
-                   plan.h, self._par)  # fmt: skip
+                   plan.h, self._par, anchor)  # fmt: skip
         code = int(plan.view(lay.I_OUT)[lay.OUT_MESSAGE])
         return plan.result(time.perf_counter() - start, _MESSAGES[code])
 
@@ -612,6 +615,11 @@ class ProjectionSolver(Solver):
 _EMPTY_BOX = "the box is empty or not a number (NaN bounds): u = 0"
 _NON_FINITE = "non-finite solution replaced by the box's closest point to 0"
 _MESSAGES = {0: "", kernel.MESSAGE_EMPTY_BOX: _EMPTY_BOX, kernel.MESSAGE_NON_FINITE: _NON_FINITE}
+
+
+def _anchor(anchor: np.ndarray | None, like: np.ndarray) -> np.ndarray:
+    """The kernel's anchor: the given one, or zeros."""
+    return np.zeros(like.shape[0]) if anchor is None else anchor
 
 
 def _refuse_inequalities(problem: StackProblem) -> None:

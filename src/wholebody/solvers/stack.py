@@ -42,6 +42,7 @@ from wholebody.errors import DimensionError, WholebodyError
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.solvers.plan import Plan, sqrt_weights
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
+from wholebody.tasks.limits import AccelerationLimits
 
 __all__ = ["OBJECTIVES", "Level", "LevelProblem", "Stack", "StackProblem"]
 
@@ -195,6 +196,10 @@ class StackProblem:
     upper: np.ndarray
     scale: np.ndarray
     objective_values: dict[str, ObjectiveValue]
+    anchor: np.ndarray | None = None
+    """Scaled velocity the projection's saturation scales motions around (clipped to the
+    box): the last step's velocity when the stack has acceleration limits (whose box is
+    centred on it), else None (0, the textbook choice)."""
 
     def to_u(self, u_scaled: np.ndarray) -> np.ndarray:
         """Actuated velocity from the scaled one."""
@@ -249,6 +254,7 @@ class Stack:
             lv if isinstance(lv, Level) else Level(entries=lv) for lv in levels
         ]
         self.constraints = list(constraints)
+        self._velocity = np.zeros(robot.nu)  # the last step's (set_velocity)
         self._scale_version = 0
         self.metric = np.ones(robot.nu) if metric is None else metric
         self._plan: Plan | None = None
@@ -397,6 +403,7 @@ class Stack:
                 plan.evaluate(state, dt)
             problem = plan.problem()
             problem.objective_values = plan.objective_values()
+            problem.anchor = self.anchor
             return problem
         self._check_layout()
         D = self._scale
@@ -467,7 +474,7 @@ class Stack:
             mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
             lower[crossed] = mid
             upper[crossed] = mid
-        return StackProblem(self._buffers, lower / D, upper / D, D, values)
+        return StackProblem(self._buffers, lower / D, upper / D, D, values, self.anchor)
 
     def advance(
         self, state: RobotState, dt: float, saturated: bool = False, u: np.ndarray | None = None
@@ -477,8 +484,14 @@ class Stack:
         for t in self._all_tasks:
             t.advance(state, dt, saturated)
         if u is not None:
-            for c in self.constraints:
-                c.advance(u, dt)
+            self.set_velocity(u, dt)
+
+    def set_velocity(self, u: np.ndarray, dt: float) -> None:
+        """The velocity the robot moves at (applied for the last ``dt`` s): the constraints
+        with a memory and the projection's anchor (:attr:`StackProblem.anchor`) use it."""
+        for c in self.constraints:
+            c.advance(u, dt)
+        self._velocity = np.array(u, dtype=float)
 
     def reset(self) -> None:
         """Reset every task's and constraint's internal state."""
@@ -486,6 +499,16 @@ class Stack:
             t.reset()
         for c in self.constraints:
             c.reset()
+        self._velocity = np.zeros(self.robot.nu)
+
+    @property
+    def _anchored(self) -> bool:
+        return any(isinstance(c, AccelerationLimits) for c in self.constraints)
+
+    @property
+    def anchor(self) -> np.ndarray | None:
+        """The scaled last velocity with acceleration limits in the stack, else None."""
+        return self._velocity / self._scale if self._anchored else None
 
     def __repr__(self) -> str:
         parts = [f"{lv.name}: [{', '.join(e.name for e in lv.entries)}]" for lv in self.levels]

@@ -20,7 +20,7 @@ while they are out of reach of one step), its posture and base costs 100 times w
 in ``peers.py`` (with those, the weighted compromise alone leaves the hands millimetres off
 their targets). See ``peers.py`` for how the base is matched.
 
-    python benchmarks/convergence.py [--n N] [--seed S] [--duration T]
+    python benchmarks/convergence.py [--n N] [--seed S] [--duration T] [--acceleration]
 
 Prints per case the success rate, the final position and orientation error percentiles (the
 worse hand), and the targets where wholebody's paper stack and pink disagree.
@@ -42,7 +42,13 @@ import wholebody
 from wholebody.presets import paper_stack
 from wholebody.solvers import Level, ProjectionSolver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.tasks import FrameTask, JointPositionLimits, PostureTask, VelocityLimits
+from wholebody.tasks import (
+    AccelerationLimits,
+    FrameTask,
+    JointPositionLimits,
+    PostureTask,
+    VelocityLimits,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import peers
@@ -66,21 +72,24 @@ def errors(poses: list[np.ndarray], goal: list[np.ndarray]) -> tuple[float, floa
     return p, r
 
 
-def wholebody_case(robot: wholebody.Robot, stack_kind: str, backend: str) -> Callable:
-    """A run function ``goal -> final hand poses`` for one wholebody stack and backend."""
+def wholebody_case(
+    robot: wholebody.Robot, stack_kind: str, backend: str, acceleration: bool
+) -> Callable:
+    """A run function ``goal -> final hand poses`` for one wholebody stack and backend
+    (with ``acceleration``: the robot's acceleration limits too)."""
     solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver()
 
     def run(goal: list[np.ndarray], steps: int) -> list[np.ndarray]:
         if stack_kind == "paper":
             hands = [FrameTask(robot, f, kp=20.0, ki=5.0) for f in peers.HANDS]
-            stack = paper_stack(robot, hands)
+            stack = paper_stack(robot, hands, acceleration=acceleration)
         else:
             hands = [FrameTask(robot, f, kp=1.0 / DT) for f in peers.HANDS]
             posture = PostureTask(robot, kp=1.0 / DT, weight=peers.W_POSTURE)
             posture.set_target(robot.joint_positions(robot.neutral()))
-            stack = Stack(robot, [Level(hands), Level([posture])],
-                          [JointPositionLimits(robot, gain=peers.LIMIT_GAIN),
-                           VelocityLimits(robot)])  # fmt: skip
+            limits = [JointPositionLimits(robot, gain=peers.LIMIT_GAIN), VelocityLimits(robot)]
+            limits += [AccelerationLimits(robot)] if acceleration else []
+            stack = Stack(robot, [Level(hands), Level([posture])], limits)
         for hand, T in zip(hands, goal, strict=True):
             hand.set_target(T)
         q = robot.neutral()
@@ -127,10 +136,12 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=50, help="number of random targets")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--duration", type=float, default=3.0, help="s per run")
+    parser.add_argument("--acceleration", action="store_true",
+                        help="wholebody's stacks with the robot's acceleration limits")  # fmt: skip
     args = parser.parse_args()
     robot = wholebody.load_robot("mobile_humanoid")
     cases: dict[str, Callable] = {
-        f"wholebody {kind} {backend}": wholebody_case(robot, kind, backend)
+        f"wholebody {kind} {backend}": wholebody_case(robot, kind, backend, args.acceleration)
         for kind in ("paper", "hierarchy") for backend in ("projection", "hqp")
     }  # fmt: skip
     pink = pink_case(robot)

@@ -94,13 +94,14 @@ def read_npz(path: str | Path, what: str) -> dict[str, np.ndarray]:
     try:
         with path.open("rb") as fh:
             head = fh.read(6)
-        if head and not head.startswith((b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")):
-            raise ValueError("not an .npz archive: no zip header")
-        z = np.load(path, allow_pickle=False)
-        if not isinstance(z, np.lib.npyio.NpzFile):
-            raise ValueError("a single .npy array, not an .npz archive")
-        with z:
-            return {k: z[k] for k in z.files}
+            if head and not head.startswith((b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")):
+                raise ValueError("not an .npz archive: no zip header")
+            fh.seek(0)
+            z = np.load(fh, allow_pickle=False)
+            if not isinstance(z, np.lib.npyio.NpzFile):
+                raise ValueError("a single .npy array, not an .npz archive")
+            with z:
+                return {k: z[k] for k in z.files}
     except _READ_ERRORS as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         if isinstance(exc, (EOFError, zipfile.BadZipFile, zlib.error)) or not str(reason):

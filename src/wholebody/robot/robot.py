@@ -178,8 +178,7 @@ class Robot:
                 a[k] = wheels
             elif name not in self._joint_ids:  # a planar base's x, y, yaw
                 a[k] = angular if k == 2 else linear
-        groups = [n for n in given if n in self.groups]
-        for name in [*groups, *(n for n in given if n not in self.groups)]:
+        for name in sorted(given, key=lambda n: n not in self.groups):  # groups, then joints
             if name in self.groups:
                 a[self.groups[name].indices] = given[name]
             elif name in self._u_index:

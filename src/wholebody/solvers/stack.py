@@ -254,7 +254,6 @@ class Stack:
             lv if isinstance(lv, Level) else Level(entries=lv) for lv in levels
         ]
         self.constraints = list(constraints)
-        self._velocity = np.zeros(robot.nu)  # the last step's (set_velocity)
         self._scale_version = 0
         self.metric = np.ones(robot.nu) if metric is None else metric
         self._plan: Plan | None = None
@@ -491,7 +490,6 @@ class Stack:
         with a memory and the projection's anchor (:attr:`StackProblem.anchor`) use it."""
         for c in self.constraints:
             c.advance(u, dt)
-        self._velocity = np.array(u, dtype=float)
 
     def reset(self) -> None:
         """Reset every task's and constraint's internal state."""
@@ -499,16 +497,15 @@ class Stack:
             t.reset()
         for c in self.constraints:
             c.reset()
-        self._velocity = np.zeros(self.robot.nu)
-
-    @property
-    def _anchored(self) -> bool:
-        return any(isinstance(c, AccelerationLimits) for c in self.constraints)
 
     @property
     def anchor(self) -> np.ndarray | None:
-        """The scaled last velocity with acceleration limits in the stack, else None."""
-        return self._velocity / self._scale if self._anchored else None
+        """With acceleration limits in the stack, the velocity they remember (scaled), else
+        None."""
+        for c in self.constraints:
+            if isinstance(c, AccelerationLimits):
+                return c.previous / self._scale
+        return None
 
     def __repr__(self) -> str:
         parts = [f"{lv.name}: [{', '.join(e.name for e in lv.entries)}]" for lv in self.levels]

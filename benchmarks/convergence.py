@@ -11,6 +11,8 @@ Stacks, each on both wholebody backends:
 
 * ``paper``: the paper's stack (hands, PI law kp = 20 1/s, ki = 5 1/s^2; then ``H``),
   position and velocity limits (:func:`wholebody.presets.paper_stack`);
+* ``paper + recovery``: the same with :class:`~wholebody.control.StallRecovery` at its
+  defaults (retreat to the middle of the joint ranges when the hands stall, then retry);
 * ``hierarchy``: hands strictly above a posture task towards the neutral posture,
   dead-beat gains (``kp = 1/dt``), the problem of ``benchmarks/peers.py``;
 
@@ -23,13 +25,13 @@ their targets). See ``peers.py`` for how the base is matched.
     python benchmarks/convergence.py [--n N] [--seed S] [--duration T] [--acceleration]
 
 Prints per case the success rate, the final position and orientation error percentiles (the
-worse hand), and the targets where wholebody's paper stack and pink disagree.
+worse hand), the share of steps whose solve FAILED (pink: found no solution), the retreats,
+and the targets where each wholebody case and pink disagree.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import sys
 from collections.abc import Callable
@@ -39,8 +41,9 @@ import numpy as np
 import pinocchio as pin
 
 import wholebody
+from wholebody.control.recovery import StallRecovery
 from wholebody.presets import paper_stack
-from wholebody.solvers import Level, ProjectionSolver, Stack
+from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import (
     AccelerationLimits,
@@ -73,13 +76,14 @@ def errors(poses: list[np.ndarray], goal: list[np.ndarray]) -> tuple[float, floa
 
 
 def wholebody_case(
-    robot: wholebody.Robot, stack_kind: str, backend: str, acceleration: bool
+    robot: wholebody.Robot, stack_kind: str, backend: str, acceleration: bool, recovery: bool
 ) -> Callable:
-    """A run function ``goal -> final hand poses`` for one wholebody stack and backend
-    (with ``acceleration``: the robot's acceleration limits too)."""
+    """A run function ``goal -> (final hand poses, failed steps, retreats)`` for one wholebody
+    stack and backend (with ``acceleration``: the robot's acceleration limits too; with
+    ``recovery``: :class:`~wholebody.control.recovery.StallRecovery` at its defaults)."""
     solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver()
 
-    def run(goal: list[np.ndarray], steps: int) -> list[np.ndarray]:
+    def run(goal: list[np.ndarray], steps: int) -> tuple[list[np.ndarray], int, int]:
         if stack_kind == "paper":
             hands = [FrameTask(robot, f, kp=20.0, ki=5.0) for f in peers.HANDS]
             stack = paper_stack(robot, hands, acceleration=acceleration)
@@ -92,14 +96,20 @@ def wholebody_case(
             stack = Stack(robot, [Level(hands), Level([posture])], limits)
         for hand, T in zip(hands, goal, strict=True):
             hand.set_target(T)
-        q = robot.neutral()
+        watch = StallRecovery(robot, stack) if recovery else None
+        q, failed = robot.neutral(), 0
         for _ in range(steps):
             state = robot.update(q)
-            result = solver.solve(stack, state, DT)
-            stack.advance(state, DT, result.limit_hit, u=result.u)
+            result = solver.solve(stack if watch is None else watch.stack, state, DT)
+            failed += result.status == SolverStatus.FAILED
+            if watch is None:
+                stack.advance(state, DT, result.limit_hit, u=result.u)
+            else:
+                watch.advance(state, DT, result)
             q = robot.integrate(q, result.u, DT)
         state = robot.update(q)
-        return [state.pose(robot.frame(f)) for f in peers.HANDS]
+        poses = [state.pose(robot.frame(f)) for f in peers.HANDS]
+        return poses, failed, 0 if watch is None else len(watch.retreats)
 
     return run
 
@@ -121,12 +131,16 @@ def pink_case(robot: wholebody.Robot) -> Callable | None:
     for task in case.tasks[len(peers.HANDS) :]:  # posture and base: a weaker pull than the
         task.cost = task.cost * PINK_REGULARISATION  # hands', not a compromise with them
 
-    def run(goal: list[np.ndarray], steps: int) -> list[np.ndarray]:
+    def run(goal: list[np.ndarray], steps: int) -> tuple[list[np.ndarray], int, int]:
         case.reset()
+        failed = 0
         for _ in range(steps):
-            with contextlib.suppress(case._pink.exceptions.NoSolutionFound):
-                case.step(goal)  # no step found: the robot stays (the final error counts it)
-        return [case.conf.get_transform_frame_to_world(f).homogeneous for f in peers.HANDS]
+            try:
+                case.step(goal)
+            except case._pink.exceptions.NoSolutionFound:
+                failed += 1  # no step found: the robot stays (the final error counts it)
+        poses = [case.conf.get_transform_frame_to_world(f).homogeneous for f in peers.HANDS]
+        return poses, failed, 0
 
     return run
 
@@ -140,10 +154,11 @@ def main() -> None:
                         help="wholebody's stacks with the robot's acceleration limits")  # fmt: skip
     args = parser.parse_args()
     robot = wholebody.load_robot("mobile_humanoid")
-    cases: dict[str, Callable] = {
-        f"wholebody {kind} {backend}": wholebody_case(robot, kind, backend, args.acceleration)
-        for kind in ("paper", "hierarchy") for backend in ("projection", "hqp")
-    }  # fmt: skip
+    cases: dict[str, Callable] = {}
+    for kind, recovery in (("paper", False), ("paper", True), ("hierarchy", False)):
+        for backend in ("projection", "hqp"):
+            name = f"wholebody {kind}{' + recovery' if recovery else ''} {backend}"
+            cases[name] = wholebody_case(robot, kind, backend, args.acceleration, recovery)
     pink = pink_case(robot)
     if pink is not None:
         cases["pink single daqp"] = pink
@@ -152,23 +167,27 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     steps = round(args.duration / DT)
     goals = [targets(robot, rng) for _ in range(args.n)]
-    results = {}
+    results, failed, retreats = {}, {}, {}
     for name, run in cases.items():
-        results[name] = np.array([errors(run(g, steps), g) for g in goals])
-    print(f"{args.n} random reachable targets (seed {args.seed}), {args.duration} s from the "
-          f"neutral posture; converged: both hands within {POSITION_TOL * 1e3:g} mm and "
-          f"{ANGLE_TOL:g} rad")  # fmt: skip
+        runs = [run(g, steps) for g in goals]
+        results[name] = np.array([errors(r[0], g) for r, g in zip(runs, goals, strict=True)])
+        failed[name] = sum(r[1] for r in runs) / (steps * args.n)
+        retreats[name] = sum(r[2] for r in runs)
     print(
-        f"{'case':<34} {'converged':>9}   position error mm p50 / p90 / max"
-        "   angle rad p50 / p90 / max"
+        f"{args.n} random reachable targets (seed {args.seed}), {args.duration} s from the "
+        f"neutral posture{' with acceleration limits' if args.acceleration else ''}; "
+        f"converged: both hands within {POSITION_TOL * 1e3:g} mm and {ANGLE_TOL:g} rad"
     )
+    print(f"{'case':<42} {'converged':>9}   position error mm p50 / p90 / max"
+          f"   angle rad p50 / p90 / max   failed steps   retreats")  # fmt: skip
     ok = {}
     for name, e in results.items():
         ok[name] = (e[:, 0] <= POSITION_TOL) & (e[:, 1] <= ANGLE_TOL)
         p = np.percentile(e[:, 0] * 1e3, [50, 90, 100])
         r = np.percentile(e[:, 1], [50, 90, 100])
-        print(f"{name:<34} {ok[name].mean():>8.0%}   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}"
-              f"   {r[0]:6.3f} / {r[1]:6.3f} / {r[2]:6.3f}")  # fmt: skip
+        print(f"{name:<42} {ok[name].mean():>8.0%}   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}"
+              f"   {r[0]:6.3f} / {r[1]:6.3f} / {r[2]:6.3f}   {failed[name]:>11.2%}"
+              f"   {retreats[name]:>8}")  # fmt: skip
     if pink is not None:
         for name in (n for n in ok if n.startswith("wholebody")):
             only_pink = np.flatnonzero(ok["pink single daqp"] & ~ok[name]).tolist()

@@ -19,3 +19,5 @@ def test_readme_python_examples_run(monkeypatch):
     log, goal = namespace["log"], namespace["goal"]
     assert abs(log.frame_positions["right_tool"][-1] - goal[:3, 3]).max() < 1e-3
     assert namespace["path"].positions.shape == (160, 3)
+    # the far reach gets out of its local minimum with one retreat
+    assert len(namespace["run"].meta["retreats"]) == 1 and namespace["miss"] < 1e-3

@@ -11,14 +11,18 @@ from wholebody.control.metrics import (
     summary,
     tracking,
 )
+from wholebody.control.recovery import Retreat, StallRecovery, mid_range_posture
 
 __all__ = [
     "ArmTrace",
     "Controller",
+    "Retreat",
     "RunLog",
+    "StallRecovery",
     "Tracking",
     "closed_chain_error",
     "limit_violations",
+    "mid_range_posture",
     "summary",
     "tracking",
 ]

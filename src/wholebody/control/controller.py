@@ -30,6 +30,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from wholebody.control.log import ArmTrace, RunLog
+from wholebody.control.recovery import StallRecovery
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot
@@ -63,6 +64,11 @@ class Controller:
         want to compare, whatever their stacks.
     feedforward
         ``"midpoint"`` (default) or ``"start"``: when the reference twist is sampled.
+    recovery
+        A :class:`~wholebody.control.recovery.StallRecovery` for ``stack`` (default none):
+        retreat to a ready posture when the tasks stall in a local minimum, then retry. The
+        run log's ``meta["retreats"]`` lists them (``[start, end]`` in s; end None if the run
+        ended during one).
     """
 
     def __init__(
@@ -75,6 +81,7 @@ class Controller:
         references: Mapping[TargetTask, Trajectory] | None = None,
         monitors: Sequence[ArmPotentialEnergy] = (),
         feedforward: str = "midpoint",
+        recovery: StallRecovery | None = None,
     ) -> None:
         if not dt > 0:
             raise DimensionError(f"control period dt must be > 0 s, got {dt}")
@@ -106,6 +113,10 @@ class Controller:
                 )
         self.monitors = list(monitors)
         self.feedforward = feedforward
+        if recovery is not None and recovery.main is not stack:
+            raise WholebodyError("recovery must be made for the controller's stack: "
+                                 "StallRecovery(robot, stack)")  # fmt: skip
+        self.recovery = recovery
 
     def _sampled_targets(self, k0: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
         """Each reference's poses at steps ``k0 .. k0+n-1`` and its twists at the same steps
@@ -147,6 +158,8 @@ class Controller:
         tracked = [t for t in self.stack.tasks if isinstance(t, FrameTask)]
         log = _Recorder(robot, self.stack, self.monitors, tracked, n)
         self.stack.reset()
+        if self.recovery is not None:
+            self.recovery.reset()
         if u0 is not None:
             u0 = np.asarray(u0, dtype=float)
             if u0.shape != (robot.nu,) or not np.isfinite(u0).all():
@@ -167,9 +180,16 @@ class Controller:
             "position_limits": [lim.tolist() for lim in robot.position_limits],
             "phases": {k: list(v) for k, v in (phases or {}).items()},
             "final_q": q.tolist(),
+            **self._retreats(),
             **(meta or {}),
         }
         return log.finish(info)
+
+    def _retreats(self) -> dict[str, list[list[float | None]]]:
+        """``{"retreats": [[start, end], ...]}`` with a recovery, else nothing."""
+        if self.recovery is None:
+            return {}
+        return {"retreats": [[r.start, r.end] for r in self.recovery.retreats]}
 
     def _loop(
         self,
@@ -180,7 +200,7 @@ class Controller:
         bar: object,
     ) -> np.ndarray:
         """The ``n`` control steps from ``q``; the references sampled a block at a time."""
-        robot, tasks = self.robot, list(self.references)
+        robot, tasks, rec = self.robot, list(self.references), self.recovery
         for k in range(n):
             start = time.perf_counter()  # the step's time includes its share of the sampling
             if k % _BLOCK == 0:
@@ -189,11 +209,15 @@ class Controller:
             for task, (poses, twists) in zip(tasks, targets, strict=True):
                 task.set_target(poses[j], twists[j])
             state = robot.update(q)
-            result = self.solver.solve(self.stack, state, self.dt)
+            stack = self.stack if rec is None else rec.stack
+            result = self.solver.solve(stack, state, self.dt)
             compute = time.perf_counter() - start
-            log.record(k, t, q, state, result)  # before the next update invalidates state
+            log.record(k, t, q, state, result, stack is self.stack)  # before the next update
             start = time.perf_counter()
-            self.stack.advance(state, self.dt, saturated=result.limit_hit, u=result.u)
+            if rec is None:
+                stack.advance(state, self.dt, saturated=result.limit_hit, u=result.u)
+            else:
+                rec.advance(state, self.dt, result)
             q = robot.integrate(q, result.u, self.dt)
             log.step_time[k] = compute + (time.perf_counter() - start)
             if callback is not None:
@@ -249,7 +273,9 @@ class _Recorder:
         self.ref = {t.name: np.zeros((n, 3)) for t in tracked}
         self.arms = {m.arm.name: np.zeros((n, 6)) for m in monitors}
 
-    def record(self, k: int, t: float, q: np.ndarray, state, result) -> None:
+    def record(self, k: int, t: float, q: np.ndarray, state, result, own: bool = True) -> None:
+        """Step ``k``'s row; ``own``: solved with the controller's stack (else a retreat's,
+        whose level residuals are not the stack's: NaN)."""
         self.t[k] = t
         self.q[k] = q
         self.u[k] = result.u
@@ -260,7 +286,7 @@ class _Recorder:
         self.failed[k] = result.status == SolverStatus.FAILED or any(
             level == self.top for level, _ in result.infeasible
         )
-        self.level_res[k] = result.level_residuals
+        self.level_res[k] = result.level_residuals if own else np.nan
         for task in self.tasks:
             self.errors[task.name][k] = task.error(state)
         for task in self.tracked:

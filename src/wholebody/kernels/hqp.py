@@ -103,6 +103,7 @@ FAIL_NONFINITE, FAIL_DECOMPOSITION, FAIL_STEP, FAIL_ENGINE = 1, 2, 3, 4
 _MARGIN = 1e3  # safety factor of the full-column-rank certificate (round-off)
 _EPS = 2.220446049250313e-16
 _ACT = 1e-8  # the polish's activity threshold
+_FLAT = 1e-12  # a QP row whose coefficients are at most this (relative) is left unbounded
 
 
 # ---------------------------------------------------------------------- small helpers
@@ -804,15 +805,29 @@ def _rows_inside(v: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float) -> b
 
 
 @kernel
+def _flat(Q: np.ndarray, q: int, r: int, scale: float) -> bool:
+    """Whether row ``q`` of the QP's rows moves with ``y`` only at rounding level: its largest
+    coefficient at most ``_FLAT max(1, scale)`` (the reference's ``_flat``)."""
+    top = 0.0
+    for j in range(r):
+        top = max(top, abs(Q[q, j]))
+    return top <= _FLAT * max(1.0, scale)
+
+
+@kernel
 def _qp_rows(Q, qb, row, N, lo, hi, x, Z, r, identity, widen) -> None:  # fmt: skip
-    """Rows ``N Z`` of the QP from ``row`` on, with the bounds ``lo - N x``, ``hi - N x``
-    (widened to contain 0, so that y = 0 is feasible, where ``widen``)."""
+    """Rows ``N Z`` of the QP from ``row`` on, with the bounds ``lo - N x``, ``hi - N x``.
+    Where ``widen``: widened to contain 0, so that y = 0 is feasible, and a row the free
+    directions move only at rounding level left unbounded (see :func:`_qp_box`)."""
     Nx = mv(N, x)
     Nz = _restrict(N, Z, r, identity)
     for q in range(N.shape[0]):
         for j in range(r):
             Q[row + q, j] = Nz[q, j]
         lo_q, hi_q = lo[q] - Nx[q], hi[q] - Nx[q]
+        if widen and _flat(Q, row + q, r, _max_abs(N[q : q + 1])):
+            qb[0, row + q], qb[1, row + q] = -np.inf, np.inf
+            continue
         qb[0, row + q] = min(lo_q, 0.0) if widen else lo_q
         qb[1, row + q] = max(hi_q, 0.0) if widen else hi_q
 
@@ -820,7 +835,10 @@ def _qp_rows(Q, qb, row, N, lo, hi, x, Z, r, identity, widen) -> None:  # fmt: s
 @kernel
 def _qp_box(Q, qb, x, box, Z, r, identity) -> int:  # fmt: skip
     """The relaxed box of the QP in ``y``: the QP's own box where Z is the identity, else
-    rows ``Z`` (returns the rows used)."""
+    rows ``Z`` (returns the rows used). A joint the free directions move only at rounding
+    level (``|Z_q| <= _FLAT``) gets no row bounds: it cannot leave its bound through ``y``,
+    and two such rows of opposite sign on joints at their bounds pinned ``y`` to 0 (the
+    engines then solved, or declared infeasible, a degenerate problem)."""
     n = x.shape[0]
     if identity:
         for j in range(r):
@@ -829,7 +847,10 @@ def _qp_box(Q, qb, x, box, Z, r, identity) -> int:  # fmt: skip
     for q in range(n):
         for j in range(r):
             Q[q, j] = Z[q, j]
-        qb[0, q], qb[1, q] = box[0, q] - x[q], box[1, q] - x[q]
+        if _flat(Q, q, r, 1.0):
+            qb[0, q], qb[1, q] = -np.inf, np.inf
+        else:
+            qb[0, q], qb[1, q] = box[0, q] - x[q], box[1, q] - x[q]
     return n
 
 
@@ -1442,8 +1463,8 @@ def _tie_setup(wf, wi, wh, t) -> None:  # fmt: skip
     Q = fvec(wf, wh, W_QC)[: nrows * r].reshape((nrows, r))
     qb = fmat(wf, wh, W_QB)
     row = _qp_box(Q, qb, x, box, Z, r, identity)
-    if ni:
-        _qp_rows(Q, qb, row, G, gb[0], gb[1], x, Z, r, identity, False)
+    if ni:  # widened to contain x, as in the level QPs
+        _qp_rows(Q, qb, row, G, gb[0], gb[1], x, Z, r, identity, True)
     st[S_NV], st[S_NROWS], st[S_HASBOX], st[S_TIE] = r, nrows, identity, 1
 
 

@@ -191,7 +191,7 @@ def run(steps: int, repeat: int) -> None:
                 hand.set_target(pose, twist)
             state = robot.update(q)
             result = solver.solve(stack, state, DT)
-            stack.advance(state, DT, result.limit_hit)
+            stack.advance(state, DT, result=result)
             q = robot.integrate(q, result.u, DT)
             out.append(time.perf_counter() - start)
             r["bounds"] = r.get("bounds", 0) + result.limit_hit

@@ -103,7 +103,7 @@ def wholebody_case(
             result = solver.solve(stack if watch is None else watch.stack, state, DT)
             failed += result.status == SolverStatus.FAILED
             if watch is None:
-                stack.advance(state, DT, result.limit_hit, u=result.u)
+                stack.advance(state, DT, result=result)
             else:
                 watch.advance(state, DT, result)
             q = robot.integrate(q, result.u, DT)

@@ -260,7 +260,7 @@ class WholebodyCase(Case):
             hand.set_target(target)
         state = self.robot.update(self.q)
         result = self.solver.solve(self.stack, state, DT)
-        self.stack.advance(state, DT, result.limit_hit)
+        self.stack.advance(state, DT, result=result)
         self.u = result.u
         self.q = self.robot.integrate(self.q, result.u, DT)
 

@@ -60,7 +60,7 @@ def step(case: dict, k: int) -> None:
         task.set_target(target)
     state = robot.update(case["q"])
     result = case["solver"].solve(stack, state, DT)
-    stack.advance(state, DT, result.limit_hit)
+    stack.advance(state, DT, result=result)
     case["q"] = robot.integrate(case["q"], result.u, DT)
     case["times"].append(time.perf_counter() - start)
     case["bounds"] = case.get("bounds", 0) + result.limit_hit

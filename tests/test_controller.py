@@ -135,10 +135,10 @@ def test_summary_of_logs_joined_with_an_unmonitored_run(humanoid):
 
 
 def test_solver_failures_mean_the_first_level_unmet_for_every_backend(torso, tmp_path):
-    """A posture level that the velocity limits hold back is INFEASIBLE for the HQP (the box
-    cost it part of its optimum) and SCALED or BOUNDS_ACTIVE for the projection; the hand
-    above it is met by both, so neither run counts a failure. A hand target out of reach
-    counts for both."""
+    """A posture level that the velocity limits hold back is INFEASIBLE for both backends
+    (the box cost it part of its optimum); the hand above it is met by both, so neither run
+    counts a failure: a failure is the first level unmet. A hand target out of reach counts
+    for both."""
     from wholebody.solvers import Level, Stack
     from wholebody.solvers.hqp import HierarchicalQPSolver
     from wholebody.solvers.result import SolverStatus
@@ -160,8 +160,9 @@ def test_solver_failures_mean_the_first_level_unmet_for_every_backend(torso, tmp
         return log, summary(log)["solver_failures"]
 
     hqp_log, hqp_failures = run(HierarchicalQPSolver(), 0.0)
-    _, proj_failures = run(ProjectionSolver(), 0.0)
-    assert np.any(hqp_log.status == SolverStatus.INFEASIBLE)  # the posture level was limited
+    proj_log, proj_failures = run(ProjectionSolver(), 0.0)
+    for log in (hqp_log, proj_log):
+        assert np.any(log.status == SolverStatus.INFEASIBLE)  # the posture level was limited
     assert hqp_failures == proj_failures == 0
     for solver in (HierarchicalQPSolver(), ProjectionSolver()):
         log, failures = run(solver, 5.0)  # 5 m away: the first level cannot be met
@@ -233,3 +234,63 @@ def test_references_sampled_in_blocks_are_the_trajectory_at_every_step(humanoid)
     log = ctrl.run(robot.home(), duration)
     expected = np.array([traj.sample(t).pose[:3, 3] for t in log.t])
     np.testing.assert_allclose(log.reference_positions[hand.name], expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("recovery", [False, True])
+@pytest.mark.parametrize("backend", ["projection", "hqp"])
+def test_a_joint_resting_on_its_limit_does_not_stop_a_hand_integral(humanoid, backend, recovery):
+    """The left elbow rests on its upper limit and no task moves it: its velocity sits on
+    the box at every step (``limit_hit``). The right hand does not use it, so the hand's PI
+    integral keeps integrating (it stayed 0 when any active bound froze every integral),
+    with or without a stall recovery advancing the stack."""
+    from wholebody.control import StallRecovery
+    from wholebody.solvers import Level, Stack
+    from wholebody.solvers.hqp import HierarchicalQPSolver
+    from wholebody.tasks import JointPositionLimits, VelocityLimits
+
+    robot = humanoid
+    elbow = robot.index("left_elbow_flexion")
+    q0 = robot.configuration({"right_shoulder_flexion": 0.3, "right_elbow_flexion": 1.2,
+                              "left_elbow_flexion": robot.position_limits[1][elbow]})  # fmt: skip
+    hand = FrameTask(robot, "right_tool", kp=5.0, ki=5.0)
+    goal = robot.frame_pose(q0, hand.frame)
+    goal[:3, 3] += (0.02, 0.0, 0.0)
+    hand.set_target(goal)
+    stack = Stack(robot, [Level([hand])], [JointPositionLimits(robot), VelocityLimits(robot)])
+    solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver()
+    watch = StallRecovery(robot, stack) if recovery else None
+    log = Controller(robot, stack, solver, dt=0.01, recovery=watch).run(q0, 0.2)
+    assert np.all(log.limit_hit) and np.all(log.u[:, elbow] == 0.0)
+    assert np.abs(hand.integral[:3]).max() > 1e-4
+
+
+def _blas_threads() -> set[int]:
+    """The thread counts of the BLAS libraries loaded in this process."""
+    from threadpoolctl import threadpool_info
+
+    return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+def test_the_loop_runs_with_the_blas_threads_asked_for(torso):
+    """``threads=1`` (the default) limits BLAS to one thread inside the loop only; None
+    leaves the libraries' setting; a count that is not a whole number >= 1 is refused."""
+    from threadpoolctl import threadpool_limits
+
+    from wholebody.solvers import Stack
+
+    hand = FrameTask(torso, "left_tool", kp=20.0)
+    stack = Stack(torso, [[hand]])
+    q0 = torso.home()
+    with threadpool_limits(2):
+        if _blas_threads() != {2}:
+            pytest.skip("this BLAS cannot run two threads")
+        for threads, inside in ((1, {1}), (None, {2}), (3, {3})):
+            seen: list[set[int]] = []
+            ctrl = Controller(torso, stack, ProjectionSolver(), dt=0.01, threads=threads)
+            ctrl.run(q0, 0.03, callback=lambda k, t, q, seen=seen: seen.append(_blas_threads()))
+            assert seen == [inside] * 3, threads
+            assert _blas_threads() == {2}  # restored after the run
+        assert Controller(torso, stack, ProjectionSolver(), dt=0.01).threads == 1
+    for bad in (0, -1, 1.5, True, "1"):
+        with pytest.raises(WholebodyError, match="threads must be a whole number"):
+            Controller(torso, stack, ProjectionSolver(), dt=0.01, threads=bad)

@@ -25,6 +25,7 @@ def test_bundled_scenarios_load(name):
     assert spec.name == name and spec.robot == "mobile_humanoid" and spec.rate_hz == 100.0
     assert spec.planner.demo is not None and spec.planner.demo.is_file()
     assert spec.duration > 5.0
+    assert spec.start == "neutral"  # the paper's initial state, which the files were made for
 
 
 def test_paper_numbers_are_in_the_files():

@@ -31,9 +31,12 @@ frame = "left_tool"
 """
 
 
-def scenario(tmp_path: Path, text: str) -> Path:
+def scenario(tmp_path: Path, text: str, start: str | None = None) -> Path:
+    """The small scenario's file: ``HEAD``, with ``start = <start>`` in ``[scenario]`` unless
+    None, then ``text``."""
+    line = "" if start is None else f"start = {start}\n"
     path = tmp_path / "small.toml"
-    path.write_text(HEAD + text)
+    path.write_text(HEAD.replace("rate_hz = 100.0\n", f"rate_hz = 100.0\n{line}") + text)
     return path
 
 
@@ -66,6 +69,7 @@ planner = "hold"
 
 
 def test_a_carried_object_stays_where_it_is_left(tmp_path):
+    # the object is at the right hand of the neutral posture
     path = scenario(tmp_path, """
 [[objects]]
 name = "obj"
@@ -85,7 +89,7 @@ duration = 0.1
 [phases.hands.right]
 planner = "min_jerk"
 goal = [0.1, -0.47, 0.4]
-""")  # fmt: skip
+""", start='"neutral"')  # fmt: skip
     run = run_scenario(load_scenario(path))
     poses, log = run.object_poses["obj"], run.log
     carry, leave = log.phase_mask("carry"), log.phase_mask("leave")
@@ -192,3 +196,71 @@ planner = "hold"
     table = outputs.comparison_markdown(outputs.comparison([run]), "torso")
     assert "waist" not in table and "| method | frequency (Hz) |" in table
     outputs.write_run(run, tmp_path / "out")  # the figures draw on this robot too
+
+
+HOLD = """
+[[phases]]
+name = "p"
+duration = 0.02
+[phases.hands.right]
+planner = "hold"
+"""
+
+
+def with_start(tmp_path: Path, start: str | None) -> Path:
+    """The small scenario holding the right hand for 2 steps, with ``start = <start>``."""
+    return scenario(tmp_path, HOLD, start)
+
+
+def home_joints(robot) -> dict[str, float]:
+    """The home posture's joints by name (the base's actuators left out)."""
+    base = len(robot.base.actuators)
+    return dict(zip(robot.actuated_joints[base:], robot.joint_positions(robot.home())[base:],
+                    strict=True))  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("start", "expected"),
+    [
+        (None, lambda robot: robot.home()),
+        ('"home"', lambda robot: robot.home()),
+        ('"neutral"', lambda robot: robot.neutral()),
+        ("{ left_elbow_flexion = 0.8, waist_yaw = -0.2 }",
+         lambda robot: robot.configuration({**home_joints(robot), "left_elbow_flexion": 0.8,
+                                            "waist_yaw": -0.2})),
+    ],
+    ids=["default", "home", "neutral", "table"],
+)  # fmt: skip
+def test_a_scenario_starts_at_its_start_posture(humanoid, tmp_path, start, expected):
+    """The first logged configuration is the start posture: home by default; a table moves
+    the named joints from home."""
+    run = run_scenario(load_scenario(with_start(tmp_path, start)))
+    q0 = expected(humanoid)
+    np.testing.assert_array_equal(run.log.q[0], q0)
+    assert not np.array_equal(humanoid.home(), humanoid.neutral())  # the cases differ
+
+
+@pytest.mark.parametrize(
+    ("start", "parts", "when"),
+    [
+        ("3", ["[scenario.start]", '"home", "neutral" or a table', "got 3"], "load"),
+        ('"crouch"', ["[scenario.start]", "'crouch'", "home, neutral"], "load"),
+        ('{ waist_yaw = "left" }', ["[scenario.start.waist_yaw]", "expected a number"], "load"),
+        ("{ waist_yw = 0.1 }", ["[scenario.start.waist_yw]", "unknown joint", "waist_yaw"],
+         "run"),
+        ("{ left_elbow_flexion = 3.0 }", ["[scenario.start.left_elbow_flexion]",
+                                          "outside the joint's limits"], "run"),
+        ("{ wheel_front_left = 1.0 }", ["[scenario.start.wheel_front_left]", "base actuator"],
+         "run"),
+    ],
+    ids=["wrong type", "unknown posture", "not a number", "unknown joint", "out of limits",
+         "a wheel"],
+)  # fmt: skip
+def test_a_bad_start_is_refused_by_name(tmp_path, start, parts, when):
+    path = with_start(tmp_path, start)
+    with pytest.raises(ConfigError) as info:
+        spec = load_scenario(path)
+        assert when == "run", "load_scenario accepted it"
+        run_scenario(spec)  # checked against the robot before the first step
+    for part in [str(path), *parts]:
+        assert part in str(info.value), info.value

@@ -3,6 +3,8 @@ degenerate boxes and rows, and the reports (status, infeasible tasks) of both ba
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -175,3 +177,127 @@ def test_a_non_finite_task_leaves_the_other_tasks_residuals_alone(bad):
         _, residuals, _ = problem.residuals(x, 1e-6)
     assert residuals["good"] == pytest.approx(np.linalg.norm(A[:2] @ x - b[:2]), rel=1e-15)
     assert not np.isfinite(residuals["bad"])
+
+
+class PinnedJoint(Constraint):
+    """A joint held at rest (a locked motor): its velocity bounds are both 0."""
+
+    name = "pinned_joint"
+
+    def __init__(self, robot, joint: str) -> None:
+        self.lower, self.upper = np.full(robot.nu, -np.inf), np.full(robot.nu, np.inf)
+        self.lower[robot.index(joint)] = self.upper[robot.index(joint)] = 0.0
+
+    def bounds(self, state, dt):
+        return Bounds(self.lower, self.upper)
+
+
+def two_hands(robot, q, ki=5.0):
+    """Right hand above left hand, each with a PI integral and a target 2 cm off."""
+    state = robot.update(q)
+    right = FrameTask(robot, "right_tool", kp=5.0, ki=ki)
+    left = FrameTask(robot, "left_tool", kp=5.0, ki=ki)
+    for task, offset in ((right, (0.02, 0.0, 0.0)), (left, (0.0, 0.0, 0.02))):
+        T = state.pose(task.frame).copy()
+        T[:3, 3] += offset
+        task.set_target(T)
+    return right, left
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("compiled", [True, False])
+def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(
+    humanoid, solver, compiled
+):
+    """The left elbow is pinned at rest: a bound is active at every step. The right hand's
+    rows do not move that joint, so its integral keeps integrating; the left hand's do, so
+    its integral stays frozen at 0. (One flag for all, ``result.limit_hit``, froze both.)"""
+    q = humanoid.home()
+    right, left = two_hands(humanoid, q)
+    stack = Stack(humanoid, [Level([right], name="right"), Level([left], name="left")],
+                  [PinnedJoint(humanoid, "left_elbow_flexion"), *limits(humanoid)])  # fmt: skip
+    elbow = humanoid.index("left_elbow_flexion")
+    s = solver(compiled=compiled)
+    for _ in range(20):
+        state = humanoid.update(q)
+        result = s.solve(stack, state, DT)
+        assert elbow in result.active_bounds and result.limit_hit
+        assert stack.saturated_tasks(state, result) == {"right_tool": False, "left_tool": True}
+        stack.advance(state, DT, result=result)
+        q = humanoid.integrate(q, result.u, DT)
+    assert np.abs(right.integral[:3]).max() > 1e-4  # 20 steps of a ~1 cm error
+    assert not np.any(left.integral)
+
+
+def test_advance_keeps_the_single_flag_and_refuses_both_forms(humanoid):
+    q = humanoid.home()
+    right, left = two_hands(humanoid, q)
+    stack = Stack(humanoid, [[right], [left]], [PinnedJoint(humanoid, "left_elbow_flexion")])
+    state = humanoid.update(q)
+    result = ProjectionSolver().solve(stack, state, DT)
+    with pytest.raises(WholebodyError, match="not both"):
+        stack.advance(state, DT, saturated=True, result=result)
+    stack.advance(state, DT, result.limit_hit)  # the older form: every integral frozen
+    assert not np.any(right.integral) and not np.any(left.integral)
+    stack.advance(state, DT, False)
+    assert np.any(right.integral) and np.any(left.integral)
+
+
+def test_a_task_is_saturated_when_its_level_is_scaled_or_it_is_unmet(humanoid):
+    """Without an active bound on its joints a task still counts as limited when the
+    projection scaled its level or the solve left it unmet; the rows are the tasks' own
+    when the stack was not evaluated at that state."""
+    q = humanoid.home()
+    right, left = two_hands(humanoid, q)
+    stack = Stack(humanoid, [Level([right], name="right"), Level([left], name="left")])
+    state = humanoid.update(q)
+    result = ProjectionSolver().solve(stack, state, DT)
+    assert stack.saturated_tasks(state, result) == {"right_tool": False, "left_tool": False}
+    scaled = dataclasses.replace(result, scale=np.array([1.0, 0.5]))
+    assert stack.saturated_tasks(state, scaled) == {"right_tool": False, "left_tool": True}
+    unmet = dataclasses.replace(result, infeasible=[("right", "right_tool")])
+    assert stack.saturated_tasks(state, unmet) == {"right_tool": True, "left_tool": False}
+    other = humanoid.update(q)  # not evaluated: the rows are computed
+    for joint, expected in (("waist_yaw", True), ("left_wrist_rotation", False)):
+        active = dataclasses.replace(result, active_bounds=np.array([humanoid.index(joint)]))
+        assert stack.saturated_tasks(other, active) == {"right_tool": expected,
+                                                        "left_tool": True}  # fmt: skip
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_status_has_one_meaning_for_both_backends(humanoid, compiled):
+    """The left elbow rests on its upper limit and the posture level under the hands asks
+    it to go 0.3 rad further: the box, not the hands, keeps that level from its optimum,
+    and both backends say INFEASIBLE (the projection, which re-solves the level around the
+    saturated joint without scaling it, said BOUNDS_ACTIVE). Without the box the hands
+    alone keep the posture from its target: OK for both. With a bound active that costs no
+    level anything: BOUNDS_ACTIVE for both."""
+    elbow = humanoid.index("left_elbow_flexion")
+    home = dict(zip(humanoid.actuated_joints[4:], humanoid.joint_positions(humanoid.home())[4:],
+                    strict=True))  # fmt: skip
+    q = humanoid.configuration({**home, "left_elbow_flexion": humanoid.position_limits[1][elbow]})
+    state = humanoid.update(q)
+    hands = [holding(humanoid, state, frame) for frame in ("left_tool", "right_tool")]
+    posture = PostureTask(humanoid, humanoid.actuated_joints[4:], kp=1.0)
+    beyond = humanoid.joint_positions(q)[4:]
+    beyond[elbow - 4] += 0.3
+
+    def statuses(target, constraints):
+        posture.set_target(target)
+        stack = Stack(humanoid, [Level(hands, name="hands"), Level([posture], name="posture")],
+                      constraints)  # fmt: skip
+        results = [solver(compiled=compiled).solve(stack, state, DT) for solver in SOLVERS]
+        for r in results:
+            assert not any(level == "hands" for level, _ in r.infeasible)  # the hands are met
+        return [r.status for r in results], results
+
+    limited, (projection, _) = statuses(beyond, limits(humanoid))
+    assert limited == [SolverStatus.INFEASIBLE] * 2
+    assert np.all(projection.scale == 1.0) and elbow in projection.active_bounds
+    assert ("posture", "posture") in projection.infeasible
+    free, results = statuses(beyond, [])
+    assert free == [SolverStatus.OK] * 2
+    assert all(("posture", "posture") in r.infeasible for r in results)
+    resting, results = statuses(humanoid.joint_positions(q)[4:], limits(humanoid))
+    assert resting == [SolverStatus.BOUNDS_ACTIVE] * 2
+    assert all(elbow in r.active_bounds for r in results)

@@ -117,3 +117,72 @@ def test_replay_animation_and_props(scene, monkeypatch):
     # each frame shows the latest sample at or after its time (0, then 0.5 s, then 1 s)
     assert [v[0] for v in panel.values] == [0.0] + [1.0] * 5 + [2.0] * 5
     assert sum(len(c.tracks["position"].frames) == 11 for c in clips.values()) > 10  # links
+
+
+def _screenshot(url: str, tmp_path: Path) -> np.ndarray:
+    out = tmp_path / "shot.png"
+    cmd = [CHROMIUM, "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
+           "--enable-unsafe-swiftshader", "--disable-background-networking",
+           "--disable-component-update", "--disable-sync", "--no-first-run",
+           f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={out}",
+           "--window-size=800,600", "--virtual-time-budget=15000", url]  # fmt: skip
+    subprocess.run(cmd, capture_output=True, timeout=240, check=False)
+    assert out.is_file(), "chromium wrote no screenshot"
+    import matplotlib.image
+
+    return matplotlib.image.imread(out)[..., :3]
+
+
+def _robot_data_installed() -> bool:
+    from wholebody.robot.urdf import example_robot_data_share
+
+    return example_robot_data_share() is not None
+
+
+@pytest.mark.skipif(not _robot_data_installed(), reason="needs pip install 'wholebody[robots]'")
+def test_a_shipped_robot_is_drawn_with_its_meshes(tmp_path, capsys):
+    """TIAGo++'s meshes live in example-robot-data (package:// paths): found, reduced with
+    the locked joints, and drawn."""
+    from wholebody.viz.scene import Scene
+
+    robot = wholebody.load_robot("tiago_dual")
+    visual, note = robot.geometry("visual")
+    meshes = [g for g in visual.geometryObjects if Path(g.meshPath).suffix]  # (shapes: "BOX")
+    assert note == "" and len(meshes) > 20 and all(Path(g.meshPath).is_file() for g in meshes)
+    scene = Scene(robot)
+    try:
+        scene.show(robot.home())
+        assert "meshes not drawn" not in capsys.readouterr().err
+        if CHROMIUM is None:
+            pytest.skip("Debian's chromium is not installed (.ci/run installs it)")
+        middle = _screenshot(scene.url, tmp_path)[100:500, 200:600].reshape(-1, 3)
+        colours = np.unique((middle * 255).astype(int), axis=0)
+        assert len(colours) > 300, f"only {len(colours)} colours: blank canvas?"
+    finally:
+        scene.close()
+
+
+def test_missing_meshes_are_left_out_and_said_in_one_line(tmp_path, capsys):
+    """A URDF whose package:// meshes cannot be found draws its other shapes and says so."""
+    from wholebody.resources import robots_dir
+    from wholebody.viz.scene import Scene
+
+    dst = tmp_path / "r"
+    shutil.copytree(robots_dir() / "mobile_humanoid", dst)
+    urdf = dst / "robot.urdf"
+    text = urdf.read_text()
+    old = '<geometry><cylinder radius="0.08" length="0.05"/></geometry><material name="rubber"/>'
+    assert old in text
+    urdf.write_text(text.replace(old, '<geometry><mesh filename="package://nowhere/wheel.stl"/>'
+                                      '</geometry><material name="rubber"/>', 1))  # fmt: skip
+    robot = wholebody.load_robot(dst)
+    visual, note = robot.geometry("visual")
+    assert "1 meshes not drawn" in note and "package_dirs" in note
+    full, _ = wholebody.load_robot("mobile_humanoid").geometry("visual")
+    assert visual.ngeoms == full.ngeoms - 1
+    scene = Scene(robot)
+    try:
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len([line for line in err if "meshes not drawn" in line]) == 1
+    finally:
+        scene.close()

@@ -14,10 +14,11 @@ __all__ = ["main"]
 
 
 def _info(args: argparse.Namespace) -> int:
-    from wholebody.robot import available_robots, load_robot
+    from wholebody.robot import load_robot, robot_catalogue
 
     if args.list:
-        print("\n".join(available_robots()))
+        for name, text, available in robot_catalogue():
+            print(f"{name:<18} {text if available else 'unavailable: ' + text}")
         return 0
     print(load_robot(args.robot).summary())
     return 0
@@ -48,14 +49,14 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     spec = load_scenario(path)
     scene = live = None
     if viz:
-        from wholebody.scenarios.runner import scenario_robot
+        from wholebody.scenarios.runner import scenario_robot, start_configuration
         from wholebody.scenarios.visual import LiveView, draw_objects, show_run
         from wholebody.viz.scene import Scene
 
         scene = Scene(scenario_robot(spec))
         print(f"MeshCat (localhost only): {scene.url}")
         draw_objects(scene, spec)
-        scene.show(scene.robot.neutral())
+        scene.show(start_configuration(spec, scene.robot))
         live = LiveView(scene, spec.dt)
     run = run_scenario(spec, backend=backend, progress=True, on_step=live)
     files = write_run(run, out)

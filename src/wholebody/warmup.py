@@ -62,7 +62,7 @@ def _steps(robot: Robot, solver: object, tight: bool) -> None:
             hand.set_target(target)
         state = robot.update(q)
         result = solver.solve(stack, state, DT)  # type: ignore[attr-defined]
-        stack.advance(state, DT, result.limit_hit)
+        stack.advance(state, DT, result=result)
         q = robot.integrate(q, result.u, DT)
 
 

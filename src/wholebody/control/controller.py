@@ -9,7 +9,9 @@ One step at time ``t_k = k dt``:
    as with the twist at ``t_k`` (set ``feedforward="start"`` for the latter);
 2. kinematics at ``q_k`` (:meth:`Robot.update`), the solver's ``u_k``;
 3. the log row (errors, tracked positions against references, arm energies);
-4. the tasks' integrators advance (anti-windup when the solver hit a limit);
+4. the tasks' integrators advance, each with its own anti-windup (its integral stops
+   growing while a bound limits that task: :meth:`Stack.saturated_tasks
+   <wholebody.solvers.Stack.saturated_tasks>`; a joint no task moves may rest on its limit);
 5. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold).
 
 ``step_time`` is the wall time of the control computation of a step: targets (reference
@@ -69,6 +71,13 @@ class Controller:
         retreat to a ready posture when the tasks stall in a local minimum, then retry. The
         run log's ``meta["retreats"]`` lists them (``[start, end]`` in s; end None if the run
         ended during one).
+    threads
+        Threads of the BLAS and OpenMP libraries (numpy's, scipy's) while :meth:`run` runs
+        the loop, restored after (threadpoolctl); None leaves the libraries' own setting.
+        Default 1: a control step is many small products, which threads only slow down, and
+        on a busy machine a step then waits for the other threads' cores (measured on a
+        loaded 2-core machine: a 99-DOF robot's step took 720-780 ms with two OpenBLAS
+        threads and 8-19 ms with one).
     """
 
     def __init__(
@@ -82,6 +91,7 @@ class Controller:
         monitors: Sequence[ArmPotentialEnergy] = (),
         feedforward: str = "midpoint",
         recovery: StallRecovery | None = None,
+        threads: int | None = 1,
     ) -> None:
         if not dt > 0:
             raise DimensionError(f"control period dt must be > 0 s, got {dt}")
@@ -117,6 +127,7 @@ class Controller:
             raise WholebodyError("recovery must be made for the controller's stack: "
                                  "StallRecovery(robot, stack)")  # fmt: skip
         self.recovery = recovery
+        self.threads = _thread_count(threads)
 
     def _sampled_targets(self, k0: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
         """Each reference's poses at steps ``k0 .. k0+n-1`` and its twists at the same steps
@@ -166,7 +177,7 @@ class Controller:
                 raise DimensionError(f"u0 must be {robot.nu} finite velocities, got {u0!r}")
             self.stack.set_velocity(u0, self.dt)
         bar = _progress(n, progress)
-        with threadpool_limits(1), _gc_paused():  # no BLAS threads, no collection mid-step
+        with _threads(self.threads), _gc_paused():  # no collection mid-step
             q = self._loop(q, n, log, callback, bar)
         if bar is not None:
             bar.close()
@@ -215,7 +226,7 @@ class Controller:
             log.record(k, t, q, state, result, stack is self.stack)  # before the next update
             start = time.perf_counter()
             if rec is None:
-                stack.advance(state, self.dt, saturated=result.limit_hit, u=result.u)
+                stack.advance(state, self.dt, result=result)
             else:
                 rec.advance(state, self.dt, result)
             q = robot.integrate(q, result.u, self.dt)
@@ -228,6 +239,22 @@ class Controller:
 
 
 _BLOCK = 1024  # steps of reference sampled at once (memory: 176 bytes a step a reference)
+
+
+def _thread_count(threads: object) -> int | None:
+    """``threads`` checked: a whole number >= 1, or None."""
+    if threads is None:
+        return None
+    if isinstance(threads, numbers.Integral) and not isinstance(threads, bool) and threads >= 1:
+        return int(threads)
+    raise WholebodyError(f"threads must be a whole number >= 1 (BLAS threads in the control "
+                         f"loop) or None (the libraries' own setting), got "
+                         f"{threads!r}")  # fmt: skip
+
+
+def _threads(count: int | None) -> contextlib.AbstractContextManager[object]:
+    """The BLAS and OpenMP libraries limited to ``count`` threads (None: unchanged)."""
+    return contextlib.nullcontext() if count is None else threadpool_limits(count)
 
 
 @contextlib.contextmanager

@@ -182,7 +182,7 @@ class StallRecovery:
         solved (its integrators and constraints), then watch the reach or the retreat and
         switch between them."""
         active = self.stack
-        active.advance(state, dt, saturated=result.limit_hit, u=result.u)
+        active.advance(state, dt, result=result)
         self._time += dt
         if self.retreating:
             self._watch_retreat(state)

@@ -105,10 +105,12 @@ class ArmParameters:
         chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         state = robot.update(robot.home())
         S, E, W = (state.position(f) for f in (chain.shoulder, chain.elbow, chain.wrist))
-        fractions = []
-        for body, a, b in ((chain.upper_arm, S, E), (chain.forearm, E, W)):
+        fractions, masses = [], []
+        for bodies, a, b in ((chain.upper_arm_bodies, S, E), (chain.forearm_bodies, E, W)):
             seg = b - a
-            c = state.com_position(body) - a
+            mass = sum(body.mass for body in bodies)  # a segment split over several links
+            c = sum(body.mass * state.com_position(body) for body in bodies) / mass - a
+            body = bodies[0]
             frac = float(c @ seg / (seg @ seg))
             off = float(np.linalg.norm(c - frac * seg))
             if off > COM_OFF_AXIS_TOLERANCE:
@@ -117,11 +119,12 @@ class ArmParameters:
                     "off its segment axis; the closed-form stiffness label needs it on the axis"
                 )
             fractions.append(frac)
+            masses.append(mass)
         return cls(
             chain.upper_arm_length,
             chain.forearm_length,
-            chain.upper_arm.mass,
-            chain.forearm.mass,
+            masses[0],
+            masses[1],
             fractions[0],
             fractions[1],
             float(np.linalg.norm(robot.model.gravity.linear)),

@@ -592,7 +592,8 @@ def project(
 ) -> None:
     """Solve the evaluated stack: ``F_U`` (scaled and actuated), per level its residual and
     scale factor, per task its residuals and whether it is met, the active bounds and the
-    status (``I_OUT``). ``anchor`` (scaled): the velocity SNS scales motions around."""
+    status (``I_OUT``, see :func:`_report`). ``anchor`` (scaled): the velocity SNS scales
+    motions around."""
     box = fmat(f, h, lay.F_BOX)
     lo_box, hi_box = box[0], box[1]
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
@@ -604,7 +605,7 @@ def project(
     for j in range(n):
         if not lo_box[j] <= hi_box[j]:  # NaN compares false; evaluate never crosses the box
             out[lay.OUT_FAILED], out[lay.OUT_MESSAGE] = 1, MESSAGE_EMPTY_BOX
-            _report(f, i, h, np.zeros(n), par[PAR_TOLERANCE])
+            _report(f, i, h, np.zeros(n), par[PAR_TOLERANCE], np.zeros(n), False)
             return
     lo, hi = lo_box, hi_box
     wide_lo, wide_hi = _widened(lo, hi)
@@ -619,8 +620,10 @@ def project(
             A[r0:r1], b[r0:r1], lf[k, lay.LEVEL_REFERENCE], lf[k, lay.LEVEL_IDENTITY], u, Z,
             is_mask, free, sat, lo, hi, wide_lo, wide_hi, k + 1 < L, False, par,
         )  # fmt: skip
+    u_free = u  # the box-free solution of every level (a new array: _level returns one)
     u_c = np.zeros(n)  # SNS runs for d = u - u_c from d = 0 (the reference's shift)
-    if par[PAR_SATURATE] != 0.0 and not _inside(u, wide_lo, wide_hi):
+    sns = par[PAR_SATURATE] != 0.0 and not _inside(u, wide_lo, wide_hi)
+    if sns:
         shifted = False
         for j in range(n):
             u_c[j] = min(max(anchor[j], lo_box[j]), hi_box[j])
@@ -649,7 +652,7 @@ def project(
                 for m in range(n):
                     u[m] = min(max(0.0, lo_box[m]), hi_box[m])
                 break
-    _report(f, i, h, u, par[PAR_TOLERANCE])
+    _report(f, i, h, u, par[PAR_TOLERANCE], u_free, sns)
 
 
 @kernel
@@ -664,8 +667,12 @@ def _widened(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @kernel
-def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: float) -> None:
-    """Residuals, met tasks, active bounds and status at the scaled solution ``u``."""
+def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: float,
+            u_free: np.ndarray, sns: bool) -> None:  # fmt: skip
+    """Residuals, met tasks, active bounds and status at the scaled solution ``u``; with
+    ``sns`` (the box-free solution ``u_free`` left the box), a task whose weighted residual
+    the box raised above that at ``u_free`` by more than ``tol (1 + ||b_t||)`` makes the
+    status INFEASIBLE, as the first level unmet does (the reference's ``_result``)."""
     box, D = fmat(f, h, lay.F_BOX), fmat(f, h, lay.F_METRIC)[0]
     lo, hi = box[0], box[1]
     levels, tasks = imat(i, h, lay.I_LEVEL), imat(i, h, lay.I_TASK)
@@ -678,7 +685,8 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
     for j in range(n):
         U[0, j] = u[j]
         U[1, j] = D[j] * u[j]
-    top_unmet = False
+    top_unmet = limited = False
+    free_res = np.empty((tasks.shape[0] if sns else 0, 3))
     t0 = 0
     for k in range(levels.shape[0]):
         r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
@@ -689,11 +697,16 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
         if r1 > r0:
             lev_out[k, 0] = level_report(A[r0:r1], b[r0:r1], rows[1, r0:r1], u, tasks[t0:t1],
                                          r0, res[t0:t1])  # fmt: skip
+            if sns:
+                level_report(A[r0:r1], b[r0:r1], rows[1, r0:r1], u_free, tasks[t0:t1], r0,
+                             free_res[t0:t1])  # fmt: skip
         for t in range(t0, t1):
             met = res[t, 0] <= tol * (1.0 + res[t, 2])  # (a NaN residual is not met)
             infeasible[t] = 0 if met or tasks[t, 2] == tasks[t, 1] else 1
             if infeasible[t] and k == 0:
                 top_unmet = True
+            if infeasible[t] and sns and res[t, 0] - free_res[t, 0] > tol * (1.0 + res[t, 2]):
+                limited = True
         t0 = t1
     any_active = False
     for j in range(n):
@@ -705,7 +718,7 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
     scales = lev_out[:, 1]
     if out[lay.OUT_FAILED]:
         status = STATUS_FAILED
-    elif scales.shape[0] and scales[0] >= 1.0 and top_unmet:
+    elif top_unmet or limited:
         status = STATUS_INFEASIBLE
     elif _any_below_one(scales):
         status = STATUS_SCALED

@@ -24,13 +24,30 @@ __all__ = [
     "available_robots",
     "load_robot",
     "read_robot_config",
+    "robot_catalogue",
 ]
 
 
 def available_robots() -> list[str]:
-    """Names of the robots that ship with wholebody."""
+    """Names of the robots that ship with wholebody (some need an extra: see
+    :func:`robot_catalogue`)."""
     root = robots_dir()
     return sorted(p.parent.name for p in root.glob("*/robot.toml"))
+
+
+def robot_catalogue() -> list[tuple[str, str, bool]]:
+    """Every bundled robot as ``(name, description, available)``: unavailable ones (their
+    URDF is in a package that is not installed) have the reason and the install command as
+    description."""
+    out = []
+    for name in available_robots():
+        try:
+            config = read_robot_config(robots_dir() / name / "robot.toml")
+        except ConfigError as exc:
+            out.append((name, str(exc).split(": ", 1)[-1], False))
+        else:
+            out.append((name, config.description, True))
+    return out
 
 
 def load_robot(name_or_path: str | Path) -> Robot:

@@ -9,8 +9,11 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
 
     [robot]
     name = "my_robot"            # required
-    urdf = "robot.urdf"          # required, relative to this file
+    urdf = "robot.urdf"          # required, relative to this file, or a ROS package path
+                                 # "package://PKG/..." (see wholebody.robot.urdf)
     description = "..."          # optional
+    package_dirs = ["..."]       # optional: directories holding ROS packages (relative to
+                                 # this file), searched first for package:// paths
 
     [base]                       # optional; default type = "fixed"; wheels are URDF
                                  # joints of the root link turning about its +y or -y
@@ -31,7 +34,20 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     side = "left" | "right"      # mirrors the arm angle (a single arm: either)
     group = "<group name>"       # optional
     shoulder = elbow = wrist = tool = "<frame>"
-    upper_arm = forearm = "<link>"
+    upper_arm = forearm = "<link>"   # or a list of links: a segment whose mass is split
+                                     # over several links (the arm energy adds them all)
+
+    [locked]                     # optional: joints removed from the model, held at a
+                                 # position (Pinocchio's reduced model): casters, fingers,
+                                 # suspensions, legs. Key: a joint name, a glob pattern
+    "caster_*" = 0.0             # (fnmatch) or a [groups] name (the group goes with it);
+    "arm_left_4_joint" = 0.5     # value: the position (rad, m). A mimic joint whose leader
+                                 # is locked is locked with it.
+
+    [frames.<name>]              # optional: a frame of your own, usable wherever a frame
+    parent = "<link or joint>"   # name is (arm chains, tasks)
+    xyz = [0.0, 0.0, 0.0]        # m, in the parent's frame (default 0)
+    rpy = [0.0, 0.0, 0.0]        # rad, roll-pitch-yaw as in URDF (default 0)
 
     [home]                       # optional; joint = angle (rad), others at 0 (or at
                                  # the nearer limit when 0 is outside their range)
@@ -53,10 +69,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from wholebody.errors import ConfigError
+from wholebody.robot.urdf import PACKAGE, resolve_package
 from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
 
-__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "RobotConfig",
+__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "FrameConfig", "RobotConfig",
            "read_robot_config"]  # fmt: skip
 
 ACCELERATION_DEFAULTS: Mapping[str, float] = {
@@ -88,7 +105,8 @@ class BaseConfig:
 
 @dataclass(frozen=True)
 class ArmConfig:
-    """One arm chain: frame names at the joint centres and tool, and its two bodies."""
+    """One arm chain: frame names at the joint centres and tool, and the links of its two
+    segments (one or more each)."""
 
     name: str
     side: Literal["left", "right"]
@@ -96,9 +114,20 @@ class ArmConfig:
     elbow: str
     wrist: str
     tool: str
-    upper_arm: str
-    forearm: str
+    upper_arm: tuple[str, ...]
+    forearm: tuple[str, ...]
     group: str | None = None
+
+
+@dataclass(frozen=True)
+class FrameConfig:
+    """A frame declared in ``[frames]``: its parent link or joint and its placement there
+    (m; roll-pitch-yaw, rad)."""
+
+    name: str
+    parent: str
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -117,6 +146,12 @@ class RobotConfig:
     acceleration: Mapping[str, float] = field(default_factory=dict)
     """``[acceleration]`` as written (rad/s^2, m/s^2); :attr:`Robot.acceleration_limits`
     resolves it with the defaults :data:`ACCELERATION_DEFAULTS`."""
+    package_dirs: tuple[Path, ...] = ()
+    """``[robot] package_dirs``, absolute."""
+    locked: Mapping[str, float] = field(default_factory=dict)
+    """``[locked]`` as written: joint name, glob pattern or group -> position (rad, m)."""
+    frames: Mapping[str, FrameConfig] = field(default_factory=dict)
+    """``[frames]``."""
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
@@ -136,16 +171,14 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     r = _Reader(path)
     data = load_toml(path, "robot configuration")
 
-    r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration"))
+    r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration", "locked",
+                      "frames"))  # fmt: skip
     robot = r.table(data, "robot", "", required=True)
-    r.only(robot, "robot", ("name", "urdf", "description"))
+    r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")
-    urdf = path.parent / r.string(robot, "urdf", "robot")
-    if not urdf.is_file():
-        raise r.fail(
-            "robot.urdf",
-            f"file {urdf} does not exist: expected a URDF path relative to the robot.toml",
-        )
+    package_dirs = tuple(path.parent / d for d in r.names(robot, "package_dirs", "robot")
+                         ) if "package_dirs" in robot else ()  # fmt: skip
+    urdf = _urdf_path(r, path, r.string(robot, "urdf", "robot"), package_dirs)
     description = r.string(robot, "description", "robot", default="")
 
     base = _read_base(r, r.table(data, "base", "", required=False))
@@ -180,7 +213,8 @@ def read_robot_config(path: str | Path) -> RobotConfig:
             name=aname,
             side=r.string(table, "side", where, choices=("left", "right")),  # type: ignore[arg-type]
             group=group,
-            **{k: r.string(table, k, where) for k in (*ARM_FRAME_KEYS, *ARM_BODY_KEYS)},
+            **{k: r.string(table, k, where) for k in ARM_FRAME_KEYS},
+            **{k: _links(r, table, k, where) for k in ARM_BODY_KEYS},
         )
 
     home: dict[str, float] = {}
@@ -188,6 +222,10 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         home[joint] = r.number(data["home"], joint, "home")
     acceleration = {key: r.number(data["acceleration"], key, "acceleration", positive=True)
                     for key in r.table(data, "acceleration", "", required=False)}  # fmt: skip
+    locked = {key: r.number(data["locked"], key, "locked")
+              for key in r.table(data, "locked", "", required=False)}  # fmt: skip
+    frames = {fname: _frame(r, fname, table)
+              for fname, table in r.table(data, "frames", "", required=False).items()}  # fmt: skip
 
     return RobotConfig(
         path=path,
@@ -199,7 +237,44 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         arms=arms,
         home=home,
         acceleration=acceleration,
+        package_dirs=package_dirs,
+        locked=locked,
+        frames=frames,
     )
+
+
+def _urdf_path(r: _Reader, path: Path, value: str, package_dirs: tuple[Path, ...]) -> Path:
+    """The URDF file: relative to the robot.toml, or a ``package://`` path resolved."""
+    if value.startswith(PACKAGE):
+        try:
+            return resolve_package(value, package_dirs)
+        except FileNotFoundError as exc:
+            raise r.fail("robot.urdf", str(exc)) from None
+    urdf = path.parent / value
+    if not urdf.is_file():
+        raise r.fail("robot.urdf", f"file {urdf} does not exist: expected a URDF path relative "
+                     "to the robot.toml or a package:// path")  # fmt: skip
+    return urdf
+
+
+def _links(r: _Reader, table: Mapping[str, Any], key: str, where: str) -> tuple[str, ...]:
+    """A segment's link: a name, or a non-empty list of names."""
+    if isinstance(table.get(key), list):
+        names = r.names(table, key, where)
+        if not names:
+            raise r.fail(f"{where}.{key}", "expected a link name or a non-empty list of them")
+        return names
+    return (r.string(table, key, where),)
+
+
+def _frame(r: _Reader, name: str, table: Any) -> FrameConfig:
+    where = f"frames.{name}"
+    if not isinstance(table, dict):
+        raise r.fail(where, f"expected a table (parent, xyz, rpy), got {type(table).__name__}")
+    r.only(table, where, ("parent", "xyz", "rpy"))
+    xyz = r.vector(table, "xyz", where, 3, default=(0.0, 0.0, 0.0))
+    rpy = r.vector(table, "rpy", where, 3, default=(0.0, 0.0, 0.0))
+    return FrameConfig(name, r.string(table, "parent", where), xyz, rpy)  # type: ignore[arg-type]
 
 
 def _read_base(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:

@@ -23,10 +23,8 @@ from __future__ import annotations
 import difflib
 import math
 import numbers
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
@@ -35,8 +33,10 @@ import pinocchio as pin
 from wholebody._numeric import float_array
 from wholebody.errors import DimensionError, FrameError, ModelError, WholebodyError
 from wholebody.robot.base import BaseModel, base_model
+from wholebody.robot.building import build_model, geometry_model
 from wholebody.robot.compiled import RobotKinematics
 from wholebody.robot.config import ACCELERATION_DEFAULTS, ArmConfig, RobotConfig
+from wholebody.robot.urdf import UrdfInfo, read_urdf
 
 __all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
 
@@ -97,6 +97,12 @@ class ArmChain:
     forearm: Body
     group: JointGroup | None
 
+    upper_arm_bodies: tuple[Body, ...] = ()
+    """Every link of the upper-arm segment (``upper_arm`` is the first): a segment's mass may
+    be split over several links; the arm energy adds them all."""
+    forearm_bodies: tuple[Body, ...] = ()
+    """Every link of the forearm segment (``forearm`` is the first)."""
+
     @property
     def upper_arm_length(self) -> float:
         """Shoulder-to-elbow distance (m), the same at every posture (checked on loading)."""
@@ -134,24 +140,22 @@ class Robot:
         self.config = config
         self.name = config.name
         self.base: BaseModel = base_model(config.base)
-        root = pin.JointModelPlanar() if self.base.mobile else None
-        self._links, root_link = _read_urdf_links(config.urdf)
-        try:
-            self.model: pin.Model = (
-                pin.buildModelFromUrdf(str(config.urdf), root)
-                if root is not None
-                else pin.buildModelFromUrdf(str(config.urdf))
-            )
-        except (RuntimeError, ValueError) as exc:
-            raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
+        self.urdf: UrdfInfo = read_urdf(config.urdf)
+        """What the URDF says besides the kinematics (link masses, mimic joints)."""
+        self._links, root_link = self.urdf.links, self.urdf.root
+        self._built = build_model(config, self.urdf, self.base.mobile)
+        self.model: pin.Model = self._built.model
+        self.locked: Mapping[str, float] = dict(self._built.locked)
+        """The joints ``[locked]`` removed from the model, and their positions (rad, m)."""
         self.data: pin.Data = self.model.createData()
         self._version = 0
         self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(root_link)
         """The URDF's root link (the moving base of a mobile robot)."""
         self._build_actuation()
+        kept = {g: j for g, j in config.groups.items() if g not in self._built.locked_groups}
         self.groups: dict[str, JointGroup] = _Named(
-            "joint group", {g: self._group(g, joints) for g, joints in config.groups.items()}
+            "joint group", {g: self._group(g, joints) for g, joints in kept.items()}
         )
         self._check_base_geometry()
         self.arms: dict[str, ArmChain] = _Named(
@@ -210,7 +214,10 @@ class Robot:
                 )
         if base.wheel_joints:
             base = self.base = self._wheel_geometry(joint_ids)
-        names = list(base.actuators) + [n for n in joint_ids if n not in base.wheel_joints]
+        # a mimic joint (not locked) is no velocity of u: its leader's moves it (below)
+        self._followers = {f: m for f, m in self.urdf.mimic.items() if f in joint_ids}
+        moved = set(base.wheel_joints) | set(self._followers)
+        names = list(base.actuators) + [n for n in joint_ids if n not in moved]
         self.actuated_joints: tuple[str, ...] = tuple(names)
         self.nu = len(names)
         self.nq, self.nv = model.nq, model.nv
@@ -244,6 +251,7 @@ class Robot:
             else:
                 lower[k] = model.lowerPositionLimit[iq]
                 upper[k] = model.upperPositionLimit[iq]
+        self._mimic_q = self._couple_mimics(joint_ids, names, A, lower, upper, vmax)
         lower[~np.isfinite(lower) | (lower < -1e300)] = -np.inf
         upper[~np.isfinite(upper) | (upper > 1e300)] = np.inf
         for k in np.flatnonzero(~(lower < upper) & (kinds == 0)).tolist():
@@ -282,10 +290,45 @@ class Robot:
         self._pair_list: list[int] = self._pairs.tolist()
         self._neutral = pin.neutral(model)
         self._neutral[self._scalar_q] = np.clip(0.0, lower[self._scalar], upper[self._scalar])
+        self._couple(self._neutral)
         self._neutral.setflags(write=False)
+
+    def _couple_mimics(self, joint_ids: Mapping[str, int], names: Sequence[str], A: np.ndarray,
+                       lower: np.ndarray, upper: np.ndarray,
+                       vmax: np.ndarray) -> list[tuple[int, int, float, float]]:  # fmt: skip
+        """Each mimic joint moves with its leader: its row of ``A`` is ``multiplier`` in the
+        leader's column, and its position and velocity limits narrow the leader's (in the
+        leader's coordinate). Returns ``(q index, leader's q index, multiplier, offset)``."""
+        model, index = self.model, {n: k for k, n in enumerate(names)}
+        out = []
+        for name, m in self._followers.items():
+            jf, jl = model.joints[joint_ids[name]], model.joints[joint_ids[m.leader]]
+            if jf.nq != 1 or jl.nq != 1:
+                raise ModelError(f"{self.config.urdf}: mimic joint {name!r}: wholebody "
+                                 "couples revolute and prismatic joints only")  # fmt: skip
+            k = index[m.leader]
+            A[jf.idx_v, k] = m.multiplier
+            lo, hi = model.lowerPositionLimit[jf.idx_q], model.upperPositionLimit[jf.idx_q]
+            if abs(lo) < 1e300 and abs(hi) < 1e300:
+                a, b = sorted(((lo - m.offset) / m.multiplier, (hi - m.offset) / m.multiplier))
+                lower[k], upper[k] = max(lower[k], a), min(upper[k], b)
+            if model.velocityLimit[jf.idx_v] > 0:
+                vmax[k] = min(vmax[k], model.velocityLimit[jf.idx_v] / abs(m.multiplier))
+            out.append((jf.idx_q, jl.idx_q, m.multiplier, m.offset))
+        return out
+
+    def _couple(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with every mimic joint at ``multiplier q_leader + offset`` (in place)."""
+        for i, leader, multiplier, offset in self._mimic_q:
+            q[i] = multiplier * q[leader] + offset
+        return q
 
     def _group(self, gname: str, joints: tuple[str, ...]) -> JointGroup:
         for j in joints:
+            if j in self.locked or j in self._followers:
+                why = "locked ([locked])" if j in self.locked else "a mimic joint"
+                raise self.config.error(f"groups.{gname}", f"joint {j!r} is {why}: it is no "
+                                        "velocity of u; leave it out of the group")  # fmt: skip
             if j not in self._u_index:
                 raise self.config.error(
                     f"groups.{gname}",
@@ -338,10 +381,18 @@ class Robot:
         return replace(base, matrix=B)
 
     def _check_base_geometry(self) -> None:
-        """Check the base parameters of robot.toml against the URDF's wheel placements."""
+        """Check the base parameters of robot.toml against the URDF's wheel placements and,
+        where the wheels' geometry is a cylinder or sphere, their radius (within 5 %)."""
         base, cfg = self.base, self.config.base
         if not base.wheel_joints:
             return
+        for w in base.wheel_joints:
+            r = self.urdf.radii.get(self.urdf.children.get(w, ""))
+            if r is not None and abs(r - cfg.wheel_radius) > 0.05 * r:
+                raise self.config.error(
+                    "base.wheel_radius", f"{cfg.wheel_radius:g} m, but the URDF's wheel "
+                    f"{w!r} has a radius of {r:g} m (its geometry)",
+                )  # fmt: skip
         placements = []
         for w in base.wheel_joints:  # (attached to the base: see _wheel_geometry)
             placements.append(self.model.jointPlacements[self._joint_ids[w]].translation[:2])
@@ -377,25 +428,10 @@ class Robot:
                 frames[key] = self.frame(getattr(cfg, key))
             except FrameError as exc:
                 raise self.config.error(f"{where}.{key}", str(exc)) from None
-        bodies = {}
-        for key in ("upper_arm", "forearm"):
-            name = getattr(cfg, key)
-            if name not in self._links:
-                raise self.config.error(
-                    f"{where}.{key}",
-                    f"{name!r} is not a link of {self.config.urdf.name}"
-                    + _suggest(name, self._links),
-                )
-            mass, com = self._links[name]
-            if mass <= 0:
-                raise self.config.error(
-                    f"{where}.{key}",
-                    f"link {name!r} has no mass in the URDF: expected an "
-                    "<inertial> with mass > 0 (the arm energy needs it)",
-                )
-            bodies[key] = Body(name, self.frame(name), mass, com)
+        segments = {key: self._segment(f"{where}.{key}", getattr(cfg, key))
+                    for key in ("upper_arm", "forearm")}  # fmt: skip
         group = self.groups[cfg.group] if cfg.group else None
-        self._check_chain(cfg, frames, bodies, group)
+        self._check_chain(cfg, frames, segments, group)
         lengths = self._arm_lengths(cfg, frames)
         return ArmChain(
             cfg.name,
@@ -404,13 +440,35 @@ class Robot:
             frames["elbow"],
             frames["wrist"],
             frames["tool"],
-            bodies["upper_arm"],
-            bodies["forearm"],
+            segments["upper_arm"][0],
+            segments["forearm"][0],
             group,
-            lengths,
+            upper_arm_bodies=segments["upper_arm"],
+            forearm_bodies=segments["forearm"],
+            _lengths=lengths,
         )
 
-    def _check_chain(self, cfg: ArmConfig, frames: dict[str, Frame], bodies: dict[str, Body],
+    def _segment(self, key: str, links: tuple[str, ...]) -> tuple[Body, ...]:
+        """The bodies of an arm segment: links of the URDF with a mass; the first one the
+        arm energy's kernel reads, the others added to it (see ArmPotentialEnergy)."""
+        out = []
+        for name in links:
+            if name not in self._links:
+                raise self.config.error(
+                    key, f"{name!r} is not a link of {self.config.urdf.name}"
+                    + _suggest(name, self._links),
+                )  # fmt: skip
+            mass, com = self._links[name]
+            if mass <= 0:
+                raise self.config.error(
+                    key, f"link {name!r} has no mass in the URDF: expected an <inertial> "
+                    "with mass > 0 (the arm energy needs it)",
+                )  # fmt: skip
+            out.append(Body(name, self.frame(name), mass, com))
+        return tuple(out)
+
+    def _check_chain(self, cfg: ArmConfig, frames: dict[str, Frame],
+                     segments: dict[str, tuple[Body, ...]],
                      group: JointGroup | None) -> None:  # fmt: skip
         """Shoulder, elbow, wrist and tool one below the other on one kinematic chain, the
         upper arm between shoulder and elbow, the forearm between elbow and wrist, and the
@@ -432,13 +490,13 @@ class Robot:
                 )
         for key, (a, b) in (("upper_arm", ("shoulder", "elbow")),
                             ("forearm", ("elbow", "wrist"))):  # fmt: skip
-            body = bodies[key].frame
-            if not (below(frames[a], body) and below(body, frames[b])):
-                raise self.config.error(
-                    f"{where}.{key}",
-                    f"link {body.name!r} is not on the chain between the {a} "
-                    f"{frames[a].name!r} and the {b} {frames[b].name!r}",
-                )
+            for body in (s.frame for s in segments[key]):
+                if not (below(frames[a], body) and below(body, frames[b])):
+                    raise self.config.error(
+                        f"{where}.{key}",
+                        f"link {body.name!r} is not on the chain between the {a} "
+                        f"{frames[a].name!r} and the {b} {frames[b].name!r}",
+                    )
         if group is not None:
             chain = set(supports[frames["tool"].joint])
             # the base's actuators (wheels, a planar base's virtual joints) move every frame
@@ -566,8 +624,8 @@ class Robot:
         q = self.neutral()
         lower, upper = self.position_limits
         for name, value in joints.items():
-            if name not in self._joint_ids:
-                msg = f"{name!r} is not a joint of the robot" + _suggest(name, self._joint_ids)
+            if name not in self._u_index:
+                msg = _not_actuated(name, self.locked, self._followers, self._u_index)
                 if where == "home":
                     raise self.config.error(f"home.{name}", msg)
                 raise FrameError(msg)
@@ -587,7 +645,7 @@ class Robot:
                 q[j.idx_q : j.idx_q + 2] = math.cos(value), math.sin(value)
             else:
                 q[j.idx_q] = value
-        return q
+        return self._couple(q)
 
     def _set_base(self, q: np.ndarray, pose: tuple[float, float, float]) -> None:
         if not self.base.mobile:
@@ -632,7 +690,7 @@ class Robot:
         if self.base.mobile:
             x, y = rng.uniform(-base_range, base_range, 2)
             self._set_base(q, (x, y, rng.uniform(-np.pi, np.pi)))
-        return q
+        return self._couple(q)
 
     def joint_positions(self, q: np.ndarray) -> np.ndarray:
         """One scalar position per entry of ``u`` (rad or m): joint angles, wheel angles in
@@ -735,25 +793,41 @@ class Robot:
             raise DimensionError(f"integrate: dt must be a finite number of seconds, got {dt!r}")
         return pin.integrate(self.model, q, self.actuation.dot(u * dt))
 
+    def geometry(self, kind: str = "visual") -> tuple[pin.GeometryModel, str]:
+        """The URDF's ``"visual"`` or ``"collision"`` geometry for :attr:`model` (locked
+        joints welded as in the model; ``package://`` meshes found through ``[robot]
+        package_dirs``, ``$ROS_PACKAGE_PATH`` and the installed example-robot-data), and a
+        one-line note when meshes could not be found (they are then left out)."""
+        kinds = {"visual": pin.GeometryType.VISUAL, "collision": pin.GeometryType.COLLISION}
+        if kind not in kinds:
+            raise WholebodyError(f"geometry kind must be 'visual' or 'collision', got {kind!r}")
+        return geometry_model(self.config, self._built, kinds[kind])
+
     # ------------------------------------------------------------------ presentation
     def summary(self) -> str:
         """A human-readable description of the robot."""
-        q = self.neutral()
-        state = self.update(q)
+        state = self.update(self.home())
         lines = [
             f"robot {self.name}: {self.config.description}".rstrip(": "),
-            f"  files: {self.config.path}",
+            f"  files: {self.config.path} ({self.config.urdf})",
             f"  base: {self.base.type}; nq = {self.nq}, nv = {self.nv}, nu = {self.nu} "
             "actuated velocities",
         ]
+        if self.locked:
+            lines.append(f"  locked: {len(self.locked)} joints ({_abridged(list(self.locked))})")
+        if self._followers:
+            lines.append("  mimic: " + ", ".join(f"{f} follows {m.leader}"
+                                                 for f, m in self._followers.items()))  # fmt: skip
         for g in self.groups.values():
             lines.append(f"  group {g.name} ({len(g)}): {', '.join(g.joints)}")
         for arm in self.arms.values():
             p = state.position(arm.tool)
             lines.append(
                 f"  arm {arm.name} ({arm.side}): upper arm {arm.upper_arm_length:.4f} m, "
-                f"forearm {arm.forearm_length:.4f} m, masses {arm.upper_arm.mass:g} / "
-                f"{arm.forearm.mass:g} kg; tool at q=0: ({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m"
+                f"forearm {arm.forearm_length:.4f} m, masses "
+                f"{sum(b.mass for b in arm.upper_arm_bodies):g} / "
+                f"{sum(b.mass for b in arm.forearm_bodies):g} kg; tool at the home posture: "
+                f"({p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}) m"
             )
         return "\n".join(lines)
 
@@ -963,6 +1037,22 @@ class _Named(dict):
         raise KeyError(f"no {self.kind} {key!r}" + _suggest(key, self))
 
 
+def _abridged(names: list[str], most: int = 6) -> str:
+    """At most ``most`` names, then how many more."""
+    more = len(names) - most
+    return ", ".join(names[:most]) + (f" and {more} more" if more > 0 else "")
+
+
+def _not_actuated(name: str, locked: Mapping[str, float], followers: Mapping[str, object],
+                  known: Mapping[str, int]) -> str:  # fmt: skip
+    """Why ``name`` cannot be given a position: locked, a mimic joint, or unknown."""
+    if name in locked:
+        return f"{name!r} is locked at {locked[name]:g} ([locked] of robot.toml)"
+    if name in followers:
+        return f"{name!r} is a mimic joint: give its leader {followers[name].leader!r}"  # type: ignore[attr-defined]
+    return f"{name!r} is not a joint of the robot" + _suggest(name, known)
+
+
 def _suggest(name: object, candidates) -> str:
     """Up to three close matches, or the candidates themselves when none is close."""
     names = [str(c) for c in candidates]
@@ -970,95 +1060,3 @@ def _suggest(name: object, candidates) -> str:
     if close:
         return f" (did you mean {', '.join(repr(c) for c in close)}?)"
     return f"; known: {', '.join(names)}" if names else ""
-
-
-def _numbers(path: Path, where: str, text: str, size: int) -> np.ndarray:
-    """``size`` finite numbers from a URDF attribute, or :class:`ModelError`."""
-    try:
-        values = np.array([float(v) for v in text.split()])
-    except ValueError as exc:
-        raise ModelError(f"{path}: {where}: {text!r} is not {size} numbers") from exc
-    if values.shape != (size,) or not np.isfinite(values).all():
-        raise ModelError(f"{path}: {where}: expected {size} finite numbers, got {text!r}")
-    return values
-
-
-def _inertial(path: Path, link: str, inertial: ET.Element | None) -> tuple[float, np.ndarray]:
-    """A link's mass (kg, finite, >= 0) and centre of mass (link frame, m); 0 without
-    ``<inertial>``. The inertia tensor's entries must be finite."""
-    mass, com = 0.0, np.zeros(3)
-    if inertial is not None:
-        where = f"link {link!r} <inertial>"
-        m, o, inertia = inertial.find("mass"), inertial.find("origin"), inertial.find("inertia")
-        if m is not None:
-            mass = float(_numbers(path, f"{where} <mass value>", m.get("value", "0"), 1)[0])
-            if mass < 0:
-                raise ModelError(f"{path}: {where}: mass {mass:g} kg is negative")
-        if o is not None:
-            com = _numbers(path, f"{where} <origin xyz>", o.get("xyz", "0 0 0"), 3)
-        if inertia is not None:
-            for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-                _numbers(path, f"{where} <inertia {key}>", inertia.get(key, "0"), 1)
-    com.setflags(write=False)
-    return mass, com
-
-
-def _check_joint(path: Path, joint: ET.Element) -> None:
-    """A joint's origin is finite; a moving joint has a non-zero axis and finite limits with
-    a velocity limit >= 0 (0: not given). A negative one would be read as no limit at all."""
-    name, kind = joint.get("name"), joint.get("type")
-    where = f"joint {name!r}"
-    origin = joint.find("origin")
-    if origin is not None:
-        _numbers(path, f"{where} <origin xyz>", origin.get("xyz", "0 0 0"), 3)
-        _numbers(path, f"{where} <origin rpy>", origin.get("rpy", "0 0 0"), 3)
-    if kind in ("fixed", "floating", "planar"):
-        return
-    axis = joint.find("axis")
-    if axis is not None:
-        xyz = _numbers(path, f"{where} <axis xyz>", axis.get("xyz", "1 0 0"), 3)
-        if not np.linalg.norm(xyz) > 1e-9:
-            raise ModelError(f"{path}: {where}: <axis xyz> is zero: the joint would move "
-                             "nothing; give its axis or make it fixed")  # fmt: skip
-    limit = joint.find("limit")
-    if limit is None:
-        return
-    for key in ("lower", "upper", "effort", "velocity"):
-        if key in limit.attrib:
-            value = float(_numbers(path, f"{where} <limit {key}>", limit.get(key, ""), 1)[0])
-            if key in ("effort", "velocity") and value < 0:
-                raise ModelError(f"{path}: {where}: <limit {key}> = {value:g} is negative "
-                                 "(0 means not given)")  # fmt: skip
-
-
-def _read_urdf_links(path: Path) -> tuple[dict[str, tuple[float, np.ndarray]], str]:
-    """Mass and centre of mass (link frame) of every link of a URDF, and the root link.
-
-    Mimic joints are refused: Pinocchio would load each as an independent joint, a velocity
-    of its own that moves without its leader.
-    """
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ModelError(f"{path}: not well-formed XML: {exc}") from exc
-    if root.tag != "robot":
-        raise ModelError(f"{path}: root element is <{root.tag}>; expected <robot>")
-    mimic = [j.get("name") for j in root.iter("joint") if j.find("mimic") is not None]
-    if mimic:
-        raise ModelError(
-            f"{path}: mimic joints are not supported ({', '.join(map(repr, mimic))}): each "
-            "would be an independent joint; make them fixed or drop their <mimic>"
-        )
-    links: dict[str, tuple[float, np.ndarray]] = {}
-    for link in root.findall("link"):
-        name = link.get("name")
-        if not name:
-            raise ModelError(f"{path}: a <link> has no name attribute")
-        links[name] = _inertial(path, name, link.find("inertial"))
-    for joint in root.findall("joint"):
-        _check_joint(path, joint)
-    children = {c.get("link") for c in root.iter("child")}
-    roots = [name for name in links if name not in children]
-    if len(roots) != 1:
-        raise ModelError(f"{path}: expected one root link, found {roots or 'none'}")
-    return links, roots[0]

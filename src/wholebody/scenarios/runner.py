@@ -35,7 +35,7 @@ import pinocchio as pin
 from wholebody.control import Controller, RunLog, summary
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
-from wholebody.errors import ConfigError, DataError
+from wholebody.errors import ConfigError, DataError, FrameError
 from wholebody.files import read_npz
 from wholebody.humanlike.stiffness import StiffnessModel
 from wholebody.planning import obstacles as ob
@@ -55,7 +55,7 @@ from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativeFrameTask
 
-__all__ = ["ScenarioRun", "make_solver", "run_scenario", "scenario_robot"]
+__all__ = ["ScenarioRun", "make_solver", "run_scenario", "scenario_robot", "start_configuration"]
 
 
 @dataclass
@@ -85,6 +85,39 @@ def scenario_robot(spec: ScenarioSpec) -> Robot:
     candidate = spec.path.parent / spec.robot
     usable = candidate.is_file() or (candidate / "robot.toml").is_file()
     return load_robot(candidate if usable else spec.robot)
+
+
+def start_configuration(spec: ScenarioSpec, robot: Robot) -> np.ndarray:
+    """The configuration a run of ``spec`` starts from (``[scenario] start``): the robot's home
+    posture, its neutral one, or the home posture with the named joints moved (rad, m), the
+    base at the world origin. A :class:`ConfigError` naming the file and the joint for a
+    joint the robot does not have (or a base actuator) and for a position outside the
+    joint's limits."""
+    if spec.start == "home":
+        return robot.home()
+    if spec.start == "neutral":
+        return robot.neutral()
+    if isinstance(spec.start, str):
+        raise spec.error("scenario.start", f'expected "home", "neutral" or a table of joint '
+                         f"positions, got {spec.start!r}")  # fmt: skip
+    base = len(robot.base.actuators)
+    joints = robot.actuated_joints[base:]
+    positions = dict(zip(joints, robot.joint_positions(robot.home())[base:], strict=True))
+    lower, upper = robot.position_limits
+    for name, value in spec.start.items():
+        key = f"scenario.start.{name}"
+        if name in robot.actuated_joints[:base]:
+            raise spec.error(key, f"{name!r} is a base actuator; the base starts at the world "
+                             "origin")  # fmt: skip
+        try:
+            k = robot.index(name)
+        except FrameError as exc:
+            raise spec.error(key, f"unknown joint: {exc}") from None
+        if not lower[k] <= value <= upper[k]:
+            raise spec.error(key, f"{value} (rad or m) is outside the joint's limits "
+                             f"[{lower[k]}, {upper[k]}]")  # fmt: skip
+        positions[name] = value
+    return robot.configuration(positions)
 
 
 def _stiffness(spec: ScenarioSpec, robot: Robot) -> float | StiffnessModel:
@@ -197,7 +230,7 @@ def run_scenario(
     monitors = [ArmPotentialEnergy(robot, arm, stiffness) for arm in robot.arms]
     solver = make_solver(backend)
     planners = _Planners(spec)
-    q = robot.neutral()
+    q = start_configuration(spec, robot)
     state = robot.update(q)
     starts = {h: state.pose(t.frame) for h, t in tasks.items()}
     logs, start_wall, t0 = [], time.perf_counter(), 0.0
@@ -263,7 +296,8 @@ def run_scenario(
         t0 += duration
     if bar is not None:
         bar.close()
-    log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend})
+    log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend,
+                             "start": spec.start})  # fmt: skip
     poses = _object_poses(robot, log, spec.objects, carries, {h: tasks[h].frame for h in tasks})
     metrics = _metrics(log, spec, duration_scale)
     return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)

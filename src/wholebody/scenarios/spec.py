@@ -12,6 +12,11 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     robot = "mobile_humanoid"          # bundled name or path (relative to this file)
     backend = "projection"             # projection | pinv | hqp
     rate_hz = 100.0
+    start = "home"                     # the robot's posture at the start: "home" (its
+                                       # robot.toml [home], the default), "neutral" (all
+                                       # joints at 0) or a table of joint positions (rad, m;
+                                       # joints not named at home), the base at the origin:
+                                       # start = { left_elbow_flexion = 0.8 }
 
     [stack]                            # the paper's H (see wholebody.presets)
     energy = 0.5                       # w1 on each arm's f_p
@@ -151,6 +156,9 @@ class PhaseSpec:
     primary: str | None = None
 
 
+START_POSTURES = ("home", "neutral")
+
+
 @dataclass(frozen=True)
 class ScenarioSpec:
     path: Path
@@ -166,6 +174,9 @@ class ScenarioSpec:
     title: str = ""
     paper: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    start: str | dict[str, float] = "home"
+    """The start posture: ``"home"``, ``"neutral"`` or joint positions by name (rad, m; the
+    joints and their limits are checked against the robot when it is loaded)."""
 
     @property
     def dt(self) -> float:
@@ -204,7 +215,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases"))
 
     head = r.table(data, "scenario", "", required=True)
-    r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz"))
+    r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz", "start"))
     name = r.string(head, "name", "scenario")
     robot = r.string(head, "robot", "scenario", default="mobile_humanoid")
     backend = r.string(head, "backend", "scenario", default="projection", choices=BACKENDS)
@@ -314,7 +325,21 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         phases=tuple(phases),
         title=r.string(head, "title", "scenario", ""),
         paper=r.string(head, "paper", "scenario", ""),
+        start=_start(r, head),
     )
+
+
+def _start(r: TomlReader, head: dict) -> str | dict[str, float]:
+    """``[scenario] start``: ``"home"`` (default), ``"neutral"`` or a table of joint positions
+    (finite numbers, rad or m); whether the joints exist and are within their limits is
+    checked against the robot (:func:`wholebody.scenarios.runner.start_configuration`)."""
+    value = head.get("start", "home")
+    if isinstance(value, str):
+        return r.string(head, "start", "scenario", default="home", choices=START_POSTURES)
+    if not isinstance(value, dict):
+        raise r.fail("scenario.start", f'expected "home", "neutral" or a table of joint '
+                     f"positions (rad, m), got {value!r}")  # fmt: skip
+    return {joint: r.number(value, joint, "scenario.start") for joint in value}
 
 
 def _phase(

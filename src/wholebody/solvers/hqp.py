@@ -119,7 +119,8 @@ the first level is not met or when the box cost some level part of its box-free 
 (:attr:`LevelReport.limited`: computed at every QP level by the cascade; by the native method
 for the level where the box first bites and for inequality rows); FAILED after an engine
 failure or non-finite rows (the level is skipped, named, and the rest is solved);
-BOUNDS_ACTIVE when some entry of ``u`` sits on the box.
+BOUNDS_ACTIVE when some entry of ``u`` sits on the box. The projection backend gives the status
+the same meaning (:class:`~wholebody.solvers.SolverStatus`).
 
 Objectives: a descent step at their level
 -----------------------------------------

@@ -164,8 +164,10 @@ class _Arm:
 
 
 def _compiled_objective(o: Objective) -> bool:
-    if type(o) is ArmPotentialEnergy:
-        return type(o.stiffness) is ConstantStiffness or o.network() is not None
+    if type(o) is ArmPotentialEnergy:  # (links beyond one per segment: evaluated in Python)
+        return not o.extra_bodies and (
+            type(o.stiffness) is ConstantStiffness or o.network() is not None
+        )
     return type(o) in (JointLimitAvoidance, Manipulability)
 
 

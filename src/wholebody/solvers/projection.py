@@ -66,14 +66,23 @@ directions is ``B^T G^-1 r``; while no joint of the first level is saturated, ``
 diagonal and ``B`` is ``A`` with columns zeroed. A level made only of objectives (rows ``s I``)
 needs no factorisation at all: its move is ``F (b/s - base)``. The best task scaling factor
 ``s*`` seen so far is kept; when the level runs out of free directions
-(``rank(A_k Z_free) <`` what the level needs), its velocity is scaled by ``s*`` (status
-``SCALED``). Saturated joints stay fixed for the lower levels. As a last guard, a candidate
+(``rank(A_k Z_free) <`` what the level needs), its velocity is scaled by ``s*``
+(``scale``). Saturated joints stay fixed for the lower levels. As a last guard, a candidate
 that is still outside the box is moved along the segment from the (feasible) solution of the
 higher levels, so the box always holds and the result is never NaN.
 
 Cost: every factorisation of an SNS iteration is also its rank test (the rank the level needs
 is that of the first iteration), a snapshot of the free directions is a reference (they are
 never modified in place) and the scaling factor is one pass over the stacked bounds.
+
+Reporting: ``infeasible`` lists every equality task whose weighted residual exceeds
+``tolerance * (1 + ||v||)``, as the HQP's. The status has the HQP's meaning
+(:class:`~wholebody.solvers.SolverStatus`): INFEASIBLE when a task of the first level is
+unmet, or when SNS ran and the box raised a task's residual above its residual at the
+box-free solution (the unsaturated pass, the best the higher levels leave it) by more than
+that tolerance, whatever its level; else SCALED when a level was scaled (in practice an
+objectives' level, whose rows are no task); else BOUNDS_ACTIVE when some entry of ``u`` is
+on a bound.
 """
 
 from __future__ import annotations
@@ -533,7 +542,9 @@ class ProjectionSolver(Solver):
         for i, lp in enumerate(levels):
             state_k = self._level(lp, state_k, box, i + 1 < len(levels), False)
         u_c = np.zeros(nu)
+        u_free = None  # the box-free solution, when it leaves the box
         if self.saturate and not box.inside(state_k.u):
+            u_free = state_k.u
             # SNS for d = u - u_c from d = 0, u_c the box's point closest to the anchor (0,
             # or the last velocity with acceleration limits), so that the search starts
             # inside the box it saturates against and a scaled level slows its change of
@@ -554,7 +565,7 @@ class ProjectionSolver(Solver):
             u_start = np.minimum(np.maximum(0.0, lo), hi)
             return self._result(problem, u_start, scales, time.perf_counter() - start, message,
                                 failed=True)  # fmt: skip
-        return self._result(problem, u_s, scales, time.perf_counter() - start, "")
+        return self._result(problem, u_s, scales, time.perf_counter() - start, "", u_free=u_free)
 
     def _solve_compiled(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
         start = time.perf_counter()
@@ -577,7 +588,13 @@ class ProjectionSolver(Solver):
         return plan.result(time.perf_counter() - start, _MESSAGES[code])
 
     def _result(self, problem: StackProblem, u_s: np.ndarray, scales: np.ndarray, elapsed: float,
-                message: str, failed: bool = False) -> SolverResult:  # fmt: skip
+                message: str, failed: bool = False, u_free: np.ndarray | None = None,
+                ) -> SolverResult:  # fmt: skip
+        """The result at ``u_s``. Status (one meaning with the HQP's): INFEASIBLE when a task
+        of the first level is unmet or the box raised a task's residual above its box-free
+        one (at ``u_free``, the solution without the box, given when SNS ran) by more than
+        the tolerance; else SCALED when a level's motion was scaled; else BOUNDS_ACTIVE when
+        an entry of ``u`` is on a bound."""
         lo, hi = problem.lower, problem.upper
         levels = problem.levels
         level_res, task_res, infeasible = problem.residuals(u_s, self.tolerance)
@@ -591,7 +608,9 @@ class ProjectionSolver(Solver):
         top = levels[0].name if levels else ""
         if failed:
             status = SolverStatus.FAILED
-        elif scales[0] >= 1.0 and any(level == top for level, _ in infeasible):
+        elif any(level == top for level, _ in infeasible) or (
+            u_free is not None and infeasible and _box_limited(problem, u_s, u_free, self.tolerance)
+        ):
             status = SolverStatus.INFEASIBLE
         elif _count(scales < 1.0):
             status = SolverStatus.SCALED
@@ -615,6 +634,23 @@ class ProjectionSolver(Solver):
 _EMPTY_BOX = "the box is empty or not a number (NaN bounds): u = 0"
 _NON_FINITE = "non-finite solution replaced by the box's closest point to 0"
 _MESSAGES = {0: "", kernel.MESSAGE_EMPTY_BOX: _EMPTY_BOX, kernel.MESSAGE_NON_FINITE: _NON_FINITE}
+
+
+def _box_limited(problem: StackProblem, u: np.ndarray, u_free: np.ndarray, tol: float) -> bool:
+    """Whether the box raised some task's weighted residual at ``u`` above that at the
+    box-free solution ``u_free`` by more than ``tol (1 + ||b_t||)``: the HQP's test of a
+    task the box limited. At ``u_free`` each level has the best residual the levels above
+    leave it; where SNS kept those levels' residuals, the optimal set they leave is the same
+    at ``u``, and where it did not, a level above is limited itself."""
+    for lev in problem.levels:
+        if not lev.A.shape[0]:
+            continue
+        _, tasks = lev.residual_report(u)
+        _, free = lev.residual_report(u_free)
+        for (_, r, _, b), (_, r0, _, _) in zip(tasks, free, strict=True):
+            if r - r0 > tol * (1.0 + b):
+                return True
+    return False
 
 
 def _anchor(anchor: np.ndarray | None, like: np.ndarray) -> np.ndarray:

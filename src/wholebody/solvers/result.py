@@ -11,17 +11,26 @@ __all__ = ["SolverResult", "SolverStatus"]
 
 
 class SolverStatus(enum.IntEnum):
-    """Outcome of one solve, from best to worst."""
+    """Outcome of one solve, from best to worst; the same meaning for every backend.
+
+    A task is *limited* when the hard constraints (the box, inequality rows) raised its
+    weighted residual above the best that the higher levels leave it (its box-free
+    optimum) by more than the solver's tolerance ``tol (1 + ||v||)``. A task that the
+    higher levels alone keep from its target (a posture under the hands) is not limited:
+    it is listed in :attr:`SolverResult.infeasible`, and the status does not change."""
 
     OK = 0
     """Every level solved; no bound active."""
     BOUNDS_ACTIVE = 1
     """Every level solved as well as the higher levels allow, with some bounds active."""
     SCALED = 2
-    """The projection backend scaled a level's motion down to respect the bounds."""
+    """As BOUNDS_ACTIVE, and the projection backend scaled a level's motion down to respect
+    the bounds without limiting a task (an objectives' level: its descent step shortened;
+    the HQP reports BOUNDS_ACTIVE there)."""
     INFEASIBLE = 3
-    """A level could not be met within tolerance (see ``infeasible``); ``u`` is the best
-    feasible answer."""
+    """A level could not be met within tolerance: a task of the first level is unmet, or a
+    task of any level is limited by the hard constraints (see ``infeasible``); ``u`` is the
+    best feasible answer."""
     FAILED = 4
     """A numerical failure; ``u`` is a safe fallback that respects the bounds."""
 
@@ -65,9 +74,13 @@ class SolverResult:
 
     @property
     def limit_hit(self) -> bool:
-        """Whether any bound was active or any motion scaled down."""
-        return self.status in (SolverStatus.BOUNDS_ACTIVE, SolverStatus.SCALED) or bool(
-            self.active_bounds.size
+        """Whether any bound was active or any motion scaled down (whichever task it
+        concerns: :meth:`Stack.saturated_tasks <wholebody.solvers.Stack.saturated_tasks>`
+        tells which tasks a bound limited)."""
+        return (
+            self.status in (SolverStatus.BOUNDS_ACTIVE, SolverStatus.SCALED)
+            or bool(self.active_bounds.size)
+            or bool(np.any(self.scale < 1.0))
         )
 
     @property

@@ -32,15 +32,17 @@ changes.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError, WholebodyError
+from wholebody.kernels import layout as lay
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.solvers.plan import Plan, sqrt_weights
+from wholebody.solvers.result import SolverResult
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 from wholebody.tasks.limits import AccelerationLimits
 
@@ -50,6 +52,10 @@ Entry = Task | InequalityTask | Objective
 
 OBJECTIVES = "objectives"
 """The name of a level's objective rows in :attr:`LevelProblem.task_rows`."""
+
+_ZERO_COLUMN = 1e-12
+"""A column of a task's rows whose entries are all below this fraction of the rows' largest
+entry does not move the task (round-off of a joint outside its chain, which is exactly 0)."""
 
 
 @dataclass
@@ -376,6 +382,7 @@ class Stack:
         self._all_tasks = [t for plan in self._plans for t in plan.tasks]
         self._lower = np.empty(nu)
         self._upper = np.empty(nu)
+        self._evaluated: RobotState | None = None  # the state of the buffers' rows
 
     # ------------------------------------------------------------------ use
     @property
@@ -473,17 +480,88 @@ class Stack:
             mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
             lower[crossed] = mid
             upper[crossed] = mid
+        self._evaluated = state
         return StackProblem(self._buffers, lower / D, upper / D, D, values, self.anchor)
 
     def advance(
-        self, state: RobotState, dt: float, saturated: bool = False, u: np.ndarray | None = None
+        self,
+        state: RobotState,
+        dt: float,
+        saturated: bool | None = None,
+        u: np.ndarray | None = None,
+        *,
+        result: SolverResult | None = None,
     ) -> None:
-        """Advance every task's internal state (PI integrals) by one step, and tell the
-        constraints the velocity ``u`` that was applied (when given)."""
-        for t in self._all_tasks:
-            t.advance(state, dt, saturated)
+        """Advance every task's internal state (the PI integrals) by one step of ``dt`` s,
+        after the step was solved at ``state``, and tell the constraints the velocity ``u``
+        that was applied (when given).
+
+        ``result``: the solve of this step. Each task's anti-windup then follows its own
+        saturation (:meth:`saturated_tasks`: a bound that limits that task, not just any
+        bound), and ``u`` defaults to ``result.u``. ``saturated``: instead, one flag for every
+        task (``result.limit_hit`` freezes every integral whenever any entry of ``u`` sits on
+        a bound, e.g. a joint resting at 0 on its limit that no task uses). Give one or the
+        other.
+        """
+        if result is not None:
+            if saturated is not None:
+                raise WholebodyError("Stack.advance: give result= (per-task anti-windup) or "
+                                     "saturated= (one flag for every task), not both")  # fmt: skip
+            flags = self.saturated_tasks(state, result)
+            for t in self._all_tasks:
+                t.advance(state, dt, flags[t.name])
+            if u is None:
+                u = result.u
+        else:
+            flag = bool(saturated)
+            for t in self._all_tasks:
+                t.advance(state, dt, flag)
         if u is not None:
             self.set_velocity(u, dt)
+
+    def saturated_tasks(self, state: RobotState, result: SolverResult) -> dict[str, bool]:
+        """Per equality task (by name), whether the hard constraints limited it in the solve
+        ``result`` at ``state``, which is what its anti-windup needs: its level's motion was
+        scaled (``result.scale[level] < 1``, projection), or an active bound
+        (``result.active_bounds``) is on an entry of ``u`` that the task's rows move (a
+        column of its rows not 0: a joint no task row uses may rest on its limit without
+        stopping any integral), or the task is reported unmet (``result.infeasible``).
+
+        The rows are those of the stack's last evaluation at ``state`` (compiled or not);
+        without one, the tasks' own rows at ``state``."""
+        flags = dict.fromkeys((t.name for t in self._all_tasks), False)
+        unmet = {name for _, name in result.infeasible}
+        scale = np.asarray(result.scale)
+        per_level = scale.size == len(self.levels)  # (a result of another stack: not read)
+        scaled = set(np.flatnonzero(scale < 1.0).tolist()) if per_level else set()
+        active = np.asarray(result.active_bounds, dtype=np.intp)
+        if not (unmet or scaled or active.size):
+            return flags
+        for task, level, rows in self._evaluated_rows(state):
+            if level in scaled or task.name in unmet:
+                flags[task.name] = True
+            elif active.size and rows.size:
+                size = np.abs(rows).max()
+                flags[task.name] = bool(np.abs(rows[:, active]).max() > _ZERO_COLUMN * size)
+        return flags
+
+    def _evaluated_rows(self, state: RobotState) -> Iterator[tuple[Task, int, np.ndarray]]:
+        """``(task, level index, rows)`` of every equality task: the rows of the last
+        evaluation at ``state`` (scaled and weighted: the same zero columns as ``J``), else
+        computed now."""
+        plan = self._plan
+        if plan is not None and plan.evaluated is state:
+            A = plan.view(lay.F_A)
+            for r in plan.rows:
+                yield r.task, r.level, A[r.start : r.stop]
+        elif self._evaluated is state:
+            for li, lp in enumerate(self._plans):
+                for t, (A, _) in zip(lp.tasks, lp.views, strict=True):
+                    yield t, li, A
+        else:
+            for li, level in enumerate(self.levels):
+                for t in level.tasks:
+                    yield t, li, t.compute(state).J
 
     def set_velocity(self, u: np.ndarray, dt: float) -> None:
         """The velocity the robot moves at (applied for the last ``dt`` s): the constraints

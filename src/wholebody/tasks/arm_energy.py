@@ -31,6 +31,10 @@ centres, ``J_c1, J_c2`` those of the centres of mass and ``s = |alpha|_s``::
     d f_g = g (m1 (J_c1[z] - J_S[z]) + m2 (J_c2[z] - J_S[z]))     (shoulder reference)
     d f_e = 1/2 (pi - s)^2 w dk  -  k (pi - s) s'(alpha) w dalpha  +  1/2 k (pi - s)^2 dw
 
+A segment whose mass is split over several links (``upper_arm = ["a", "b"]`` in robot.toml)
+adds ``g m_i h_i`` per link; the kernels hold one link per segment, so an arm with more is
+evaluated here: the kernel's two, plus the others with their centre-of-mass Jacobians.
+
 The stiffness model's input is the wrist relative to the shoulder in the arm's canonical body
 axes (x forward, y medial, z up; see :mod:`wholebody.humanlike.stiffness`):
 ``p = Mirror R_b^T (W - S)`` with ``R_b`` the base yaw, so
@@ -64,7 +68,7 @@ from wholebody.kernels.objectives import (
     ARM_PARTS,
     arm_energy,
 )
-from wholebody.robot import ArmChain, Frame, Robot, RobotState
+from wholebody.robot import ArmChain, Body, Frame, Robot, RobotState
 from wholebody.tasks.base import Objective, ObjectiveValue
 
 __all__ = ["ArmEnergyValue", "ArmPotentialEnergy"]
@@ -181,9 +185,35 @@ class ArmPotentialEnergy(Objective):
         at ``state``, without the gradient (no Jacobians: what a monitor logs)."""
         return self._energy(state, _NO_JACOBIAN, _NO_GRADIENT)
 
+    @property
+    def extra_bodies(self) -> tuple[Body, ...]:
+        """The links of the arm's segments beyond the first of each (see the module
+        docstring): their gravity is added outside the kernel."""
+        arm = self.arm
+        return arm.upper_arm_bodies[1:] + arm.forearm_bodies[1:]
+
     def _energy(self, state: RobotState, J: np.ndarray, grad: np.ndarray) -> np.ndarray:
-        """The kernel's ``ARM_PARTS`` at ``state``, its gradient into ``grad`` (``J``: the
-        frames' Jacobians, one column per entry of ``grad``)."""
+        """``ARM_PARTS`` at ``state`` (the kernel's, with the extra links' gravity), the
+        gradient into ``grad`` (``J``: the frames' Jacobians, one column per entry of
+        ``grad``; none: no gradient)."""
+        parts = self._kernel_energy(state, J, grad)
+        extra = self.extra_bodies
+        if extra:
+            shoulder = self.reference == "shoulder"
+            base = state.position(self.arm.shoulder)[2] if shoulder else 0.0
+            gravity = sum(self.g * b.mass * (state.com_position(b)[2] - base) for b in extra)
+            parts[0] += gravity
+            parts[1] += gravity
+            if grad.size:
+                for b in extra:
+                    grad += self.g * b.mass * state.com_jacobian(b)[2]
+                    if shoulder:
+                        grad -= self.g * b.mass * state.jacobian(self.arm.shoulder)[2]
+        return parts
+
+    def _kernel_energy(self, state: RobotState, J: np.ndarray, grad: np.ndarray) -> np.ndarray:
+        """The kernel's ``ARM_PARTS`` at ``state`` (the first link of each segment), its
+        gradient into ``grad``."""
         P = np.empty((6, 3))
         R = np.empty((6, 3, 3))
         for i, f in enumerate(self._frames_base):

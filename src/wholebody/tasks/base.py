@@ -123,8 +123,10 @@ class Task(ABC):
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:  # noqa: B027
         """Advance internal state (integrators) by one control step of ``dt`` seconds, after
-        the step was solved at ``state``. ``saturated`` tells that the solver could not
-        realise the rows exactly (bounds active or task scaled), for anti-windup."""
+        the step was solved at ``state``. ``saturated`` tells that the hard constraints kept
+        the solver from realising this task's rows (a bound active on a joint they move, its
+        level scaled, or the task unmet: :meth:`~wholebody.solvers.Stack.saturated_tasks`),
+        for anti-windup."""
 
     def reset(self) -> None:  # noqa: B027
         """Forget internal state (integrators)."""

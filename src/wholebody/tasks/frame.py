@@ -19,7 +19,8 @@ Its exact rate, with ``v, w = J u`` the frame's velocity and ``v_d, w_d`` the ta
 
 At ``e_o = 0`` they reduce to ``J u = x'_d + Kp e + Ki int(e)``, the paper's law verbatim. The
 integral ``I`` advances once per control step (:meth:`FrameTask.advance`) with anti-windup:
-each component is clamped to ``+-integral_limit``, and while the solver reports saturation the
+each component is clamped to ``+-integral_limit``, and while the hard constraints limit this
+task (its ``saturated`` flag: see :meth:`~wholebody.solvers.Stack.saturated_tasks`) the
 integral may only shrink (conditional integration).
 """
 

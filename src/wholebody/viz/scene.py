@@ -9,6 +9,7 @@ from the control loop) and replayed afterwards as a MeshCat animation
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 
 import meshcat
@@ -55,12 +56,10 @@ class Scene:
             self.server = start_server()
             zmq_url = self.server.zmq_url
         self.viewer = meshcat.Visualizer(zmq_url=zmq_url)
-        self.visual = pin.buildGeomFromUrdf(
-            robot.model, str(robot.config.urdf), pin.GeometryType.VISUAL
-        )
-        self.collision = pin.buildGeomFromUrdf(
-            robot.model, str(robot.config.urdf), pin.GeometryType.COLLISION
-        )
+        self.visual, note = robot.geometry("visual")
+        self.collision, _ = robot.geometry("collision")
+        if note:
+            print(f"wholebody: {note}", file=sys.stderr)
         self._pin = MeshcatVisualizer(robot.model, self.collision, self.visual)
         self._pin.initViewer(viewer=self.viewer)
         self._pin.loadViewerModel(rootNodeName="robot")

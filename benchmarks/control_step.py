@@ -18,16 +18,37 @@ over seconds on this shared host) hits all the cases and both schedules alike. P
 median and p90 per case (us) and the ratio of medians to the plain pseudo-inverse measured
 in the same schedule and run.
 
-    python benchmarks/control_step.py [--steps N] [--repeat R]
+Then, in a second interleaved run (the humanoid's table is measured without them), **real
+robots against pink**: robots of ``robots/`` whose URDFs ship in example-robot-data
+(``--robots``, default TIAGo++ ``tiago_dual`` and the TALOS upper body ``talos_upper``; also
+``tiago_dual_fixed``). Per robot, wholebody (projection and HQP daqp) and pink (daqp) solve
+``benchmarks/peers.py``'s problem (both hands' 6-D tasks on the arms' tool frames, dead-beat,
+a weak posture regularisation, joint position and velocity limits; ``single`` weighted QP and
+``hierarchy`` hands above posture) on the same Pinocchio model (``robot.model``), the hands
+going forth and back by a few cm from the home posture. Printed per case: median and p90 (us)
+in both schedules and the ratios of each wholebody median to pink's on the same robot,
+problem and schedule (``wb/pink``, ``pink/wb``); then peers.py's agreement check (every
+case's hands against wholebody's HQP, tolerance 0.1 mm) and the largest share of a bound
+used along the reference (none is active, so all backends solve the same least squares).
+TIAGo++'s differential base is kept: pink gets the planar root's twist with the lateral
+velocity held at zero by an equality, the wheels' regularisation and speed limits through
+``B^+`` (see ``peers.RobotSetup``); ``tiago_dual_fixed`` holds the base still instead
+(robot.toml without ``[base]``, wheels locked). Skipped with a line when example-robot-data
+(``pip install '.[robots]'``) or pink (``'.[bench]'``) is missing.
+
+    python benchmarks/control_step.py [--steps N] [--repeat R] [--robots A,B | none]
+                                      [--only-robots] [--check-steps M]
 
 Add a case by appending to ``CASES``: ``(name, factory)``, the factory building
-``(stack, solver)`` from the robot and the two hand tasks.
+``(stack, solver)`` from the robot and the two hand tasks; a real robot by adding a
+``RobotPlan`` to peers.py's ``ROBOTS``.
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+import textwrap
 import time
 from collections.abc import Callable
 
@@ -52,6 +73,7 @@ from wholebody.tasks import (
 
 DT = 0.01
 BLOCK = 50  # steps of one case in a row in the warm schedule
+ROBOTS = "tiago_dual,talos_upper"  # the real robots against pink (peers.py's ROBOTS)
 PAPER = PaperWeights(manipulability=0.05)  # the full H = w1 f_p + w2 h1 - w3 h2
 
 Factory = Callable[[wholebody.Robot, list[FrameTask]], tuple[Stack, Solver]]
@@ -197,18 +219,14 @@ def run(steps: int, repeat: int) -> None:
             r["bounds"] = r.get("bounds", 0) + result.limit_hit
         r["q"] = q
 
-    for _ in range(repeat):
-        for schedule in ("cold", "warm"):
-            for r in runs:
-                r["q"] = q0.copy()
-                if "peer" in r:
-                    r["peer"].reset()
-                else:
-                    r["stack"].reset()
-            size = 1 if schedule == "cold" else BLOCK
-            for k in range(0, steps, size):
-                for r in runs:
-                    steps_of(r, range(k, min(k + size, steps)), r[schedule])
+    def reset(r: dict) -> None:
+        r["q"] = q0.copy()
+        if "peer" in r:
+            r["peer"].reset()
+        else:
+            r["stack"].reset()
+
+    interleave(runs, steps, repeat, steps_of, reset)
     print(
         f"control step, mobile_humanoid (nu = {robot.nu}), dt = {DT} s, "
         f"{steps} steps x {repeat}, {platform.processor() or platform.machine()}, "
@@ -235,6 +253,23 @@ def run(steps: int, repeat: int) -> None:
     print("paper (Table 2 / Sec. 5.2): pseudo-inverse 343.46 Hz, paper's method 40.55 Hz")
 
 
+def interleave(runs: list[dict], steps: int, repeat: int,
+               steps_of: Callable[[dict, range, list[float]], None],
+               reset: Callable[[dict], None]) -> None:  # fmt: skip
+    """Time ``steps`` steps of every case in ``runs``, ``repeat`` times in both schedules:
+    taking turns step by step (step times appended to ``r["cold"]``), then every ``BLOCK``
+    steps (``r["warm"]``); each case is ``reset`` before each schedule, so that drifts of the
+    machine's speed hit every case and both schedules alike."""
+    for _ in range(repeat):
+        for schedule in ("cold", "warm"):
+            for r in runs:
+                reset(r)
+            size = 1 if schedule == "cold" else BLOCK
+            for k in range(0, steps, size):
+                for r in runs:
+                    steps_of(r, range(k, min(k + size, steps)), r[schedule])
+
+
 def placo_case():
     """placo on peers.py's 2-level hierarchy (hands strictly above posture, same robot) and
     its reference's targets (one reach forth and back), or None when placo is not installed:
@@ -257,12 +292,148 @@ def peer_steps(case, targets: list, ks: range, out: list[float]) -> None:
         out.append(time.perf_counter() - start)
 
 
+# ---------------------------------------------------------------------- real robots
+def robot_rows(names: list[str], steps: int, repeat: int, check_steps: int) -> None:
+    """wholebody against pink on robots of robots/ (peers.py's ``ROBOTS``), each robot's
+    cases of both libraries in one interleaved run (all robots together, both schedules),
+    then the agreement check; a robot whose URDF is not installed is skipped with a line, and
+    all of them without pink (the rows are ratios to pink)."""
+    import peers
+
+    why = peers.peer_available("pink")
+    if why is not None:
+        print(f"\nskipped the real robots ({', '.join(names)}): pink is not installed ({why}); "
+              "pip install '.[bench]'")  # fmt: skip
+        return
+    setups = []
+    for name in names:
+        missing = peers.robot_available(name)
+        if missing is None:
+            setups.append(peers.make_robot_setup(name))
+        else:
+            print(f"\nskipped {name}: {missing}")
+    if not setups:
+        return
+    runs, checks = [], {}
+    for setup in setups:
+        cases = peers.build_robot_cases(setup)
+        checks[setup.name] = robot_check(setup, cases, check_steps)
+        targets = [setup.targets(k) for k in range(2 * peers.PERIOD)]
+        runs.extend({"setup": setup, "peer": c, "targets": targets, "cold": [], "warm": []}
+                    for c in cases)  # fmt: skip
+
+    def steps_of(r: dict, ks: range, out: list[float]) -> None:
+        peer_steps(r["peer"], r["targets"], ks, out)
+
+    interleave(runs, steps, repeat, steps_of, lambda r: r["peer"].reset())
+    print_robot_table(setups, runs, steps, repeat)
+    print_robot_check(setups, checks, check_steps)
+
+
+def robot_check(setup, cases: list, steps: int) -> tuple[dict, dict]:
+    """peers.py's agreement check on the robot's reference (every case against wholebody's
+    HQP on the same problem), and the largest share of a position and a velocity bound
+    wholebody's HQP uses along it, per problem (below 1: no bound active, so that the
+    projection, the HQP and pink solve the same least squares)."""
+    import peers
+
+    check = peers.run_check(setup, cases, steps)
+    use = {p: peers.limit_use(setup, peers.reference_case(cases, p), steps)
+           for p in (peers.SINGLE, peers.HIERARCHY)}  # fmt: skip
+    return check, use
+
+
+def case_label(case) -> str:
+    """``wholebody projection``, ``wholebody hqp daqp`` or ``pink daqp``."""
+    backend = "hqp daqp" if case.library == "wholebody" and case.backend == "daqp" else case.backend
+    return f"{case.library} {backend}"
+
+
+def print_robot_table(setups: list, runs: list[dict], steps: int, repeat: int) -> None:
+    """Median and p90 per case and schedule, and the ratios of each wholebody case's median
+    to pink's on the same robot, problem and schedule (``wb/pink``) and back (``pink/wb``)."""
+    import peers
+
+    print(f"\nreal robots against pink, dt = {DT} s, {steps} steps x {repeat}, the {len(runs)} "
+          "cases interleaved (robots/NAME/robot.toml, URDFs from example-robot-data)")  # fmt: skip
+    print(f"problem (peers.py's): 2 hand tasks (6-D, w = {peers.W_HAND:g}, dead-beat) + posture "
+          f"(w = {peers.W_POSTURE:g}) + joint position/velocity limits\n  single: one weighted "
+          "QP; hierarchy: hands strictly above posture; pink on wholebody's Pinocchio model "
+          "(robot.model)\nbase per robot:")  # fmt: skip
+    for setup in setups:
+        note = f"u = {setup.robot.nu}, {setup.base}"
+        print(textwrap.fill(note, 100, initial_indent=f"  {setup.name:17s}",
+                            subsequent_indent=" " * 19))  # fmt: skip
+    cols = f"{'median us':>10s} {'p90 us':>9s} {'wb/pink':>8s} {'pink/wb':>8s}"
+    print(f"{'':48s} {'step-interleaved (cold)':^39s}  {'block-interleaved (warm)':^39s}".rstrip())
+    print(f"{'robot':16s} {'problem':10s} {'case':20s} {cols}  {cols}")
+    for r in runs:
+        case = r["peer"]
+        pink = next(p for p in runs if p["setup"] is r["setup"] and p["peer"].library == "pink"
+                    and p["peer"].problem == case.problem)  # fmt: skip
+        line = f"{r['setup'].name:16s} {case.problem:10s} {case_label(case):20s}"
+        for sch in ("cold", "warm"):
+            t = np.asarray(r[sch]) * 1e6
+            med, ref = float(np.median(t)), float(np.median(pink[sch])) * 1e6
+            ratios = (f"{med / ref:8.2f} {ref / med:8.2f}" if case.library != "pink"
+                      else f"{'':8s} {'':8s}")  # fmt: skip
+            line += f" {med:10.1f} {np.percentile(t, 90):9.1f} {ratios} "
+        print(line.rstrip())
+    print("wb/pink: the case's median over pink daqp's median on the same robot and problem, same "
+          "schedule and run (below 1: wholebody faster); pink/wb: its inverse")  # fmt: skip
+
+
+def print_robot_check(setups: list, checks: dict, steps: int) -> None:
+    """The agreement check (tolerance 0.1 mm, as peers.py) and the bounds' use per robot."""
+    print(f"\nagreement over {steps} steps of each robot's reference (max over steps and hands "
+          "of the distance to wholebody daqp's hand, same problem; tolerance 0.1 mm)")  # fmt: skip
+    print(f"{'robot':16s} {'case':32s} {'max dev mm':>11s} {'1-step rel dv':>14s} "
+          f"{'tracking mm':>12s}  ok")  # fmt: skip
+    for setup in setups:
+        check, _ = checks[setup.name]
+        for name, r in check.items():
+            ok = "yes" if r["deviation"] <= 1e-4 else "NO"
+            print(f"{setup.name:16s} {name:32s} {r['deviation'] * 1e3:11.5f} "
+                  f"{r['first_step_dv']:14.2e} {r['tracking'] * 1e3:12.3f}  {ok}")  # fmt: skip
+    print("largest share of a bound wholebody daqp uses along the reference (1: active; position: "
+          "|u| dt over the step the position limit allows)")  # fmt: skip
+    for setup in setups:
+        _, use = checks[setup.name]
+        text = ", ".join(f"{p}: position {pos:.3f}, velocity {vel:.3f}"
+                         for p, (pos, vel) in use.items())  # fmt: skip
+        print(f"  {setup.name:17s}{text}")
+
+
+def robot_names(text: str) -> list[str]:
+    """``--robots``: comma-separated names of peers.py's ``ROBOTS``; ``none`` (or empty):
+    no real robot."""
+    import peers
+
+    names = [n.strip() for n in text.split(",") if n.strip() and n.strip() != "none"]
+    unknown = [n for n in names if n not in peers.ROBOTS]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown robot(s) {', '.join(unknown)}; expected "
+                                         f"{', '.join(peers.ROBOTS)} or none")  # fmt: skip
+    return names
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=400)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--robots", type=robot_names, default=ROBOTS,
+                        help="real robots against pink, comma-separated (peers.py's ROBOTS: "
+                        "tiago_dual, tiago_dual_fixed, talos_upper); none: skip them "
+                        f"(default {ROBOTS})")  # fmt: skip
+    parser.add_argument("--only-robots", action="store_true",
+                        help="only the real robots (skip mobile_humanoid's table)")  # fmt: skip
+    parser.add_argument("--check-steps", type=int, default=None,
+                        help="steps of the robots' agreement check (default: --steps)")  # fmt: skip
     args = parser.parse_args()
-    run(args.steps, args.repeat)
+    if not args.only_robots:
+        run(args.steps, args.repeat)
+    if args.robots:
+        robot_rows(args.robots, args.steps, args.repeat, args.check_steps or args.steps)
 
 
 if __name__ == "__main__":

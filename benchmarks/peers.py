@@ -64,6 +64,11 @@ state that other processes evict.
 
     python benchmarks/peers.py [--steps N] [--repeat R] [--check-steps M]
 
+Real robots (``ROBOTS``, for ``benchmarks/control_step.py``): the same problem on robots of
+``robots/`` whose URDFs ship in example-robot-data (TIAGo++, the TALOS upper body), wholebody
+against pink only, pink on the Pinocchio model wholebody runs on (``robot.model``); TIAGo++'s
+differential base is given to pink as :class:`RobotSetup` says.
+
 Peers come from the optional ``bench`` extra (``pip install wholebody[bench]``); a missing
 one is skipped with a line saying so. ``tests/test_peers.py`` imports the builders below.
 """
@@ -71,6 +76,7 @@ one is skipped with a line saying so. ``tests/test_peers.py`` imports the builde
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import math
 import platform
@@ -88,9 +94,12 @@ import pinocchio as pin
 
 import wholebody
 from wholebody.planning.trajectory import MinimumJerkTrajectory
+from wholebody.resources import robots_dir
+from wholebody.robot import robot_catalogue
 from wholebody.solvers import Level, ProjectionSolver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import FrameTask, JointPositionLimits, PostureTask, VelocityLimits
+from wholebody.tomlreader import tomllib  # the standard library's, or tomli before 3.11
 
 DT = 0.01
 HANDS = ("left_tool", "right_tool")
@@ -113,8 +122,20 @@ SINGLE, HIERARCHY = "single", "hierarchy"
 
 
 # ---------------------------------------------------------------------- the shared setup
+class HandReferences:
+    """The hands' references, shared by :class:`Setup` and :class:`RobotSetup`."""
+
+    references: list[MinimumJerkTrajectory]
+
+    def targets(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The hand targets (4x4, world) for the end of step k (forth and back)."""
+        s = (k + 1) % (2 * PERIOD)
+        t = (s if s <= PERIOD else 2 * PERIOD - s) * DT
+        return tuple(ref.sample(t).pose for ref in self.references)  # type: ignore[return-value]
+
+
 @dataclass
-class Setup:
+class Setup(HandReferences):
     """The robot, the base cost, the peers' URDF texts and the shared reference."""
 
     robot: wholebody.Robot
@@ -126,12 +147,7 @@ class Setup:
     q0: np.ndarray
     home: dict[str, float]
     references: list[MinimumJerkTrajectory]
-
-    def targets(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The hand targets (4x4, world) for the end of step k (forth and back)."""
-        s = (k + 1) % (2 * PERIOD)
-        t = (s if s <= PERIOD else 2 * PERIOD - s) * DT
-        return tuple(ref.sample(t).pose for ref in self.references)  # type: ignore[return-value]
+    hands: tuple[str, str] = HANDS  # the (left, right) hand frames
 
     def base_twist(self, u: np.ndarray) -> np.ndarray:
         """Base twist (vx, vy, wz; base frame) from wholebody's actuated velocity."""
@@ -150,15 +166,29 @@ def make_setup(robot: wholebody.Robot | None = None) -> Setup:
     q0 = robot.home()
     jp = robot.joint_positions(q0)
     home = {j: float(jp[robot.index(j)]) for j in joints}
-    refs = []
-    for frame, side in zip(HANDS, (1.0, -1.0), strict=True):
-        start = robot.frame_pose(q0, frame)
-        end = start.copy()
-        end[:3, 3] += np.array(REACH) * (1.0, side, 1.0)
-        end[:3, :3] = pin.exp3(np.array([0.0, TILT, 0.0])) @ start[:3, :3]
-        refs.append(MinimumJerkTrajectory(start, end, PERIOD * DT))
+    refs = hand_references(robot, q0, HANDS, REACH, TILT)
     return Setup(robot, joints, base_cost, _peer_urdf(urdf, wheels, False),
                  _peer_urdf(urdf, wheels, True), urdf.parent, q0, home, refs)  # fmt: skip
+
+
+def hand_references(
+    robot: wholebody.Robot,
+    q0: np.ndarray,
+    hands: tuple[str, str],
+    reach: tuple[float, float, float],
+    tilt: float,
+) -> list[MinimumJerkTrajectory]:
+    """One minimum-jerk reach of ``PERIOD`` steps per hand from its pose at ``q0``: moved by
+    ``reach`` (m, world; y mirrored for the right hand, the second) and pitched by ``tilt``
+    (rad, about the world y axis)."""
+    refs = []
+    for frame, side in zip(hands, (1.0, -1.0), strict=True):
+        start = robot.frame_pose(q0, frame)
+        end = start.copy()
+        end[:3, 3] += np.array(reach) * (1.0, side, 1.0)
+        end[:3, :3] = pin.exp3(np.array([0.0, tilt, 0.0])) @ start[:3, :3]
+        refs.append(MinimumJerkTrajectory(start, end, PERIOD * DT))
+    return refs
 
 
 def _peer_urdf(path: Path, wheels: tuple[str, ...], chain: bool) -> str:
@@ -236,10 +266,10 @@ class Case:
 class WholebodyCase(Case):
     library = "wholebody"
 
-    def __init__(self, setup: Setup, backend: str, problem: str) -> None:
+    def __init__(self, setup: Setup | RobotSetup, backend: str, problem: str) -> None:
         self.setup, self.backend, self.problem = setup, backend, problem
         robot = self.robot = setup.robot
-        self.hands = [FrameTask(robot, f, kp=1.0 / DT, weight=W_HAND) for f in HANDS]
+        self.hands = [FrameTask(robot, f, kp=1.0 / DT, weight=W_HAND) for f in setup.hands]
         posture = PostureTask(robot, kp=1.0 / DT, weight=W_POSTURE)
         levels = ([Level(self.hands, name="hands"), Level([posture], name="posture")]
                   if problem == HIERARCHY else [Level([*self.hands, posture])])  # fmt: skip
@@ -266,10 +296,11 @@ class WholebodyCase(Case):
 
     def hand_positions(self):
         state = self.robot.update(self.q)
-        return np.array([state.position(self.robot.frame(f)) for f in HANDS])
+        return np.array([state.position(self.robot.frame(f)) for f in self.setup.hands])
 
     def velocity(self):
-        return np.concatenate([self.setup.base_twist(self.u), self.u[4:]])
+        base = len(self.robot.base.actuators)  # the wheels (or a planar base's twist)
+        return np.concatenate([self.setup.base_twist(self.u), self.u[base:]])
 
 
 class PinkCase(Case):
@@ -306,7 +337,7 @@ class PinkCase(Case):
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
         self.hands = [PinkFrameTask(f, position_cost=math.sqrt(W_HAND),
                                     orientation_cost=math.sqrt(W_HAND), lm_damping=0.0,
-                                    gain=1.0) for f in HANDS]  # fmt: skip
+                                    gain=1.0) for f in setup.hands]  # fmt: skip
         self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)
         self.posture.set_target(self.q0)
         base = BaseDamping(cost=np.sqrt(setup.base_cost), gain=0.0)
@@ -332,7 +363,8 @@ class PinkCase(Case):
         self.conf.integrate_inplace(v, DT)  # also updates the kinematics for the next step
 
     def hand_positions(self):
-        return np.array([self.conf.get_transform_frame_to_world(f).translation for f in HANDS])
+        hands = self.setup.hands
+        return np.array([self.conf.get_transform_frame_to_world(f).translation for f in hands])
 
     def velocity(self):
         return np.concatenate([self.v[:3], self.v[self.iv]])
@@ -528,6 +560,288 @@ def build_cases(setup: Setup, say: Callable[[str], None] = print) -> list[Case]:
     return cases
 
 
+# ---------------------------------------------------------------------- real robots
+# The rows of benchmarks/control_step.py for robots of robots/ that ship in example-robot-data:
+# wholebody against pink on the same Pinocchio model and the problem above (dead-beat hands,
+# posture W_POSTURE, position and velocity limits), along a reference per robot that keeps
+# every bound inactive (measured by limit_use), so that every backend solves the same problem.
+@dataclass(frozen=True)
+class RobotPlan:
+    """How a robot is benchmarked against pink."""
+
+    robot: str  # the bundled robot (robots/NAME/robot.toml)
+    fixed_base: bool  # True: robot.toml without its [base] table and the wheels locked
+    reach: tuple[float, float, float]  # m, world axes, left hand (y mirrored for the right)
+    tilt: float  # rad about the world y axis, both hands
+
+
+# The reaches are a few cm: along them the joint nearest a bound is TIAGo's torso lift at 23 %
+# of its speed limit (0.07 m/s; TALOS's shoulders at 10 %), and no step uses more than 1.4 %
+# of what a position limit allows (limit_use): no bound is active on either robot.
+ROBOTS: dict[str, RobotPlan] = {
+    "tiago_dual": RobotPlan("tiago_dual", False, (0.06, -0.03, 0.05), -0.2),
+    "tiago_dual_fixed": RobotPlan("tiago_dual", True, (0.06, -0.03, 0.05), -0.2),
+    "talos_upper": RobotPlan("talos_upper", False, (0.06, -0.03, 0.05), -0.2),
+}
+
+
+@dataclass
+class RobotSetup(HandReferences):
+    """A robot of ``robots/`` in wholebody, the model pink gets, and the hands' references.
+
+    pink runs on ``robot.model``, the model wholebody runs on (locked joints removed). On a
+    mobile base wholebody's base velocities are the wheel speeds ``u_w`` (base twist
+    ``v_b = B u_w``, ``B`` of robot.toml's ``[base]``); pink's model has the same planar root
+    (twist in the base frame, the same SE(2) integration) with the wheel joints welded (they
+    move no task frame), and its velocities are ``v_b``. ``B`` has full column rank (a
+    differential drive), so ``u_w = B^+ v_b`` is the one wheel speed making ``v_b``, and pink
+    gets wholebody's problem exactly:
+
+    * the twists the wheels cannot make, ``N^T v_b = 0`` (``N`` spans the null space of
+      ``B^T``: a differential drive's lateral velocity), as an equality constraint;
+    * wholebody's posture rows on the wheels, ``sqrt(W_POSTURE) u_w``, as the rows
+      ``sqrt(W_POSTURE) B^+ v_b`` of a cost;
+    * the wheels' speed limits ``|u_w| <= v_max`` as the inequalities ``|B^+ v_b| <= v_max``.
+    """
+
+    name: str  # the plan's name (ROBOTS)
+    robot: wholebody.Robot
+    joints: tuple[str, ...]  # the actuated joints other than the base's, wholebody's order
+    hands: tuple[str, str]  # the tool frames of the left and right arms
+    model: pin.Model  # pink's: robot.model, wheel joints welded
+    q0: np.ndarray
+    home: dict[str, float]
+    references: list[MinimumJerkTrajectory]
+
+    @property
+    def mobile(self) -> bool:
+        """Whether the robot has a planar root joint (a mobile base)."""
+        return self.robot.base.mobile
+
+    @property
+    def base(self) -> str:
+        """How the base is modelled in both libraries (one line, for the output)."""
+        if self.mobile:
+            return (f"{self.robot.base.type} base kept: wholebody drives the wheel speeds u_w "
+                    "(v_b = B u_w); pink the planar root's twist v_b, wheels welded, with "
+                    "N^T v_b = 0 (no lateral velocity) as an equality, the wheels' posture rows "
+                    "as sqrt(W) B^+ v_b and |B^+ v_b| <= wheel speed limits")  # fmt: skip
+        if ROBOTS[self.name].fixed_base:
+            return ("base held still (robot.toml without [base], wheels locked): the fixed "
+                    "model in both libraries")  # fmt: skip
+        return "fixed base (robot.toml): the same model in both libraries"
+
+    def base_twist(self, u: np.ndarray) -> np.ndarray:
+        """Base twist (vx, vy, wz; base frame) from wholebody's actuated velocity; empty for a
+        fixed base."""
+        if not self.mobile:
+            return np.zeros(0)
+        return self.robot.base.matrix @ u[: len(self.robot.base.actuators)]
+
+
+def robot_available(name: str) -> str | None:
+    """None when the plan's robot loads (its URDF is installed), else the reason."""
+    plan = ROBOTS[name]
+    for robot, description, available in robot_catalogue():
+        if robot == plan.robot:
+            return None if available else description
+    return f"no robot {plan.robot!r} in robots/"
+
+
+def fixed_base_toml(text: str) -> str:
+    """A robot.toml's text without its ``[base]`` table (a fixed base: the URDF's root link
+    at the world origin) and with the base's wheels locked at 0 (without the base they are
+    ordinary continuous joints, which would join ``u``)."""
+    wheels = tomllib.loads(text).get("base", {}).get("wheels", [])
+    lock = [f'"{w}" = 0.0  # the base is held still' for w in wheels]
+    out: list[str] = []
+    table = None
+    for line in text.splitlines():
+        header = re.match(r"\s*\[([^\[\]]+)\]\s*(#.*)?$", line)
+        if header:
+            table = header.group(1).strip()
+        if table != "base":
+            out.append(line)
+        if header and table == "locked":
+            out.extend(lock)
+            lock = []
+    if lock:  # no [locked] table
+        out.extend(["", "[locked]", *lock])
+    return "\n".join(out) + "\n"
+
+
+def load_plan_robot(plan: RobotPlan) -> wholebody.Robot:
+    """The plan's robot: the bundled one, or its fixed-base copy (loaded from a temporary
+    robot.toml; ``package://`` URDF paths resolve from any directory)."""
+    if not plan.fixed_base:
+        return wholebody.load_robot(plan.robot)
+    text = fixed_base_toml((robots_dir() / plan.robot / "robot.toml").read_text())
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "robot.toml"
+        path.write_text(text)
+        robot = wholebody.load_robot(path)
+    assert not robot.base.mobile, f"{plan.robot}: still a mobile base without [base]"
+    return robot
+
+
+def make_robot_setup(name: str) -> RobotSetup:
+    """The robot of ``ROBOTS[name]`` and its references (raises ConfigError when its URDF is
+    not installed: see :func:`robot_available`)."""
+    plan = ROBOTS[name]
+    robot = load_plan_robot(plan)
+    base = robot.base
+    if base.mobile:
+        B = base.matrix
+        assert np.linalg.matrix_rank(B) == B.shape[1], f"{name}: B has no full column rank"
+    model = robot.model
+    if base.wheel_joints:
+        ids = [model.getJointId(w) for w in base.wheel_joints]
+        model = pin.buildReducedModel(model, ids, robot.home())
+    joints = robot.actuated_joints[len(base.actuators) :]
+    q0 = robot.home()
+    jp = robot.joint_positions(q0)
+    home = {j: float(jp[robot.index(j)]) for j in joints}
+    hands = (robot.arm("left").tool.name, robot.arm("right").tool.name)
+    refs = hand_references(robot, q0, hands, plan.reach, plan.tilt)
+    return RobotSetup(name, robot, joints, hands, model, q0, home, refs)
+
+
+@functools.cache
+def _pink_rows() -> tuple[type, type]:
+    """pink's pieces for :class:`RobotPinkCase` (defined on first use: pink is optional):
+    a task of constant rows ``R`` with zero error (a cost ``|R dq|^2``, or as a constraint
+    ``R dq = 0``), and the limit ``|R dq| <= dt v_max``."""
+    from pink.limits import Limit
+    from pink.tasks import Task
+
+    class Rows(Task):
+        """Constant rows (the cost's or constraint's Jacobian), zero error."""
+
+        def __init__(self, rows: np.ndarray, name: str) -> None:
+            super().__init__(cost=1.0, gain=0.0, lm_damping=0.0)
+            self.rows, self.name = rows, name
+            self.zero = np.zeros(rows.shape[0])
+
+        def compute_error(self, configuration):
+            return self.zero
+
+        def compute_jacobian(self, configuration):
+            return self.rows
+
+        def __repr__(self):
+            return f"Rows({self.name}, {self.rows.shape[0]} x {self.rows.shape[1]})"
+
+    class RowsLimit(Limit):
+        """``-dt v_max <= rows dq <= dt v_max``."""
+
+        def __init__(self, rows: np.ndarray, v_max: np.ndarray) -> None:
+            self.G = np.vstack([rows, -rows])
+            self.v_max = np.concatenate([v_max, v_max])
+
+        def compute_qp_inequalities(self, configuration, dt):
+            return self.G, dt * self.v_max
+
+    return Rows, RowsLimit
+
+
+class RobotPinkCase(PinkCase):
+    """pink on a :class:`RobotSetup`: :class:`WholebodyCase`'s problem on the same model
+    (the base as :class:`RobotSetup` says)."""
+
+    def __init__(self, setup: RobotSetup, backend: str, problem: str) -> None:
+        import pink
+        from pink.tasks import FrameTask as PinkFrameTask
+        from pink.tasks import PostureTask as PinkPostureTask
+
+        self.setup, self.backend, self.problem = setup, backend, problem
+        self._pink = pink
+        m = self.model = setup.model.copy()
+        self.data = m.createData()
+        self.iq = np.array([m.joints[m.getJointId(j)].idx_q for j in setup.joints])
+        self.iv = np.array([m.joints[m.getJointId(j)].idx_v for j in setup.joints])
+        self.q0 = pin.neutral(m)
+        if setup.mobile:
+            self.q0[:4] = setup.q0[:4]  # x, y, cos yaw, sin yaw: the same planar root
+        self.q0[self.iq] = [setup.home[j] for j in setup.joints]
+        self.hands = [PinkFrameTask(f, position_cost=math.sqrt(W_HAND),
+                                    orientation_cost=math.sqrt(W_HAND), lm_damping=0.0,
+                                    gain=1.0) for f in setup.hands]  # fmt: skip
+        self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)  # skips the root
+        self.posture.set_target(self.q0)
+        self.limits = [pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),
+                       pink.limits.VelocityLimit(m)]  # fmt: skip
+        tasks, equalities = self._base(setup, [self.posture])
+        if problem == HIERARCHY:
+            self.tasks, self.constraints = tasks, [*self.hands, *equalities]
+        else:
+            self.tasks, self.constraints = [*self.hands, *tasks], equalities or None
+        self.reset()
+
+    def _base(self, setup: RobotSetup, tasks: list) -> tuple[list, list]:
+        """``tasks`` with the wheels' posture rows, the base's equalities, and the wheels'
+        speed limits appended to ``self.limits`` (nothing for a fixed base)."""
+        if not setup.mobile:
+            return tasks, []
+        Rows, RowsLimit = _pink_rows()
+        base = setup.robot.base
+        root = np.eye(3, self.model.nv)  # the planar root's twist
+        Bp = np.linalg.pinv(base.matrix)  # u_w = B^+ v_b
+        v_max = setup.robot.velocity_limits[: len(base.actuators)]
+        self.limits.append(RowsLimit(Bp @ root, v_max))
+        u, s, _ = np.linalg.svd(base.matrix)
+        N = u[:, int(np.sum(s > 1e-12 * s.max())) :]  # null space of B^T
+        equalities = [Rows(N.T @ root, "base constraint")] if N.shape[1] else []
+        return [*tasks, Rows(math.sqrt(W_POSTURE) * Bp @ root, "wheel posture")], equalities
+
+    def velocity(self):
+        base = self.v[:3] if self.setup.mobile else np.zeros(0)
+        return np.concatenate([base, self.v[self.iv]])
+
+
+# (library, backends): both problems each
+ROBOT_PLAN: list[tuple[str, tuple[str, ...]]] = [
+    ("wholebody", ("projection", "daqp")),
+    ("pink", ("daqp",)),
+]
+
+
+def build_robot_cases(setup: RobotSetup, say: Callable[[str], None] = print) -> list[Case]:
+    """wholebody's and pink's cases of ``ROBOT_PLAN`` on the robot, both problems (pink
+    skipped, with a line, when it does not import)."""
+    why = peer_available("pink")
+    if why is not None:
+        say(f"skipped pink on {setup.name}: not installed ({why}); pip install '.[bench]'")
+    cases: list[Case] = []
+    for problem in (SINGLE, HIERARCHY):
+        for library, backends in ROBOT_PLAN:
+            if library == "pink" and why is not None:
+                continue
+            kind = WholebodyCase if library == "wholebody" else RobotPinkCase
+            cases.extend(kind(setup, backend, problem) for backend in backends)
+    return cases
+
+
+def limit_use(setup: Setup | RobotSetup, case: WholebodyCase, steps: int) -> tuple[float, float]:
+    """The largest share of a bound ``case`` uses over ``steps`` steps of the reference:
+    ``(position, velocity)``, the largest ``|u| dt / (LIMIT_GAIN d)`` (``d`` the distance to
+    the limit ahead) and ``|u| / v_max`` over joints and steps (1: the bound is active)."""
+    robot = setup.robot
+    lower, upper = robot.position_limits
+    position = velocity = 0.0
+    case.reset()
+    for k in range(steps):
+        jp = robot.joint_positions(case.q)
+        case.step(setup.targets(k))
+        u = case.u
+        ahead = np.where(u > 0, upper - jp, jp - lower)[robot.positional]
+        with np.errstate(divide="ignore"):
+            position = max(position, float(np.max(np.abs(u[robot.positional]) * DT
+                                                  / (LIMIT_GAIN * ahead))))  # fmt: skip
+        velocity = max(velocity, float(np.max(np.abs(u) / robot.velocity_limits)))
+    case.reset()
+    return position, velocity
+
+
 # ---------------------------------------------------------------------- checks
 def reference_case(cases: list[Case], problem: str) -> Case:
     """wholebody's HQP (daqp) case of the problem: the exact QP solution, the yardstick."""
@@ -535,7 +849,7 @@ def reference_case(cases: list[Case], problem: str) -> Case:
                 and c.backend == "daqp")  # fmt: skip
 
 
-def probe_targets(setup: Setup) -> tuple[np.ndarray, np.ndarray]:
+def probe_targets(setup: Setup | RobotSetup) -> tuple[np.ndarray, np.ndarray]:
     """Hand targets one typical step away from the home pose (the reference's peak step:
     1.8 mm along the reach, 3.8 mrad of pitch), for the one-step comparison."""
     out = []
@@ -550,7 +864,7 @@ def probe_targets(setup: Setup) -> tuple[np.ndarray, np.ndarray]:
     return tuple(out)  # type: ignore[return-value]
 
 
-def one_step(setup: Setup, case: Case) -> np.ndarray:
+def one_step(setup: Setup | RobotSetup, case: Case) -> np.ndarray:
     """The case's velocity (base twist, joint speeds) for :func:`probe_targets` from home."""
     case.reset()
     case.step(probe_targets(setup))
@@ -559,7 +873,9 @@ def one_step(setup: Setup, case: Case) -> np.ndarray:
     return v
 
 
-def run_check(setup: Setup, cases: list[Case], steps: int) -> dict[str, dict[str, float]]:
+def run_check(
+    setup: Setup | RobotSetup, cases: list[Case], steps: int
+) -> dict[str, dict[str, float]]:
     """Each case alone over ``steps`` steps of the reference; per case the largest distance
     (m) of each hand from the reference wholebody case's hand at every step, the largest
     tracking error (m) and, for one step from home towards :func:`probe_targets`, the

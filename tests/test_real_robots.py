@@ -1,4 +1,4 @@
-"""Real robots as they ship in example-robot-data (``pip install 'wholebody[robots]'``):
+"""Real robots as they ship in example-robot-data (``pip install '.[robots]'``):
 TIAGo++, TALOS's upper body, Panda and UR5 load from their own URDFs through their
 robot.toml, with exact Jacobians, and their scenarios track within a millimetre on both
 backends without a limit violation."""
@@ -16,7 +16,7 @@ from wholebody.robot.urdf import example_robot_data_share
 
 pytestmark = pytest.mark.skipif(
     example_robot_data_share() is None,
-    reason="example-robot-data is not installed (pip install 'wholebody[robots]')",
+    reason="example-robot-data is not installed (pip install '.[robots]' from the checkout)",
 )
 
 # name: (actuated velocities, velocities of the URDF as shipped, tool frames)
@@ -81,11 +81,11 @@ def test_the_catalogue_marks_robots_whose_package_is_missing(monkeypatch, capsys
     status = {name: (available, text) for name, text, available in robot_catalogue()}
     assert status["mobile_humanoid"][0]
     assert not status["tiago_dual"][0]
-    assert "pip install 'wholebody[robots]'" in status["tiago_dual"][1]
+    assert "pip install '.[robots]' from the checkout" in status["tiago_dual"][1]
     assert main(["info", "--list"]) == 0
     out = capsys.readouterr().out
     assert "tiago_dual" in out and "unavailable" in out
-    with pytest.raises(wholebody.ConfigError, match=r"wholebody\[robots\]"):
+    with pytest.raises(wholebody.ConfigError, match=r"pip install .\.\[robots\]."):
         wholebody.load_robot("panda")
 
 

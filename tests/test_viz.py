@@ -139,7 +139,7 @@ def _robot_data_installed() -> bool:
     return example_robot_data_share() is not None
 
 
-@pytest.mark.skipif(not _robot_data_installed(), reason="needs pip install 'wholebody[robots]'")
+@pytest.mark.skipif(not _robot_data_installed(), reason="needs pip install '.[robots]'")
 def test_a_shipped_robot_is_drawn_with_its_meshes(tmp_path, capsys):
     """TIAGo++'s meshes live in example-robot-data (package:// paths): found, reduced with
     the locked joints, and drawn."""

@@ -9,8 +9,8 @@ read: ``<transmission>``, ``<gazebo>`` and other extensions are ignored (a trans
 
 ``package://PKG/rest`` (a ROS package path) resolves to ``DIR/PKG/rest`` for the first
 directory ``DIR`` in: the robot.toml's ``package_dirs``, ``$ROS_PACKAGE_PATH``, and the share
-directory of the installed ``example-robot-data`` package (``pip install wholebody[robots]``),
-which holds the package ``example-robot-data``.
+directory of the installed ``example-robot-data`` package (``pip install '.[robots]'`` from
+a checkout), which holds the package ``example-robot-data``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ __all__ = ["Mimic", "UrdfInfo", "example_robot_data_share", "read_urdf", "resolv
 
 PACKAGE = "package://"
 ROBOT_DATA = "example-robot-data"
-ROBOT_DATA_HINT = "pip install 'wholebody[robots]' (the example-robot-data package)"
+ROBOT_DATA_HINT = "pip install '.[robots]' from the checkout (the example-robot-data package)"
 
 
 @dataclass(frozen=True)

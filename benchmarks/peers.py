@@ -69,8 +69,9 @@ Real robots (``ROBOTS``, for ``benchmarks/control_step.py``): the same problem o
 against pink only, pink on the Pinocchio model wholebody runs on (``robot.model``); TIAGo++'s
 differential base is given to pink as :class:`RobotSetup` says.
 
-Peers come from the optional ``bench`` extra (``pip install wholebody[bench]``); a missing
-one is skipped with a line saying so. ``tests/test_peers.py`` imports the builders below.
+Peers come from the optional ``bench`` extra (``pip install '.[bench]'`` from the
+checkout); a missing one is skipped with a line saying so. ``tests/test_peers.py`` imports
+the builders below.
 """
 
 from __future__ import annotations
@@ -547,7 +548,7 @@ def build_cases(setup: Setup, say: Callable[[str], None] = print) -> list[Case]:
         if library != "wholebody":
             why = peer_available(library)
             if why is not None:
-                say(f"skipped {library}: not installed ({why}); pip install wholebody[bench]")
+                say(f"skipped {library}: not installed ({why}); pip install '.[bench]'")
                 continue
         for problem in problems:
             for backend in backends:

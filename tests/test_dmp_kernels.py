@@ -30,8 +30,8 @@ from wholebody.planning import (
     minimum_jerk_scaling,
     sphere,
 )
-from wholebody.planning import dmp as dmp_module
-from wholebody.planning.dmp import reference_implementation
+from wholebody.planning.dmp import adaptive, reference_implementation
+from wholebody.planning.dmp.compiled import kernels as active_kernels
 from wholebody.planning.obstacles import kernel_rows
 
 PATH_TOL = 1e-9  # m: the compiled and the reference paths (they agree to ~1e-13)
@@ -62,9 +62,9 @@ def both_rollouts(dmp: DMP, obstacles, **kw) -> tuple[tuple, tuple]:
     x0, g, T = dmp._targets(kw.pop("start", None), kw.pop("goal", None), kw.pop("duration", None))
     N = kw.pop("samples", 160)
     args = (N, x0, g, T, tuple(obstacles), kw.pop("tolerance", 1e-3), kw.pop("max_substeps", 256))
-    compiled = dmp._rollout_obstacles(*args, dmp_module._kernels())
-    reference = dmp._rollout_obstacles(*args, None)
-    return compiled, reference
+    fast = adaptive.rollout_obstacles(dmp, *args, active_kernels())
+    reference = adaptive.rollout_obstacles(dmp, *args, None)
+    return fast, reference
 
 
 def assert_same_rollout(a, b, tol: float = PATH_TOL) -> None:
@@ -80,7 +80,7 @@ def assert_same_rollout(a, b, tol: float = PATH_TOL) -> None:
 def test_the_kernels_constants_are_the_references() -> None:
     from wholebody.planning import obstacles
 
-    assert kernels._ACCEPT_AT_LIMIT == dmp_module._ACCEPT_AT_LIMIT
+    assert kernels._ACCEPT_AT_LIMIT == adaptive.ACCEPT_AT_LIMIT
     assert kernels._Q_FLOOR == obstacles._Q_FLOOR
 
 
@@ -88,19 +88,19 @@ def test_the_switch_selects_the_implementation(scene: DMP, monkeypatch) -> None:
     """Compiled by default; the reference inside ``reference_implementation()`` (nested
     blocks restore the outer choice); a stepper keeps the one it was built with."""
     calls = []
-    original = dmp_module._ObstacleIntegrator.rollout
-    monkeypatch.setattr(dmp_module._ObstacleIntegrator, "rollout",
+    original = adaptive.ObstacleIntegrator.rollout
+    monkeypatch.setattr(adaptive.ObstacleIntegrator, "rollout",
                         lambda self, *a: calls.append(1) or original(self, *a))  # fmt: skip
     pots = paper_potentials()
     scene.rollout(160, obstacles=pots)
     assert calls == []
     with reference_implementation():
-        assert dmp_module._kernels() is None
+        assert active_kernels() is None
         with reference_implementation(False):
-            assert dmp_module._kernels() is kernels
+            assert active_kernels() is kernels
         scene.rollout(160, obstacles=pots)
         stepper = scene.stepper(obstacles=pots)
-    assert calls == [1] and dmp_module._kernels() is kernels
+    assert calls == [1] and active_kernels() is kernels
     assert stepper._kernels is None and scene.stepper(obstacles=pots)._kernels is kernels
 
 

@@ -537,7 +537,7 @@ def test_warm_start_changes_nothing_but_time(humanoid, rng, method):
         q = humanoid.integrate(q, a.u, DT)
     assert qps >= 5
     if method == "native":
-        assert warm._native_model is not None  # one daqp workspace, kept
+        assert warm._native.model is not None  # one daqp workspace, kept
     else:
         assert len(warm._engines) and warm._engines[0].setups <= 2
 

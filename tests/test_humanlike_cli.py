@@ -13,10 +13,10 @@ import pytest
 pytest.importorskip("torch")
 pytest.importorskip("sklearn")
 
+from wholebody.arm.network import NetworkStiffness
 from wholebody.errors import DataError
 from wholebody.humanlike.cli import add_stiffness_parser
 from wholebody.humanlike.dataset import StiffnessDataset
-from wholebody.humanlike.network import NetworkStiffness
 from wholebody.resources import robots_dir
 
 

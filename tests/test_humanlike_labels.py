@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wholebody.arm.angle import arm_angle
 from wholebody.humanlike.arm_angle_model import elbow_on_circle
-from wholebody.humanlike.arm_geometry import arm_angle
 from wholebody.humanlike.labels import (
     frame_rules,
     gravity_energy,

@@ -10,12 +10,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from wholebody.arm.network import NetworkStiffness, default_stiffness  # noqa: E402
 from wholebody.errors import DataError  # noqa: E402
 from wholebody.humanlike.arm_angle_model import CALIBRATED  # noqa: E402
 from wholebody.humanlike.dataset import build_dataset  # noqa: E402
 from wholebody.humanlike.evaluation import regression_scores  # noqa: E402
 from wholebody.humanlike.mapping import ArmParameters  # noqa: E402
-from wholebody.humanlike.network import NetworkStiffness, default_stiffness  # noqa: E402
 from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS, generate_synthetic  # noqa: E402
 from wholebody.humanlike.training import TrainingConfig, torch_module, train_network  # noqa: E402
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from wholebody.arm.angle import arm_angle
 from wholebody.errors import DataError
-from wholebody.humanlike.arm_geometry import arm_angle
 from wholebody.humanlike.recordings import (
     load_csv_recording,
     load_npz_recording,

@@ -7,6 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
+from wholebody.arm.angle import arm_angle
 from wholebody.humanlike.arm_angle_model import (
     CALIBRATED,
     HEAD_CENTRE,
@@ -15,7 +16,6 @@ from wholebody.humanlike.arm_angle_model import (
     kim_arm_angle,
     summarise_arm_angles,
 )
-from wholebody.humanlike.arm_geometry import arm_angle
 from wholebody.humanlike.mapping import CANONICAL_SIDE, ArmParameters, lab_to_canonical
 from wholebody.humanlike.pipeline import make_dataset
 from wholebody.humanlike.recordings import (

@@ -1,23 +1,52 @@
-"""The README's Python examples run as written, in order, in one namespace."""
+"""The README's Python examples: each runs on its own (a fresh namespace, as a reader would
+paste it) and prints what it shows."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 README = Path(__file__).resolve().parents[1] / "README.md"
+BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
 
 
-def test_readme_python_examples_run(monkeypatch):
+def run_block(code: str, name: str) -> tuple[dict, str]:
+    namespace: dict = {"__name__": "__readme__"}
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, name, "exec"), namespace)
+    return namespace, out.getvalue()
+
+
+@pytest.mark.parametrize("index", range(len(BLOCKS)))
+def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
-    assert len(blocks) >= 3
-    namespace: dict = {}
-    for i, code in enumerate(blocks):
-        exec(compile(code, f"README.md python block {i + 1}", "exec"), namespace)
-    # the reach example really reaches the paper's goal
-    log, goal = namespace["log"], namespace["goal"]
-    assert abs(log.frame_positions["right_tool"][-1] - goal[:3, 3]).max() < 1e-3
-    assert namespace["path"].positions.shape == (160, 3)
-    # the far reach gets out of its local minimum with one retreat
-    assert len(namespace["run"].meta["retreats"]) == 1 and namespace["miss"] < 1e-3
+    _, printed = run_block(BLOCKS[index], f"README.md python block {index + 1}")
+    assert printed.strip(), f"block {index + 1} prints nothing"
+
+
+def test_the_examples_do_what_they_say(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False}
+    for i, code in enumerate(BLOCKS):
+        ns, _ = run_block(code, f"README.md python block {i + 1}")
+        if "hand.set_target(goal)" in code:  # the quickstart reaches its goal
+            q, goal, robot = ns["q"], ns["goal"], ns["robot"]
+            assert np.linalg.norm(robot.frame_pose(q, "right_tool")[:3, 3] - goal[:3, 3]) < 1e-3
+            found["quickstart"] = True
+        if "the paper's single-arm reach" in code:
+            log, goal = ns["log"], ns["goal"]
+            assert abs(log.frame_positions["right_tool"][-1] - goal[:3, 3]).max() < 1e-3
+            found["reach"] = True
+        if "DMP.fit" in code:
+            assert ns["path"].positions.shape == (160, 3)
+            found["dmp"] = True
+        if "StallRecovery(robot, stack)" in code:  # out of its local minimum, one retreat
+            assert len(ns["run"].meta["retreats"]) == 1 and ns["miss"] < 1e-3
+            found["recovery"] = True
+    assert all(found.values()), found

@@ -620,9 +620,9 @@ def test_posture_error_of_an_endless_joint_is_wrapped(tmp_path):
 def test_a_robot_loaded_from_its_own_directory_finds_its_network_there(tmp_path):
     """A user's robot keeps its trained network beside its robot.toml; the bundled one of
     the same name is not taken instead, and a missing one says where it was looked for."""
+    from wholebody.arm.stiffness import ConstantStiffness
     from wholebody.errors import DataError
     from wholebody.humanlike import NetworkStiffness, default_stiffness
-    from wholebody.humanlike.stiffness import ConstantStiffness
     from wholebody.presets import default_stiffness as preset
 
     d = tmp_path / "mobile_humanoid"

@@ -194,7 +194,8 @@ planner = "hold"
     run = run_scenario(load_scenario(path))
     assert plots.plotted_groups(run.log) == ["left_arm", "right_arm", "torso"]
     table = outputs.comparison_markdown(outputs.comparison([run]), "torso")
-    assert "waist" not in table and "| method | frequency (Hz) |" in table
+    assert "waist" not in table
+    assert "| method | median step (us) | 1 / median step (Hz) |" in table
     outputs.write_run(run, tmp_path / "out")  # the figures draw on this robot too
 
 
@@ -264,3 +265,61 @@ def test_a_bad_start_is_refused_by_name(tmp_path, start, parts, when):
         run_scenario(spec)  # checked against the robot before the first step
     for part in [str(path), *parts]:
         assert part in str(info.value), info.value
+
+
+def test_the_step_rate_is_one_over_the_median_step_everywhere(tmp_path):
+    """metrics.json, the comparison row and its table give the median step and 1/median: a
+    slow first step (kernels loading) moves a mean, not them; no 1/mean is reported."""
+    from wholebody.control.metrics import summary
+    from wholebody.scenarios import outputs
+
+    run = run_scenario(load_scenario(with_start(tmp_path, None)))
+    run.log.step_time = np.array([0.5, 0.002, 0.003, 0.001, 0.004])  # s: a slow first step
+    m = summary(run.log)
+    assert m["step_time_us"]["median"] == pytest.approx(3000.0)
+    assert m["median_step_rate_hz"] == pytest.approx(1 / 0.003)  # 333 Hz; 1/mean would be 9.9
+    assert "frequency_hz" not in m
+    run.metrics.update(m)
+    (row,) = outputs.comparison([run])
+    assert row["step_time_us_median"] == pytest.approx(3000.0)
+    assert row["median_step_rate_hz"] == pytest.approx(1 / 0.003)
+    table = outputs.comparison_markdown([row], "t").splitlines()
+    header = [c.strip() for c in table[2].split("|")[1:-1]]
+    cells = [c.strip() for c in table[4].split("|")[1:-1]]
+    assert cells[header.index("median step (us)")] == "3000"
+    assert cells[header.index("1 / median step (Hz)")] == "333"
+
+
+def test_progress_in_a_log_is_plain_lines_not_a_bar(tmp_path, capsys):
+    """Without a terminal (capsys: stderr is no TTY) a run's progress is plain lines, never
+    tqdm's carriage-return redraws, which a log keeps as one huge line."""
+    run_scenario(load_scenario(with_start(tmp_path, None)), progress=True)
+    err = capsys.readouterr().err
+    assert "\r" not in err and "small: 2/2 steps in" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_progress_is_a_bar_on_a_terminal_and_periodic_lines_elsewhere():
+    import io
+
+    from tqdm import tqdm
+
+    from wholebody.control.controller import _progress
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    bar = _progress(10, True, "x", stream=Terminal())
+    assert isinstance(bar, tqdm)
+    bar.close()
+    assert _progress(10, False) is None
+    log = io.StringIO()
+    lines = _progress(4, True, "run", every=0.0, stream=log)  # a line at every update
+    lines.set_postfix_str("reach")
+    for _ in range(4):
+        lines.update(1)
+    lines.close()
+    out = log.getvalue().splitlines()
+    assert out[:3] == [f"run: {k}/4 steps ({25 * k} %), 0 s, reach" for k in (1, 2, 3)]
+    assert out[3].startswith("run: 4/4 steps in ") and len(out) == 4

@@ -158,10 +158,12 @@ def test_objective_weight_and_task_weights_are_checked(humanoid):
     with pytest.raises(WholebodyError, match="objective_weight"):
         Stack(humanoid, [Level([energy], objective_weight=-1.0)])
     state = humanoid.update(humanoid.home())
-    for bad in (-1.0, np.nan, [1.0, 2.0]):
-        stack = Stack(humanoid, [[PostureTask(humanoid, weight=bad)]])
+    for bad in (-1.0, np.nan, "heavy", True, [[1.0]]):  # refused when the task is made
         with pytest.raises(DimensionError, match="posture: weight"):
-            stack.evaluate(state, DT)
+            PostureTask(humanoid, weight=bad)
+    stack = Stack(humanoid, [[PostureTask(humanoid, weight=[1.0, 2.0])]])  # 2 of 19 rows
+    with pytest.raises(DimensionError, match="posture: weight"):
+        stack.evaluate(state, DT)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, 1e300])

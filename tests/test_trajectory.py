@@ -166,9 +166,9 @@ def test_inputs_are_validated() -> None:
     nan = np.eye(4)
     nan[0, 3] = np.nan
     cases = [
-        (np.eye(3), "expected shape \\(4, 4\\)"),
+        (np.eye(3), "4x4 pose, got shape \\(3, 3\\)"),
         (bad_rot, "not a rotation matrix"),
-        (reflect, "reflection"),
+        (reflect, "det < 0"),
         (nan, "NaN"),
     ]
     for T, msg in cases:
@@ -180,3 +180,28 @@ def test_inputs_are_validated() -> None:
         HoldTrajectory(good, 0.0)
     with pytest.raises(WholebodyError, match="times"):
         HoldTrajectory(good, 1.0).sample_many(np.array([[0.0, 1.0]]))
+
+
+def test_the_planner_and_the_tasks_accept_the_same_poses(humanoid) -> None:
+    """One pose validator: a last row 1e-8 off or a rotation 1e-5 off orthonormal is refused
+    by a trajectory and by a frame task alike; 1e-12 off is accepted by both."""
+    from wholebody.tasks import FrameTask
+
+    task = FrameTask(humanoid, "right_tool")
+    for delta, ok in ((1e-8, False), (1e-12, True)):
+        T = np.eye(4)
+        T[3, 0] = delta
+        outcomes = []
+        for make in (HoldTrajectory, task.set_target):
+            try:
+                make(T, 1.0) if make is HoldTrajectory else make(T)
+                outcomes.append(True)
+            except DimensionError:
+                outcomes.append(False)
+        assert outcomes == [ok, ok], (delta, outcomes)
+    T = np.eye(4)
+    T[0, 1] = 1e-5
+    with pytest.raises(DimensionError, match="not a rotation matrix"):
+        HoldTrajectory(T, 1.0)
+    with pytest.raises(DimensionError, match="not a rotation matrix"):
+        task.set_target(T)

@@ -186,3 +186,106 @@ def test_missing_meshes_are_left_out_and_said_in_one_line(tmp_path, capsys):
         assert len([line for line in err if "meshes not drawn" in line]) == 1
     finally:
         scene.close()
+
+
+def test_meshcat_does_not_print_its_url(scene, capsys):
+    """meshcat prints its URL on connecting; the command line prints it once itself."""
+    from wholebody.viz.scene import Scene
+
+    capsys.readouterr()
+    other = Scene(scene.robot, zmq_url=scene.server.zmq_url)  # attached: no second server
+    assert other.url == scene.url
+    out = capsys.readouterr().out
+    assert "You can open the visualizer" not in out and scene.url not in out
+
+
+def _in_view(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg: float,
+             aspect: float) -> np.ndarray:  # fmt: skip
+    """Whether each point is inside the view of a camera at ``eye`` looking at ``target``
+    (z up), vertical field of view ``fov_deg``, width / height ``aspect``."""
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = points - eye
+    depth = rel @ forward
+    tan_v = np.tan(np.radians(fov_deg) / 2)
+    return (
+        (depth > 0)
+        & (np.abs(rel @ up) <= tan_v * depth)
+        & (np.abs(rel @ right) <= tan_v * aspect * depth)
+    )
+
+
+def test_the_camera_frames_a_seven_metre_drive():
+    """The carry drives 7 m: every corner of its extent is in the camera's view, which the
+    default camera (at (3, 0, 1) looking at the origin) is not."""
+    from wholebody.viz.scene import CAMERA_FOV_DEG, camera_view
+
+    lo, hi = np.array([-2.0, -7.3, 0.0]), np.array([2.0, 0.6, 1.6])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])  # fmt: skip
+    target, offset = camera_view(corners)
+    assert _in_view(corners, target + offset, target, CAMERA_FOV_DEG, 4 / 3).all()
+    assert _in_view(corners, target + offset, target, CAMERA_FOV_DEG, 1.0).all()  # square page
+    default = _in_view(corners, np.array([3.0, 0.0, 1.0]), np.zeros(3), CAMERA_FOV_DEG, 4 / 3)
+    assert not default.all()
+    near, _ = camera_view(np.zeros((1, 3)))
+    assert np.linalg.norm(camera_view(np.zeros((1, 3)))[1]) >= 2.5 and np.allclose(near, 0)
+
+
+def test_frame_moves_the_scene_under_the_camera(scene, monkeypatch):
+    """meshcat 0.3's camera orbits the world origin: framing shifts the scene's roots (the
+    robot and props, the grid, the axes) by minus the target and puts the camera at its
+    offset (three.js's y-up axes)."""
+    from wholebody.viz.scene import camera_view
+
+    sent = []
+    window = type(scene.viewer.window)
+    send = window.send
+    monkeypatch.setattr(
+        window, "send", lambda self, cmd: sent.append(cmd.lower()) or send(self, cmd)
+    )
+    points = np.array([[0.0, 0.0, 0.0], [0.0, -7.0, 1.0]])
+    scene.clear()
+    scene.frame(points)
+    target, offset = camera_view(points)
+    np.testing.assert_allclose(scene.target, target)
+    moved = {c["path"]: np.array(c["matrix"]).reshape(4, 4).T for c in sent
+             if c["type"] == "set_transform"}  # fmt: skip
+    for root in ("/meshcat", "/Grid", "/Axes"):
+        np.testing.assert_allclose(moved[root][:3, 3], -target)
+        np.testing.assert_allclose(moved[root][:3, :3], np.eye(3))
+    (camera,) = [c for c in sent if c["type"] == "set_property"]
+    assert camera["path"] == "/Cameras/default/rotated/<object>"
+    np.testing.assert_allclose(camera["value"], [offset[0], offset[2], -offset[1]])
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed (.ci/run "
+                    "installs it)")  # fmt: skip
+def test_the_replay_page_opens_without_a_server_and_frames_the_run(tmp_path):
+    """The page saved by save_html draws the robot from a file, the server gone; framed on
+    the robot and a marker 7 m to its right, both are in view (the default camera shows no
+    marker)."""
+    from wholebody.viz.scene import Scene
+
+    s = Scene(wholebody.load_robot("mobile_humanoid"))
+    try:
+        q = s.robot.home()
+        s.show(q)
+        s.marker("far", [0.0, -7.0, 0.5], color="#ff0000", radius=0.2)
+        unframed = s.save_html(tmp_path / "unframed.html")
+        s.frame(q=q)
+        page = s.save_html(tmp_path / "replay.html")
+    finally:
+        s.close()
+    assert s.server.process.poll() is not None  # no server from here on
+
+    def red(img: np.ndarray) -> int:
+        return int(np.sum((img[..., 0] > 0.7) & (img[..., 1] < 0.3) & (img[..., 2] < 0.3)))
+
+    framed = _screenshot(page.as_uri(), tmp_path)
+    middle = framed[100:500, 100:700].reshape(-1, 3)
+    assert len(np.unique((middle * 255).astype(int), axis=0)) > 300, "robot not drawn"
+    assert red(framed) > 50, "the far marker is out of view"
+    assert red(_screenshot(unframed.as_uri(), tmp_path)) == 0

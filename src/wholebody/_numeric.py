@@ -1,11 +1,18 @@
 """Small-array helpers for the control loop's hot paths (tasks and solvers).
 
 On arrays of a few dozen entries numpy's Python-level wrappers (``ndarray.all()``,
-``np.count_nonzero``) cost more than the work; ``count_nonzero`` here is numpy's C function
-without its wrapper (numpy >= 2), or the public one on older numpy.
+``np.count_nonzero``, ``np.ones``) cost more than the work; the helpers here are the C-level
+equivalents: ``count_nonzero`` is numpy's C function without its wrapper (numpy >= 2), or
+the public one on older numpy, and the others are built on it or on a dot product.
+
+The solvers' linear algebra (``normal_solve``, ``NORMAL_KAPPA``, ``REFINE_KAPPA``) lives in
+:mod:`wholebody.solvers.linalg`; it is still importable from here.
 """
 
 from __future__ import annotations
+
+import math
+from typing import Any
 
 import numpy as np
 
@@ -16,13 +23,27 @@ try:
 except ImportError:  # pragma: no cover - numpy < 2
     count_nonzero = np.count_nonzero
 
-__all__ = ["NORMAL_KAPPA", "REFINE_KAPPA", "count_nonzero", "float_array", "normal_solve"]
+__all__ = [
+    "all_finite",
+    "all_true",
+    "any_true",
+    "count_nonzero",
+    "entry_sum",
+    "float_array",
+    "ones",
+]
 
-NORMAL_KAPPA = 1e4
-"""Largest condition bound ``kappa_F`` for which a solver may use a tall level's normal
-equations (:func:`normal_solve`) instead of a QR or an SVD."""
-REFINE_KAPPA = 1e3
-"""Above this ``kappa_F``, :func:`normal_solve` refines its answer once."""
+_MOVED = ("NORMAL_KAPPA", "REFINE_KAPPA", "normal_solve")  # now in wholebody.solvers.linalg
+
+
+def __getattr__(name: str) -> Any:
+    """The names moved to :mod:`wholebody.solvers.linalg`, imported on first use (a
+    module-level import would be circular: the solvers import this module)."""
+    if name in _MOVED:
+        from wholebody.solvers import linalg
+
+        return getattr(linalg, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def float_array(value: object, what: str) -> np.ndarray:
@@ -37,19 +58,39 @@ def float_array(value: object, what: str) -> np.ndarray:
     return arr.astype(float)
 
 
-def normal_solve(M: np.ndarray, H: np.ndarray, c: np.ndarray, kappa2: float) -> np.ndarray:
-    """The least-squares solution of a tall ``M`` (m x n, full column rank) from ``H`` with
-    ``(M^T M)^-1 = H^T H`` (``H = L^-1`` for the Cholesky factor ``M^T M = L L^T``):
-    ``y = H^T H M^T c`` (``c``: (m,) or (m, k)), refined once where ``kappa2``, the squared
-    condition bound ``kappa_F^2`` of ``M``, exceeds ``REFINE_KAPPA^2``.
+def all_true(mask: np.ndarray) -> bool:
+    """``mask.all()``."""
+    return count_nonzero(mask) == mask.size
 
-    Relative error: up to about ``kappa_F^2 eps`` unrefined, below 2.2e-10 for
-    ``kappa_F <= 1e3`` (1.2e-10 measured at kappa 900 with one small singular value); refined,
-    a few 1e-11 at worst (3e-11 measured at kappa 3000 with a large residual; a QR reaches
-    1e-13). A handful of small products, where LAPACK's QR routines spend their time in
-    per-column BLAS calls."""
-    Ht, Mt = H.T, M.T
-    y = Ht.dot(H.dot(Mt.dot(c)))
-    if kappa2 > REFINE_KAPPA * REFINE_KAPPA:
-        y += Ht.dot(H.dot(Mt.dot(c - M.dot(y))))
-    return y
+
+def any_true(mask: np.ndarray) -> bool:
+    """``mask.any()``."""
+    return count_nonzero(mask) > 0
+
+
+def all_finite(x: np.ndarray) -> bool:
+    """``np.isfinite(x).all()`` for a vector: ``x . x`` is finite iff every entry is, unless
+    it overflows (then the entry-wise test decides)."""
+    return math.isfinite(x.dot(x)) or all_true(np.isfinite(x))
+
+
+_ONES: dict[int, np.ndarray] = {}
+
+
+def entry_sum(a: np.ndarray) -> float:
+    """Sum of all entries of ``a``, as a dot product with ones (a BLAS call: cheaper than
+    ``np.add.reduce``; a NaN or inf entry makes it non-finite all the same)."""
+    f = a.ravel()
+    n = f.shape[0]
+    ones_n = _ONES.get(n)
+    if ones_n is None:
+        ones_n = _ONES[n] = np.ones(n)
+        ones_n.setflags(write=False)
+    return float(f.dot(ones_n))
+
+
+def ones(n: int) -> np.ndarray:
+    """``np.ones(n)`` (a fresh array) without its Python wrapper."""
+    out = np.empty(n)
+    out.fill(1.0)
+    return out

@@ -1,16 +1,81 @@
-"""The ``wholebody`` command line."""
+"""The ``wholebody`` command line.
+
+Building the parser imports nothing heavy (no Pinocchio, no kernels, no torch): ``--help``
+and argument errors answer at once, and each command imports what it needs when it runs.
+The ``stiffness`` subcommands' parser lives in :mod:`wholebody.humanlike.cli`, whose import
+costs as much as a run's; it is built only when the command is ``stiffness`` (a placeholder
+with the same one-line help stands in for it otherwise).
+"""
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
 from wholebody.errors import ConfigError, WholebodyError
 
-__all__ = ["main"]
+__all__ = ["BACKENDS", "build_parser", "main"]
+
+BACKENDS = ("projection", "pinv", "hqp")
+"""The scenario backends (:data:`wholebody.scenarios.spec.BACKENDS`, repeated here so that
+building the parser imports no solver; a test keeps the two equal)."""
+
+STIFFNESS_HELP = "human-like stiffness: dataset, network training, report"
+"""The ``stiffness`` command's one-line help (the same as :mod:`wholebody.humanlike.cli`'s;
+a test keeps them equal)."""
+
+FRAMES_SHOWN = 40
+"""``info`` lists at most this many link frames unless ``--frames`` is given."""
+
+
+def _frame_kinds(robot) -> dict[str, list[str]]:
+    """The names :meth:`Robot.frame` accepts, by kind: ``links`` (URDF links), ``declared``
+    (``[frames]`` of robot.toml) and ``joints`` (joints, fixed joints included), in the
+    model's order."""
+    import pinocchio as pin
+
+    declared = set(robot.config.frames)
+    kinds: dict[str, list[str]] = {"links": [], "declared": [], "joints": []}
+    for f in robot.model.frames:
+        if f.name == "universe":
+            continue
+        if f.name in declared:
+            kinds["declared"].append(f.name)
+        elif f.type == pin.FrameType.BODY:
+            kinds["links"].append(f.name)
+        elif f.type in (pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT):
+            kinds["joints"].append(f.name)
+    return kinds
+
+
+def _wrapped(label: str, names: list[str]) -> str:
+    """``label`` then the comma-separated ``names``, wrapped at 100 columns."""
+    return textwrap.fill(", ".join(names), width=100, initial_indent=f"  {label}: ",
+                         subsequent_indent="    ")  # fmt: skip
+
+
+def frames_text(robot, full: bool = False) -> str:
+    """The frames a task can name: the arms' tool frames (the hand tasks' frames), then the
+    link frames (at most :data:`FRAMES_SHOWN` unless ``full``) and the declared ones; with
+    ``full``, also the joint frames."""
+    kinds = _frame_kinds(robot)
+    tools = [f"{arm.tool.name} (arm {name})" for name, arm in robot.arms.items()]
+    lines = [_wrapped("tool frames (hand tasks)", tools or ["none: no [arms] in robot.toml"])]
+    links = kinds["links"]
+    shown = links if full or len(links) <= FRAMES_SHOWN else links[:FRAMES_SHOWN]
+    more = len(links) - len(shown)
+    tail = [f"... {more} more (wholebody info {robot.name} --frames)"] if more else []
+    lines.append(_wrapped(f"link frames ({len(links)})", shown + tail))
+    if kinds["declared"]:
+        lines.append(_wrapped(f"declared frames ({len(kinds['declared'])})", kinds["declared"]))
+    if full:
+        lines.append(_wrapped(f"joint frames ({len(kinds['joints'])})", kinds["joints"]))
+    else:
+        lines.append("  (joint names are frames too; --frames lists every frame)")
+    return "\n".join(lines)
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -20,8 +85,17 @@ def _info(args: argparse.Namespace) -> int:
         for name, text, available in robot_catalogue():
             print(f"{name:<18} {text if available else 'unavailable: ' + text}")
         return 0
-    print(load_robot(args.robot).summary())
+    robot = load_robot(args.robot)
+    print(robot.summary())
+    print(frames_text(robot, full=args.frames))
     return 0
+
+
+def bundled_scenarios() -> list[str]:
+    """The names of the scenario files that ship with the package (``tasks/*.toml``)."""
+    from wholebody.resources import tasks_dir
+
+    return sorted(p.stem for p in tasks_dir().glob("*.toml"))
 
 
 def _scenario_path(name: str) -> Path:
@@ -34,12 +108,46 @@ def _scenario_path(name: str) -> Path:
     bundled = tasks_dir() / (name if name.endswith(".toml") else f"{name}.toml")
     if bundled.is_file():
         return bundled
-    names = sorted(p.stem for p in tasks_dir().glob("*.toml"))
-    raise ConfigError(f"no scenario {name!r}: expected a file or one of {', '.join(names)}")
+    names = ", ".join(bundled_scenarios())
+    raise ConfigError(f"no scenario {name!r}: expected a file or one of {names}")
 
 
-def _display_available() -> bool:
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+def _start_viewer(spec):
+    """A MeshCat scene of the scenario at its start, framed on the start posture, the props
+    and the phases' goals (the run's extent before it runs), and its live view."""
+    import numpy as np
+
+    from wholebody.scenarios.runner import scenario_robot, start_configuration
+    from wholebody.scenarios.visual import LiveView, draw_objects
+    from wholebody.viz.scene import Scene
+
+    scene = Scene(scenario_robot(spec))
+    draw_objects(scene, spec)
+    q0 = start_configuration(spec, scene.robot)
+    scene.show(q0)
+    goals = [h.goal for p in spec.phases for h in p.hands.values() if h.goal is not None]
+    scene.frame(np.array(goals, dtype=float).reshape(-1, 3), q=q0)
+    print(f"MeshCat (localhost only): {scene.url} (the run is drawn live, at its real pace)")
+    return scene, LiveView(scene, spec.dt)
+
+
+def _replay(scene, run, out: Path, hold: bool) -> None:
+    """Load the replay, save it as a standalone page and, on a terminal, keep the viewer
+    open until Enter."""
+    from wholebody.scenarios.visual import show_run
+
+    show_run(scene, run)
+    page = scene.save_html(out / "replay.html")
+    print(f"  replay            {page} (a standalone page: open it in a browser, no server)")
+    if hold:
+        print(f"MeshCat at {scene.url} replays the run (the page's Animations controls replay "
+              "it); press Enter here to close the viewer and exit")  # fmt: skip
+        try:
+            input()
+        except (EOFError, KeyboardInterrupt):  # Ctrl-C or Ctrl-D leave the viewer too
+            print()
+    else:
+        print("no terminal to wait on: the MeshCat server is closed; open the replay page")
 
 
 def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) -> int:
@@ -47,25 +155,28 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     from wholebody.scenarios.outputs import write_run
 
     spec = load_scenario(path)
-    scene = live = None
-    if viz:
-        from wholebody.scenarios.runner import scenario_robot, start_configuration
-        from wholebody.scenarios.visual import LiveView, draw_objects, show_run
-        from wholebody.viz.scene import Scene
+    scene, live = _start_viewer(spec) if viz else (None, None)
+    try:
+        run = run_scenario(spec, backend=backend, progress=True, on_step=live)
+        files = write_run(run, out)
+        _report_run(run, files)
+        if scene is not None:
+            _replay(scene, run, out, hold)
+    finally:
+        if scene is not None:
+            scene.close()
+    return 0
 
-        scene = Scene(scenario_robot(spec))
-        print(f"MeshCat (localhost only): {scene.url}")
-        draw_objects(scene, spec)
-        scene.show(start_configuration(spec, scene.robot))
-        live = LiveView(scene, spec.dt)
-    run = run_scenario(spec, backend=backend, progress=True, on_step=live)
-    files = write_run(run, out)
+
+def _report_run(run, files: dict[str, Path]) -> None:
+    """The run's summary lines: steps, control step timing, safety counts, worst hand error
+    per phase, the files written."""
     m = run.metrics
     print(
-        f"{spec.name} [{run.backend}]: {len(run.log)} steps in {run.wall_time:.1f} s; "
-        f"control step {m['step_time_us']['median']:.0f} us median "
-        f"({m['frequency_hz']:.0f} Hz); limit violations {m['limit_violations']}, "
-        f"solver failures {m['solver_failures']}"
+        f"{run.spec.name} [{run.backend}]: {len(run.log)} steps in {run.wall_time:.1f} s; "
+        f"control step median {m['step_time_us']['median']:.0f} us "
+        f"(1/median = {m['median_step_rate_hz']:.0f} Hz); limit violations "
+        f"{m['limit_violations']}, solver failures {m['solver_failures']}"
     )
     for phase, entry in m["phases"].items():
         worst = max((v for hand in entry["mae_m"].values() for v in hand.values()), default=0.0)
@@ -74,15 +185,6 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
         print(f"  {phase:16s} worst hand MAE {worst * 1e3:.3f} mm{extra}")
     for name, f in files.items():
         print(f"  {name:17s} {f}")
-    if scene is not None:
-        if hold:
-            show_run(scene, run)
-            print(f"replay: the run is loaded as an animation at {scene.url}")
-            input("press Enter to close the viewer ")
-        else:
-            print("MeshCat viewer closed (stdin is not a terminal: nothing to wait on)")
-        scene.close()
-    return 0
 
 
 def _output_dir(out: Path) -> Path:
@@ -104,13 +206,12 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    viz = args.viz or _display_available()
-    if not viz:
-        print("no display: running the demo headless (use --viz for the MeshCat viewer)")
+    if not args.viz:
+        print("running the demo headless: figures and logs only (add --viz for the live "
+              "MeshCat viewer and a replay page)")  # fmt: skip
     out = _output_dir(Path(args.out) if args.out else Path("runs") / "demo")
-    return _run_one(
-        _scenario_path("coordinated_carry"), None, viz, out, hold=viz and sys.stdin.isatty()
-    )
+    return _run_one(_scenario_path("coordinated_carry"), None, args.viz, out,
+                    hold=args.viz and sys.stdin.isatty())  # fmt: skip
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -119,6 +220,7 @@ def _compare(args: argparse.Namespace) -> int:
         comparison,
         comparison_markdown,
         write_comparison,
+        write_figures,
         write_run,
     )
 
@@ -127,13 +229,14 @@ def _compare(args: argparse.Namespace) -> int:
     out = _output_dir(Path(args.out) if args.out else Path("runs") / f"{path.stem}_comparison")
     runs = []
     try:
-        for backend in args.backends:  # each run's log and metrics kept as soon as it ends
+        for backend in args.backends:  # each run's log, metrics, figures kept as it ends
             print(f"running {spec.name} with {backend} ...")
             run = run_scenario(spec, backend=backend, progress=True)
             write_run(run, out / backend, figures=False)
             runs.append(run)
+            write_figures(run, out / backend)
     except KeyboardInterrupt:
-        missing = args.backends[len(runs) :]
+        missing = [b for b in args.backends if b not in {r.backend for r in runs}]
         if runs:
             write_comparison(runs, out)
         done = ", ".join(r.backend for r in runs) or "none"
@@ -142,8 +245,10 @@ def _compare(args: argparse.Namespace) -> int:
         return 130
     files = write_comparison(runs, out)
     print(comparison_markdown(comparison(runs), spec.title or spec.name))
+    for backend in args.backends:
+        print(f"  {backend:10s} {out / backend}/ (run.npz, metrics.json, figures)")
     for name, f in files.items():
-        print(f"  {name:9s} {f}")
+        print(f"  {name:10s} {f}")
     return 0
 
 
@@ -159,60 +264,82 @@ def _warmup(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from wholebody.scenarios.spec import BACKENDS
+def _scenario_help(what: str) -> str:
+    """Help for a scenario argument, naming the bundled scenarios."""
+    return f"{what}: a scenario file or a bundled name: {', '.join(bundled_scenarios())}"
 
-    parser = argparse.ArgumentParser(
-        prog="wholebody",
-        description="Whole-body control of highly redundant mobile humanoids.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    info = sub.add_parser("info", help="describe a robot (bundled name, directory or robot.toml)")
-    info.add_argument("robot", nargs="?", default="mobile_humanoid")
-    info.add_argument("--list", action="store_true", help="list the bundled robots")
-    info.set_defaults(func=_info)
+
+def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
+    """``run``, ``compare`` and ``demo``."""
     run = sub.add_parser("run", help="run a scenario file (or a bundled scenario's name)")
-    run.add_argument("scenario")
-    run.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default=None,
-        help="override the scenario's backend",
-    )
-    run.add_argument("--viz", action="store_true", help="live MeshCat view and replay")
+    run.add_argument("scenario", metavar="SCENARIO", help=_scenario_help("what to run"))
+    run.add_argument("--backend", choices=BACKENDS, default=None,
+                     help="override the scenario's backend")  # fmt: skip
+    run.add_argument("--viz", action="store_true",
+                     help="draw the run live in MeshCat (localhost), then write replay.html "
+                     "(a standalone replay) and, on a terminal, keep the viewer open until "
+                     "Enter")  # fmt: skip
     run.add_argument("--out", default=None, help="output directory (default runs/NAME)")
     run.set_defaults(func=_run)
     compare = sub.add_parser(
         "compare",
         help="the paper's Table 2 for a scenario: pseudo-inverse vs projection vs hierarchical QP",
     )
-    compare.add_argument("scenario")
-    compare.add_argument("--out", default=None, help="output directory")
-    compare.add_argument(
-        "--backends",
-        nargs="+",
-        default=["pinv", "projection", "hqp"],
-        choices=BACKENDS,
-    )
+    compare.add_argument("scenario", metavar="SCENARIO", help=_scenario_help("what to run"))
+    compare.add_argument("--out", default=None, help="output directory (default "
+                         "runs/NAME_comparison; each backend's run, metrics and figures in "
+                         "its BACKEND/ subdirectory)")  # fmt: skip
+    compare.add_argument("--backends", nargs="+", default=["pinv", "projection", "hqp"],
+                         choices=BACKENDS)  # fmt: skip
     compare.set_defaults(func=_compare)
     demo = sub.add_parser(
         "demo",
-        help="the coordinated dual-arm carry: live in MeshCat with "
-        "--viz or a display, headless otherwise",
+        help="the coordinated dual-arm carry: headless (figures and logs), live in MeshCat "
+        "with --viz",
     )
-    demo.add_argument("--viz", action="store_true")
+    demo.add_argument("--viz", action="store_true",
+                      help="draw it live in MeshCat and write replay.html; on a terminal the "
+                      "viewer stays open until Enter")  # fmt: skip
     demo.add_argument("--out", default=None, help="output directory (default runs/demo)")
     demo.set_defaults(func=_demo)
+
+
+def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
+    """The command line's parser. ``stiffness``: the ``stiffness`` subcommands' real parser
+    (it imports the stiffness pipeline); else a placeholder with the same help line."""
+    parser = argparse.ArgumentParser(
+        prog="wholebody",
+        description="Whole-body control of highly redundant mobile humanoids.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    info = sub.add_parser("info", help="describe a robot (bundled name, directory or "
+                          "robot.toml): groups, arms, tool frames and frames")  # fmt: skip
+    info.add_argument("robot", nargs="?", default="mobile_humanoid")
+    info.add_argument("--list", action="store_true", help="list the bundled robots")
+    info.add_argument(
+        "--frames", action="store_true", help="list every frame a task can name (and joints)"
+    )
+    info.set_defaults(func=_info)
+    _add_scenario_commands(sub)
     warm = sub.add_parser("warmup", help="compile the kernels now (once per machine, cached)")
     warm.set_defaults(func=_warmup)
-    from wholebody.humanlike.cli import add_stiffness_parser
+    if stiffness:
+        from wholebody.humanlike.cli import add_stiffness_parser
 
-    add_stiffness_parser(sub)
+        add_stiffness_parser(sub)
+    else:
+        sub.add_parser("stiffness", help=STIFFNESS_HELP, add_help=False)
     return parser
 
 
+def _command(argv: Sequence[str]) -> str | None:
+    """The subcommand's name in ``argv`` (its first word not starting with ``-``)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(stiffness=_command(argv) == "stiffness")
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)

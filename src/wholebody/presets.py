@@ -30,9 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wholebody.humanlike.network import default_stiffness as network_stiffness
-from wholebody.humanlike.network import stiffness_path
-from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.arm.network import default_stiffness as network_stiffness
+from wholebody.arm.network import stiffness_path
+from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.robot import Robot
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import (

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from wholebody.control.controller import Controller
+from wholebody.control.controller import Controller, ReferenceTask
 from wholebody.control.log import ArmTrace, RunLog
 from wholebody.control.metrics import (
     Tracking,
@@ -16,6 +16,7 @@ from wholebody.control.recovery import Retreat, StallRecovery, mid_range_posture
 __all__ = [
     "ArmTrace",
     "Controller",
+    "ReferenceTask",
     "Retreat",
     "RunLog",
     "StallRecovery",

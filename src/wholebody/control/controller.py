@@ -27,6 +27,7 @@ import math
 import numbers
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -40,13 +41,24 @@ from wholebody.solvers.base import Solver
 from wholebody.solvers.result import SolverStatus
 from wholebody.solvers.stack import Stack
 from wholebody.tasks.arm_energy import ArmPotentialEnergy
-from wholebody.tasks.base import Task
+from wholebody.tasks.base import Objective, Task
 from wholebody.tasks.frame import FrameTask
-from wholebody.tasks.relative import RelativeFrameTask
 
-__all__ = ["Controller"]
+__all__ = ["Controller", "ReferenceTask"]
 
-TargetTask = FrameTask | RelativeFrameTask
+
+@runtime_checkable
+class ReferenceTask(Protocol):
+    """A task that follows a reference: it takes a target pose (4x4) and twist
+    ``[v (m/s), w (rad/s)]`` every step. :class:`FrameTask` and :class:`RelativeFrameTask`
+    are; a task of your own is by having this method."""
+
+    name: str
+
+    def set_target(self, pose: np.ndarray, twist: np.ndarray | None = None) -> None: ...
+
+
+TargetTask = ReferenceTask
 
 
 class Controller:
@@ -59,11 +71,13 @@ class Controller:
     dt
         Control period (s).
     references
-        Trajectory per task (a :class:`FrameTask` follows it in the world; a
-        :class:`RelativeFrameTask` in its first frame).
+        Trajectory per task of the stack that tracks one (:class:`ReferenceTask`: a
+        :class:`FrameTask` follows it in the world, a :class:`RelativeFrameTask` in its first
+        frame, a task of your own as its ``set_target`` says).
     monitors
-        Arm energies to log each step (by default none). Give the same monitors to runs you
-        want to compare, whatever their stacks.
+        Objectives to log each step (by default none): an arm energy's terms
+        (``RunLog.arms``), any other objective's value (``RunLog.objectives``). Give the same
+        monitors to runs you want to compare, whatever their stacks.
     feedforward
         ``"midpoint"`` (default) or ``"start"``: when the reference twist is sampled.
     recovery
@@ -88,7 +102,7 @@ class Controller:
         *,
         dt: float,
         references: Mapping[TargetTask, Trajectory] | None = None,
-        monitors: Sequence[ArmPotentialEnergy] = (),
+        monitors: Sequence[Objective] = (),
         feedforward: str = "midpoint",
         recovery: StallRecovery | None = None,
         threads: int | None = 1,
@@ -106,10 +120,10 @@ class Controller:
         self.references = dict(references or {})
         stacked = set(map(id, stack.tasks))
         for task, traj in self.references.items():
-            if not isinstance(task, (FrameTask, RelativeFrameTask)):
+            if not isinstance(task, ReferenceTask):
                 raise WholebodyError(
-                    f"references are keyed by the task object (a FrameTask or "
-                    f"RelativeFrameTask of the stack), got the key {task!r}"
+                    f"references are keyed by the task object (a task of the stack with a "
+                    f"set_target(pose, twist) method, e.g. a FrameTask), got the key {task!r}"
                 )
             if not isinstance(traj, Trajectory):
                 raise WholebodyError(
@@ -122,6 +136,10 @@ class Controller:
                     f"reference given for task {task.name!r}, which is not in the stack"
                 )
         self.monitors = list(monitors)
+        for m in self.monitors:
+            if not isinstance(m, Objective):
+                raise WholebodyError(f"monitors are objectives (ArmPotentialEnergy, "
+                                     f"JointLimitAvoidance, ...), got {m!r}")  # fmt: skip
         self.feedforward = feedforward
         if recovery is not None and recovery.main is not stack:
             raise WholebodyError("recovery must be made for the controller's stack: "
@@ -298,7 +316,10 @@ class _Recorder:
         self.errors = {t.name: np.zeros((n, t.dim)) for t in self.tasks}
         self.pos = {t.name: np.zeros((n, 3)) for t in tracked}
         self.ref = {t.name: np.zeros((n, 3)) for t in tracked}
-        self.arms = {m.arm.name: np.zeros((n, 6)) for m in monitors}
+        self.energies = [m for m in monitors if isinstance(m, ArmPotentialEnergy)]
+        self.others = [m for m in monitors if not isinstance(m, ArmPotentialEnergy)]
+        self.arms = {m.arm.name: np.zeros((n, 6)) for m in self.energies}
+        self.values = {m.name: np.zeros(n) for m in self.others}
 
     def record(self, k: int, t: float, q: np.ndarray, state, result, own: bool = True) -> None:
         """Step ``k``'s row; ``own``: solved with the controller's stack (else a retreat's,
@@ -320,9 +341,11 @@ class _Recorder:
             self.pos[task.name][k] = state.position(task.frame)
             self.ref[task.name][k] = task.target[:3, 3] if task.target is not None else np.nan
         plan = self.stack.current_plan
-        for m in self.monitors:  # the solve's own value when the stack has the same energy
+        for m in self.energies:  # the solve's own value when the stack has the same energy
             parts = plan.arm_parts(m, state) if plan is not None else None
             self.arms[m.arm.name][k] = parts if parts is not None else m.parts(state)
+        for m in self.others:
+            self.values[m.name][k] = m.evaluate(state).value
 
     def finish(self, meta: dict) -> RunLog:
         return RunLog(
@@ -339,14 +362,62 @@ class _Recorder:
             frame_positions=self.pos,
             reference_positions=self.ref,
             arms={a: ArmTrace(*v.T.copy()) for a, v in self.arms.items()},
+            objectives=self.values,
             meta=meta,
             failed=self.failed,
         )
 
 
-def _progress(n: int, enabled: bool):
+def _progress(
+    n: int,
+    enabled: bool,
+    desc: str = "control",
+    *,
+    leave: bool = False,
+    every: float = 10.0,
+    stream=None,
+):
+    """A progress report over ``n`` steps, or None when not ``enabled``.
+
+    On a terminal (``stream``, default stderr, is a TTY): a tqdm bar. Elsewhere (a log file,
+    a pipe, CI, a notebook) no bar, because tqdm redraws its bar with carriage returns that
+    a log keeps as one ever-growing line: a plain line at most every ``every`` seconds (s)
+    and one when it closes. Either has ``update(k)``, ``set_postfix_str(text)`` and
+    ``close()``. ``leave``: the bar stays on the terminal once closed."""
     if not enabled:
         return None
-    from tqdm import tqdm
+    import sys
 
-    return tqdm(total=n, unit="step", desc="control", leave=False)
+    stream = sys.stderr if stream is None else stream
+    isatty = getattr(stream, "isatty", None)
+    if isatty is not None and isatty():
+        from tqdm import tqdm
+
+        return tqdm(total=n, unit="step", desc=desc, leave=leave, file=stream)
+
+    class _Lines:
+        """Plain progress lines: ``desc: k/n steps (p %), t s, postfix``."""
+
+        def __init__(self) -> None:
+            self.k, self.postfix = 0, ""
+            self.start = self.last = time.perf_counter()
+
+        def _line(self, text: str) -> None:
+            print(f"{desc}: {text}", file=stream, flush=True)
+
+        def update(self, k: int = 1) -> None:
+            self.k += k
+            now = time.perf_counter()
+            if now - self.last >= every and self.k < n:
+                self.last = now
+                extra = f", {self.postfix}" if self.postfix else ""
+                self._line(f"{self.k}/{n} steps ({100 * self.k / n:.0f} %), "
+                           f"{now - self.start:.0f} s{extra}")  # fmt: skip
+
+        def set_postfix_str(self, text: str) -> None:
+            self.postfix = text
+
+        def close(self) -> None:
+            self._line(f"{self.k}/{n} steps in {time.perf_counter() - self.start:.1f} s")
+
+    return _Lines()

@@ -9,6 +9,7 @@ Arrays have one row per control step. Keys in the file (no pickle; metadata as J
     frame_position/<task>           (N, 3)    tracked frame position (m, world)
     reference_position/<task>       (N, 3)    its reference (m, world)
     arm/<arm>/{energy,gravity,spring,arm_angle,stiffness,rho}  (N,)  J, J, J, rad, N m/rad, m
+    objective/<name>                (N,)      a monitored objective's value (unweighted)
     meta                            JSON: robot, dt, solver, levels, actuated joints, groups,
                                     position limits, phases
 """
@@ -74,6 +75,8 @@ class RunLog:
     """Per step: the solve failed (status FAILED) or left a task of the first level unmet
     (see :attr:`SolverResult.infeasible`), by the same rule for every backend; None in logs
     written before it was recorded."""
+    objectives: dict[str, np.ndarray] = field(default_factory=dict)
+    """Per monitored objective other than an arm energy, its value each step."""
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -121,6 +124,7 @@ class RunLog:
             ("task_error", self.task_errors),
             ("frame_position", self.frame_positions),
             ("reference_position", self.reference_positions),
+            ("objective", self.objectives),
         ):
             for name, value in table.items():
                 arrays[f"{prefix}/{name}"] = value
@@ -154,6 +158,7 @@ class RunLog:
             "task_error": {},
             "frame_position": {},
             "reference_position": {},
+            "objective": {},
         }
         arms: dict[str, dict[str, np.ndarray]] = {}
         for key, value in data.items():
@@ -176,6 +181,7 @@ class RunLog:
             arms={a: ArmTrace(**{f: v[f] for f in ARM_FIELDS}) for a, v in arms.items()},
             meta=_meta(path, data["meta"]),
             failed=data.get("failed"),
+            objectives=tables["objective"],
         )
 
 
@@ -276,4 +282,5 @@ def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
             if any(log.failed is None for log in logs)
             else np.concatenate([log.failed for log in logs])
         ),
+        objectives=merge([log.objectives for log in logs]),
     )

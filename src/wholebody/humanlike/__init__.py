@@ -6,6 +6,9 @@ scikit-learn), the pipeline, the report and the command line are imported on dem
 
 from __future__ import annotations
 
+from wholebody.arm.angle import ArmAngle, arm_angle, arm_angle_with_gradient
+from wholebody.arm.network import NetworkStiffness, default_stiffness
+from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.humanlike.arm_angle_model import (
     CALIBRATED,
     ArmAngleModel,
@@ -13,7 +16,6 @@ from wholebody.humanlike.arm_angle_model import (
     elbow_on_circle,
     kim_arm_angle,
 )
-from wholebody.humanlike.arm_geometry import ArmAngle, arm_angle, arm_angle_with_gradient
 from wholebody.humanlike.dataset import (
     DEFAULT_TEST_PARTICIPANTS,
     StiffnessDataset,
@@ -32,7 +34,6 @@ from wholebody.humanlike.mapping import (
     lab_to_canonical,
     map_to_robot,
 )
-from wholebody.humanlike.network import NetworkStiffness, default_stiffness
 from wholebody.humanlike.recordings import (
     Recording,
     load_participants,
@@ -40,7 +41,6 @@ from wholebody.humanlike.recordings import (
     load_recordings,
     save_npz_recording,
 )
-from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.humanlike.synthetic import (
     DEFAULT_PARTICIPANTS,
     VirtualParticipant,

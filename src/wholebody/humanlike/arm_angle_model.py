@@ -27,7 +27,7 @@ the 4 joints gives ``J J^T = D^2 (I - u u^T) + t t^T`` with the elbow column
 
 the same in every arm plane: its major axis ``v = v_u u + v_p p`` has constant
 ``(v_u, v_p)``. With ``h`` the unit vector from W to the target, ``h_u = h.u`` and ``beta``
-the arm angle of the target itself (:func:`~wholebody.humanlike.arm_geometry.arm_angle`
+the arm angle of the target itself (:func:`~wholebody.arm.angle.arm_angle`
 with the target in place of the elbow)::
 
     |v.h| = | v_u h_u + v_p |h_perp| cos(alpha - beta) |
@@ -62,8 +62,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from wholebody.arm.angle import DOWN, arm_angle
 from wholebody.errors import DataError
-from wholebody.humanlike.arm_geometry import DOWN, arm_angle
 from wholebody.humanlike.mapping import CANONICAL_SIDE, lab_to_canonical
 from wholebody.humanlike.recordings import Participant, Recording
 
@@ -93,7 +93,7 @@ def elbow_on_circle(
 
     ``E = S + a u + rho (cos(alpha) e1 + sin(alpha) e2)`` with ``e1`` the downward reference
     and ``e2 = side (u x g) / |u x g|``, the conventions of
-    :func:`~wholebody.humanlike.arm_geometry.arm_angle`, which returns ``alpha`` for it.
+    :func:`~wholebody.arm.angle.arm_angle`, which returns ``alpha`` for it.
     A wrist out of reach (``D > L1 + L2``) puts the elbow on the S-W line.
     """
     S, W = np.asarray(S, dtype=float), np.asarray(W, dtype=float)

@@ -233,9 +233,9 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
 
 
 def _report(args: argparse.Namespace) -> int:
+    from wholebody.arm.network import NetworkStiffness, default_stiffness
     from wholebody.humanlike.dataset import StiffnessDataset
     from wholebody.humanlike.evaluation import regression_scores
-    from wholebody.humanlike.network import NetworkStiffness, default_stiffness
     from wholebody.humanlike.report import plot_workspace
 
     net = NetworkStiffness.load(args.model) if args.model else default_stiffness()

@@ -20,7 +20,7 @@ of mass at fractions ``c1``, ``c2`` of their segments (from the proximal joint):
     k = A sin|alpha| / (pi - |alpha|)     (N m/rad; >= 0 for every alpha in (-pi, pi])
 
 ``rho sin(theta) = sqrt(x^2 + y^2)`` in the notation of
-:mod:`~wholebody.humanlike.arm_geometry`. **Negative alpha** (elbow tucked in past its lowest
+:mod:`~wholebody.arm.angle`. **Negative alpha** (elbow tucked in past its lowest
 point): the spring acts on ``|alpha|``, so the same formula holds with ``|alpha|`` and the
 label is an even function of alpha: the gravity moment ``A sin(alpha)`` pulls the elbow
 back towards alpha = 0 from either side and the spring, wound towards pi through |alpha|,
@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wholebody.humanlike.arm_geometry import arm_angle
+from wholebody.arm.angle import arm_angle
 from wholebody.humanlike.mapping import CANONICAL_SIDE, ArmParameters
 
 __all__ = [

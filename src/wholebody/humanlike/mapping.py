@@ -15,7 +15,7 @@ moves (the ratio ``L1 / L2`` differs), and with it the shoulder-wrist line and t
 Canonical arm axes
 ------------------
 A stiffness model's input is the wrist relative to the shoulder in the arm's canonical body
-axes (see :mod:`wholebody.humanlike.stiffness`): x forward, y **medial** (towards the other
+axes (see :mod:`wholebody.arm.stiffness`): x forward, y **medial** (towards the other
 arm), z up. From the recordings' lab frame (+x participant's right, +y forward, +z up)::
 
     right arm: (x, y, z)_canonical = ( y_lab, -x_lab, z_lab)    (a rotation)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wholebody.arm.network import NetworkStiffness
 from wholebody.errors import DataError
 from wholebody.humanlike.arm_angle_model import (
     CALIBRATED,
@@ -34,7 +35,6 @@ from wholebody.humanlike.dataset import (
 )
 from wholebody.humanlike.evaluation import regression_scores
 from wholebody.humanlike.mapping import ArmParameters
-from wholebody.humanlike.network import NetworkStiffness
 from wholebody.humanlike.recordings import (
     Recording,
     load_participants,

@@ -363,6 +363,17 @@ def load_csv_recording(
     path = Path(path)
     ident = _identity(path, {"participant": participant, "task": task, "side": side,
                              "trial": trial})  # fmt: skip
+    header, body = _csv_rows(path)
+    A = _csv_numbers(path, header, body)
+    t = A[:, 0]
+    P = {j: A[:, 1 + 3 * k : 4 + 3 * k] for k, j in enumerate(JOINTS)}
+    sternum = _csv_sternum(path, header, body)
+    return _recording(path, t, P, units, ident, source, "", sternum, facing)
+
+
+def _csv_rows(path: Path) -> tuple[list[str], list[list[str]]]:
+    """The header (stripped) and the data rows of a recording's CSV, every required column
+    present once and every row as long as the header."""
     try:
         with path.open(newline="") as fh:
             lines = [line for line in csv.reader(fh) if line]  # blank lines carry nothing
@@ -382,7 +393,6 @@ def load_csv_recording(
     dup = sorted({c for c in _COLUMNS if header.count(c) > 1})
     if dup:
         raise DataError(f"{path}: header row: column(s) {', '.join(map(repr, dup))} repeated")
-    idx = [header.index(c) for c in _COLUMNS]
     body = lines[1:]
     for r, line in enumerate(body, start=1):
         if len(line) < len(header):
@@ -390,22 +400,19 @@ def load_csv_recording(
                 f"{path}: row {r}: {len(line)} fields, the header has {len(header)} "
                 f"(column {header[len(line)]!r} is missing)"
             )
+    return header, body
+
+
+def _csv_numbers(path: Path, header: list[str], body: list[list[str]]) -> np.ndarray:
+    """The required columns as finite numbers (rows x columns), or the first bad cell named."""
+    idx = [header.index(c) for c in _COLUMNS]
     cells = [[line[i].strip() for i in idx] for line in body]
     try:
         A = np.array(cells, dtype=float).reshape(len(body), len(_COLUMNS))
     except ValueError:
         for r, row in enumerate(cells, start=1):
             for c, v in enumerate(row):
-                if v == "":
-                    raise DataError(
-                        f"{path}: row {r}, column {_COLUMNS[c]!r}: empty value (missing marker?)"
-                    ) from None
-                try:
-                    float(v)
-                except ValueError:
-                    raise DataError(
-                        f"{path}: row {r}, column {_COLUMNS[c]!r}: {v!r} is not a number"
-                    ) from None
+                _csv_number(path, r, _COLUMNS[c], v, empty="empty value (missing marker?)")
         raise  # pragma: no cover - numpy and float() disagree
     bad = np.argwhere(~np.isfinite(A))
     if bad.size:
@@ -413,25 +420,32 @@ def load_csv_recording(
         raise DataError(
             f"{path}: row {r + 1}, column {_COLUMNS[c]!r}: value {A[r, c]} is not finite"
         )
-    t = A[:, 0]
-    P = {j: A[:, 1 + 3 * k : 4 + 3 * k] for k, j in enumerate(JOINTS)}
-    sternum = None
+    return A
+
+
+def _csv_number(path: Path, row: int, column: str, v: str, empty: str) -> float:
+    """A cell as a number, or DataError naming the file, row and column."""
+    if v == "":
+        raise DataError(f"{path}: row {row}, column {column!r}: {empty}")
+    try:
+        return float(v)
+    except ValueError:
+        raise DataError(f"{path}: row {row}, column {column!r}: {v!r} is not a number") from None
+
+
+def _csv_sternum(path: Path, header: list[str], body: list[list[str]]) -> np.ndarray | None:
+    """The optional sternum marker (rows x 3): an empty value is a missing sample (NaN)."""
     st_cols = [f"sternum_{a}" for a in "xyz"]
-    if all(c in header for c in st_cols):  # optional; an empty value is a missing sample
-        cols = [header.index(c) for c in st_cols]
-        sternum = np.full((len(body), 3), np.nan)
-        for r, line in enumerate(body):
-            for k, c in enumerate(cols):
-                v = line[c].strip() if c < len(line) else ""
-                if not v:
-                    continue
-                try:
-                    sternum[r, k] = float(v)
-                except ValueError:
-                    raise DataError(
-                        f"{path}: row {r + 1}, column {st_cols[k]!r}: {v!r} is not a number"
-                    ) from None
-    return _recording(path, t, P, units, ident, source, "", sternum, facing)
+    if not all(c in header for c in st_cols):
+        return None
+    cols = [header.index(c) for c in st_cols]
+    sternum = np.full((len(body), 3), np.nan)
+    for r, line in enumerate(body):
+        for k, c in enumerate(cols):
+            v = line[c].strip() if c < len(line) else ""
+            if v:
+                sternum[r, k] = _csv_number(path, r + 1, st_cols[k], v, empty="")
+    return sternum
 
 
 def _npz_str(path: Path, z: dict[str, np.ndarray], key: str, default: str | None) -> str | None:

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wholebody.arm.network import NetworkStiffness
 from wholebody.files import save_figure
 from wholebody.humanlike.dataset import StiffnessDataset
-from wholebody.humanlike.network import NetworkStiffness
 
 __all__ = ["data_card", "plot_workspace"]
 
@@ -48,7 +48,7 @@ def data_card(
         f"# Stiffness network for `{dm.get('robot', '?')}`: data card",
         "",
         f"Date: {date}. File: `stiffness.npz` (weights; layout in "
-        "`wholebody.humanlike.network`). Load it with "
+        "`wholebody.arm.network`). Load it with "
         "`wholebody.humanlike.default_stiffness(robot)`.",
         "",
         "## Model",

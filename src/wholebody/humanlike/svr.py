@@ -30,7 +30,7 @@ def _sklearn():
         from sklearn.svm import SVR
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise SolverError("the SVR baseline needs scikit-learn: pip install "
-                          "'wholebody[learn]'") from exc  # fmt: skip
+                          "'.[learn]' from the checkout") from exc  # fmt: skip
     return SVR, GroupKFold
 
 

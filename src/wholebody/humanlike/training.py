@@ -2,7 +2,7 @@
 
 The paper's settings are the defaults: mean squared error, Adam, learning rate 0.01, batch
 32, 1000 epochs (optionally with decoupled weight decay, see :class:`TrainingConfig`). The
-network is that of :mod:`wholebody.humanlike.network` (tanh hidden layers, normalised input
+network is that of :mod:`wholebody.arm.network` (tanh hidden layers, normalised input
 and output, smooth floor at zero); training minimises ``mean(((k_pred - k) / k_scale)^2)``,
 the MSE in units of the label's standard deviation (the same minimiser as the MSE in
 N m/rad). Inputs and labels are normalised with the training set's mean and standard
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wholebody.arm.network import NetworkStiffness
 from wholebody.errors import DataError, SolverError
-from wholebody.humanlike.network import NetworkStiffness
 
 __all__ = ["DEFAULT_HIDDEN", "TrainingConfig", "TrainingResult", "torch_module", "train_network"]
 
@@ -35,7 +35,7 @@ def _torch():
         import torch
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise SolverError("training the stiffness network needs PyTorch: pip install "
-                          "'wholebody[learn]'") from exc  # fmt: skip
+                          "'.[learn]' from the checkout") from exc  # fmt: skip
     return torch
 
 
@@ -72,7 +72,7 @@ def _module(hidden: Sequence[int], x_mean, x_scale, k_mean, k_scale, beta, dtype
     nn = torch.nn
 
     class StiffnessMLP(nn.Module):
-        """Same maths as :class:`NetworkStiffness` (see wholebody.humanlike.network)."""
+        """Same maths as :class:`NetworkStiffness` (see wholebody.arm.network)."""
 
         def __init__(self) -> None:
             super().__init__()

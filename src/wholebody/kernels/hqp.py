@@ -323,23 +323,35 @@ def cod(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: float):
     smax, rank = _pivoted_rank(qr, k, rtol, floor)
     if rank == r and have_tall:  # full column rank, more rows: the unique solution
         return 0, rank, tall, none, smax, True
+    info, y, Q2 = _cod_solution(qr, tau, jpvt, c, t, k, rank)
+    if info != 0:
+        return info, 0, np.zeros(r), none, 0.0, True
+    return 0, rank, y, Q2, smax, True
+
+
+@kernel
+def _cod_solution(qr, tau, jpvt, c, t, k, rank):  # fmt: skip
+    """From the pivoted QR of ``M^T`` (``qr``, ``tau``, ``jpvt``; ``k`` reflectors) and its
+    rank: ``(info, y, Q2)``, ``y = Q_1 a - Q_2 Q_2^T t`` and ``Q2`` the null space (0
+    columns at full rank)."""
+    r = qr.shape[0]
     Q = np.zeros((r, r)).T
     for j in range(k):
         for i in range(r):
             Q[i, j] = qr[i, j]
     info = orgqr(Q, tau, k, 8 * r)
     if info != 0:
-        return info, 0, np.zeros(r), none, 0.0, True
+        return info, np.zeros(r), np.zeros((r, 0))
     y = np.zeros(r)
     if rank:
         info, z = _triangular_solve(qr, c, jpvt, rank)
         if info != 0:
-            return info, 0, np.zeros(r), none, 0.0, True
+            return info, np.zeros(r), np.zeros((r, 0))
         for a in range(rank):
             for i in range(r):
                 y[i] += Q[i, a] * z[a]
     if rank == r:
-        return 0, rank, y, none, smax, True
+        return 0, y, np.zeros((r, 0))
     Q2 = np.empty((r, r - rank))
     for i in range(r):
         for a in range(r - rank):
@@ -348,7 +360,7 @@ def cod(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: float):
         if t[j] != 0:
             y = combine(y, -1.0, mv(Q2, mtv(Q2, t)))
             break
-    return 0, rank, y, Q2, smax, True
+    return 0, y, Q2
 
 
 @kernel

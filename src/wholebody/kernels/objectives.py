@@ -3,8 +3,8 @@ joint-limit avoidance ``h1`` and manipulability ``h2``, each with its analytic g
 actuated coordinates.
 
 The maths is documented with the objectives (:mod:`wholebody.tasks.arm_energy`,
-:mod:`wholebody.tasks.objectives`, :mod:`wholebody.humanlike.network`,
-:mod:`wholebody.humanlike.arm_geometry`); the objective classes call these kernels, and the
+:mod:`wholebody.tasks.objectives`, :mod:`wholebody.arm.network`,
+:mod:`wholebody.arm.angle`); the objective classes call these kernels, and the
 compiled plan calls them for every built-in objective of a stack in one pass.
 
 Parameters travel as flat float arrays with named entries (``AE_*`` for the arm energy, the
@@ -52,7 +52,7 @@ def arm_angle_terms(
 ) -> tuple[float, float, float]:
     """``(alpha, x, y)`` of one arm and the gradients of ``x`` and ``y`` with respect to S,
     E and W (rows of 3, flattened into ``dx`` and ``dy``, (9,)); see
-    :func:`wholebody.humanlike.arm_geometry.arm_angle_with_gradient`."""
+    :func:`wholebody.arm.angle.arm_angle_with_gradient`."""
     sx, sy, sz = S[0], S[1], S[2]
     ax, ay, az = E[0] - sx, E[1] - sy, E[2] - sz
     cx, cy, cz = W[0] - sx, W[1] - sy, W[2] - sz
@@ -81,7 +81,7 @@ def arm_angle_terms(
 @kernel
 def mlp_stiffness(net: np.ndarray, p: np.ndarray, grad: np.ndarray) -> float:
     """The stiffness network's ``k`` (returned) and ``dk/dp`` (into ``grad``, (3,)) at the
-    canonical wrist position ``p`` (see :mod:`wholebody.humanlike.network`).
+    canonical wrist position ``p`` (see :mod:`wholebody.arm.network`).
 
     ``net`` layout: ``[L, beta, b_out, H_L]``, then per hidden layer ``[out, in, W (out x
     in, row-major), b (out)]`` (the input normalisation folded into the first), then
@@ -137,23 +137,10 @@ def mlp_stiffness(net: np.ndarray, p: np.ndarray, grad: np.ndarray) -> float:
 
 
 @kernel
-def arm_energy(
-    P: np.ndarray,
-    R: np.ndarray,
-    J: np.ndarray,
-    par: np.ndarray,
-    nets: np.ndarray,
-    grad: np.ndarray,
-    parts: np.ndarray,
-) -> None:
-    """Gravity plus spring energy of one arm and its gradient (into ``grad``, nu).
-
-    ``P`` (6, 3), ``R`` (6, 3, 3) and ``J`` (6, 6, nu): positions, rotations and Jacobians of
-    the shoulder, elbow, wrist, upper-arm, forearm and base frames (the base's only read when
-    the stiffness depends on the wrist); ``par`` one row of ``AE_*`` parameters; ``nets`` the packed
-    networks (:func:`mlp_stiffness`). ``parts`` receives ``ARM_PARTS`` numbers."""
+def _gravity(P: np.ndarray, R: np.ndarray, par: np.ndarray, C: np.ndarray) -> float:
+    """``g (m1 h1 + m2 h2)`` of the upper-arm and forearm centres of mass (heights from the
+    shoulder with ``AE_SHOULDER``), its gradient's coefficients added into ``C``."""
     g, m1, m2 = par[AE_G], par[AE_M1], par[AE_M2]
-    C = np.zeros((ARM_FRAMES, 6))  # the gradient's coefficients of each frame's 6 rows
     gravity = 0.0
     for body in range(2):
         f = 3 + body
@@ -172,6 +159,27 @@ def arm_energy(
     if par[AE_SHOULDER] != 0.0:
         gravity -= g * (m1 + m2) * P[0, 2]
         C[0, 2] -= g * (m1 + m2)
+    return gravity
+
+
+@kernel
+def arm_energy(
+    P: np.ndarray,
+    R: np.ndarray,
+    J: np.ndarray,
+    par: np.ndarray,
+    nets: np.ndarray,
+    grad: np.ndarray,
+    parts: np.ndarray,
+) -> None:
+    """Gravity plus spring energy of one arm and its gradient (into ``grad``, nu).
+
+    ``P`` (6, 3), ``R`` (6, 3, 3) and ``J`` (6, 6, nu): positions, rotations and Jacobians of
+    the shoulder, elbow, wrist, upper-arm, forearm and base frames (the base's only read when
+    the stiffness depends on the wrist); ``par`` one row of ``AE_*`` parameters; ``nets`` the packed
+    networks (:func:`mlp_stiffness`). ``parts`` receives ``ARM_PARTS`` numbers."""
+    C = np.zeros((ARM_FRAMES, 6))  # the gradient's coefficients of each frame's 6 rows
+    gravity = _gravity(P, R, par, C)
     dx = np.empty(9)
     dy = np.empty(9)
     alpha, x, y = arm_angle_terms(P[0], P[1], P[2], par[AE_SIDE], dx, dy)

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from wholebody._numeric import count_nonzero as _count_nonzero
+from wholebody._poses import ROTATION_TOL, check_pose
 from wholebody.errors import DimensionError
 
 __all__ = [
@@ -24,9 +25,6 @@ __all__ = [
     "as_times",
     "as_vector",
 ]
-
-ROTATION_TOL = 1e-6
-"""Largest entry of ``|R^T R - I|`` accepted for a rotation matrix."""
 
 
 def as_array(value: object, shape: tuple[int | None, ...], name: str) -> np.ndarray:
@@ -65,12 +63,9 @@ def as_rotation(value: object, name: str) -> np.ndarray:
 
 
 def as_pose(value: object, name: str) -> np.ndarray:
-    """``value`` as a 4x4 homogeneous transform with a rotation block and last row 0 0 0 1."""
-    T = as_array(value, (4, 4), name)
-    if np.max(np.abs(T[3] - (0.0, 0.0, 0.0, 1.0))) > ROTATION_TOL:
-        raise DimensionError(f"{name}: last row of a homogeneous transform must be [0, 0, 0, 1]")
-    as_rotation(T[:3, :3], f"{name} (rotation block)")
-    return T
+    """``value`` as a 4x4 homogeneous transform with a rotation block and last row 0 0 0 1
+    (the one pose validator, :func:`wholebody._poses.check_pose`, which tasks use too)."""
+    return check_pose(value, name)
 
 
 def as_positive(value: object, name: str) -> float:

@@ -54,16 +54,13 @@ not to rescue a path that entered it.
 ``v`` is the DMP's velocity state ``tau x'`` (m) in :mod:`wholebody.planning.dmp`, which makes
 the avoided path independent of the movement's duration.
 
-**The paper's scene** (tests/test_obstacles.py, benchmarks/dmp.py): two cylinders
-r = 4 cm, h = 20 cm, the hand's straight demonstration passing 5 mm off the first one's axis.
-A sweep over margin, ``lambda``, ``beta``, ``eta`` (K = 1050) kept the settings whose path is
-converged under step refinement, clears both cylinders and reaches the goal: reserved space
-(``margin``) 2 cm, ``lambda = 10``, ``beta = 2``, ``eta = 2``, exponent ``m = 4``. The path
-swerves about 6 cm round the first cylinder with 2.7 cm clearance and ends 0.03 mm from the
+**Settings for the paper's scene** (two cylinders r = 4 cm, h = 20 cm, the hand's straight
+demonstration passing 5 mm off the first one's axis; tests/test_obstacles.py): reserved
+space (``margin``) 2 cm, ``lambda = 10``, ``beta = 2``, ``eta = 2``, exponent ``m = 4``, with
+which the path is converged under step refinement, clears both cylinders and reaches the
 goal. Weak steering (small ``lambda``, ``beta = 1``, ``eta <= 1``) lets the hand stall
 head-on in front of the cylinder and slip round it: there the force switches on and off
-with the sign of ``cos theta`` and the ODE's solution changes by centimetres with the step
-size.
+with the sign of ``cos theta``, and the path depends on the step size.
 """
 
 from __future__ import annotations

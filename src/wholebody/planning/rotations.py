@@ -11,13 +11,13 @@ follows a time scaling ``sigma(t)``, the world angular velocity and acceleration
 
     omega(t) = sigma'(t) R0 phi,         alpha(t) = sigma''(t) R0 phi.
 
-``Log`` goes through the unit quaternion (Shepperd's method), which stays accurate near
-``theta = 0`` and ``theta = pi``; at exactly ``pi`` the sign of the axis is arbitrary.
+``Log`` is Pinocchio's ``log3``, the SO(3) logarithm every other module uses.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 __all__ = ["Slerp", "exp_so3", "hat", "log_so3", "slerp"]
 
@@ -54,30 +54,9 @@ def exp_so3(phi: np.ndarray) -> np.ndarray:
 
 
 def log_so3(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) of one rotation matrix, ``theta`` in [0, pi] (rad)."""
-    R = np.asarray(R, dtype=float)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    # Shepperd: build the quaternion from its largest component.
-    k = int(np.argmax((tr, R[0, 0], R[1, 1], R[2, 2])))
-    if k == 0:
-        r = np.sqrt(max(1.0 + tr, 0.0))
-        w = 0.5 * r
-        v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) * (0.5 / r)
-    else:
-        i = k - 1
-        j, m = (i + 1) % 3, (i + 2) % 3
-        r = np.sqrt(max(1.0 + R[i, i] - R[j, j] - R[m, m], 0.0))
-        v = np.empty(3)
-        v[i] = 0.5 * r
-        v[j] = (R[j, i] + R[i, j]) * (0.5 / r)
-        v[m] = (R[m, i] + R[i, m]) * (0.5 / r)
-        w = (R[m, j] - R[j, m]) * (0.5 / r)
-    if w < 0.0:  # same rotation, angle in [0, pi]
-        w, v = -w, -v
-    s = float(np.linalg.norm(v))
-    if s < 1e-12:
-        return 2.0 * v / w
-    return (2.0 * np.arctan2(s, w) / s) * v
+    """Rotation vector (3,) of one rotation matrix, ``theta`` in [0, pi] (rad): Pinocchio's
+    ``log3`` (accurate near 0 and pi; at exactly pi the sign of the axis is arbitrary)."""
+    return pin.log3(np.asarray(R, dtype=float))
 
 
 def slerp(R0: np.ndarray, R1: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

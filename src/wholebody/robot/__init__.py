@@ -1,4 +1,21 @@
-"""Robot models: Pinocchio kinematics in the actuated velocity space, groups, limits, arms."""
+"""Robot models: Pinocchio kinematics in the actuated velocity space, groups, limits, arms.
+
+* :mod:`~wholebody.robot.robot` -- :class:`Robot`: loading, names, :meth:`Robot.update`.
+* :mod:`~wholebody.robot.state` -- :class:`RobotState`: poses, Jacobians and centres of mass
+  at one configuration.
+* :mod:`~wholebody.robot.configurations` -- making, checking and reading configurations ``q``.
+* :mod:`~wholebody.robot.actuation` -- the actuated velocity space ``u`` and ``v = A u``.
+* :mod:`~wholebody.robot.com` -- the whole-body centre of mass and its Jacobian.
+* :mod:`~wholebody.robot.parts` -- :class:`Frame`, :class:`Body`, :class:`JointGroup`,
+  :class:`ArmChain`.
+* :mod:`~wholebody.robot.arms` -- arm chains from ``[arms]``, their geometry checked.
+* :mod:`~wholebody.robot.base`, :mod:`~wholebody.robot.wheels` -- mobile bases and their
+  wheels.
+* :mod:`~wholebody.robot.config`, :mod:`~wholebody.robot.urdf`,
+  :mod:`~wholebody.robot.building` -- ``robot.toml``, the URDF and the model built from them.
+* :mod:`~wholebody.robot.compiled`, :mod:`~wholebody.robot.hessian` -- what the compiled core
+  reads; kinematic Hessians.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +25,9 @@ from wholebody.errors import ConfigError
 from wholebody.resources import robots_dir
 from wholebody.robot.base import BaseModel
 from wholebody.robot.config import ArmConfig, BaseConfig, RobotConfig, read_robot_config
-from wholebody.robot.robot import ArmChain, Body, Frame, JointGroup, Robot, RobotState
+from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
+from wholebody.robot.robot import Robot
+from wholebody.robot.state import RobotState
 
 __all__ = [
     "ArmChain",

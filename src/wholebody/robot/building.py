@@ -4,7 +4,7 @@
 2. ``[locked]`` joints leave the model: Pinocchio's reduced model
    (``pinocchio.buildReducedModel``) welds each at its position, so casters, fingers,
    suspensions or legs are no velocities of ``u`` and cost nothing in a step (TIAGo++ as
-   shipped has 99 velocities; 20 with its hands, casters and suspension locked). A mimic joint
+   shipped has 101 velocities; 19 with its hands, casters and suspensions locked). A mimic joint
    whose leader is locked is locked with it, at ``multiplier * value + offset``.
 3. ``[frames]`` are added as operational frames, on a link or joint of the (reduced) model.
 

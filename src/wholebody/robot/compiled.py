@@ -21,7 +21,8 @@ import numpy as np
 import pinocchio as pin
 
 if TYPE_CHECKING:
-    from wholebody.robot.robot import Frame, Robot
+    from wholebody.robot.parts import Frame
+    from wholebody.robot.robot import Robot
 
 __all__ = ["RobotKinematics"]
 

@@ -22,7 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 from wholebody.errors import DimensionError
-from wholebody.robot.robot import Frame, Robot, RobotState
+from wholebody.robot.parts import Frame
+from wholebody.robot.robot import Robot
+from wholebody.robot.state import RobotState
 
 __all__ = ["actuated_support_mask", "check_off_wheels", "frame_hessian"]
 

@@ -1,7 +1,8 @@
 """Files a scenario run leaves behind, and the paper's Table 2 across backends.
 
 ``write_run`` writes ``run.npz`` (the :class:`~wholebody.control.RunLog`), ``metrics.json``
-and the figures ``hands.png``, ``joint_velocities.png``, ``arm_energy.png``.
+and the figures ``hands.png``, ``joint_velocities.png``, ``arm_energy.png``
+(``write_figures`` the figures alone).
 ``comparison`` builds the Table 2 rows (plain pseudo-inverse, the paper's projection, the
 hierarchical QP) from runs of one scenario; ``write_comparison`` writes them as
 ``comparison.md`` and ``comparison.json``.
@@ -26,7 +27,7 @@ from wholebody.scenarios import plots
 from wholebody.scenarios.runner import ScenarioRun
 
 __all__ = ["OutputsInterrupted", "comparison", "comparison_markdown", "write_comparison",
-           "write_run"]  # fmt: skip
+           "write_figures", "write_run"]  # fmt: skip
 
 BACKEND_LABELS = {
     "pinv": "pseudo-inverse (paper's baseline)",
@@ -57,41 +58,49 @@ def _write_all(jobs: list[tuple[str, Callable[[], Path]]]) -> dict[str, Path]:
 
 def write_run(run: ScenarioRun, out: Path, *, figures: bool = True) -> dict[str, Path]:
     """Write the log, the metrics and (``figures``) the figures of a run into ``out``."""
-    spec, log = run.spec, run.log
-    title = f"{spec.title or spec.name} [{run.backend}]"
     jobs: list[tuple[str, Callable[[], Path]]] = [
-        ("log", partial(log.save, out / "run.npz")),
+        ("log", partial(run.log.save, out / "run.npz")),
         (
             "metrics",
             partial(write_json, out / "metrics.json", run.metrics, indent=2, default=json_default),
         ),
     ]
-    if figures:
-        jobs += [
-            (
-                "hands",
-                partial(
-                    plots.hand_paths,
-                    log,
-                    out / "hands.png",
-                    spec.objects,
-                    run.object_poses,
-                    title=title,
-                ),
+    return _write_all(jobs + (_figure_jobs(run, out) if figures else []))
+
+
+def write_figures(run: ScenarioRun, out: Path) -> dict[str, Path]:
+    """Write the figures of a run into ``out`` (``hands.png``, ``joint_velocities.png``,
+    ``arm_energy.png``)."""
+    return _write_all(_figure_jobs(run, out))
+
+
+def _figure_jobs(run: ScenarioRun, out: Path) -> list[tuple[str, Callable[[], Path]]]:
+    spec, log = run.spec, run.log
+    title = f"{spec.title or spec.name} [{run.backend}]"
+    return [
+        (
+            "hands",
+            partial(
+                plots.hand_paths,
+                log,
+                out / "hands.png",
+                spec.objects,
+                run.object_poses,
+                title=title,
             ),
-            (
-                "joint_velocities",
-                partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
-            ),
-            ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title)),
-        ]
-    return _write_all(jobs)
+        ),
+        (
+            "joint_velocities",
+            partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
+        ),
+        ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title)),
+    ]
 
 
 def comparison(runs: list[ScenarioRun]) -> list[dict]:
-    """One Table 2 row per run: frequency, MSE and MAE per axis (averaged over the hands,
-    over the steps where a hand has a task), waist travel, final arm energy, failures and
-    limit violations."""
+    """One Table 2 row per run: the median control step (us) and the rate it sustains
+    (``1 / median``, Hz), MSE and MAE per axis (averaged over the hands, over the steps where
+    a hand has a task), waist travel, final arm energy, failures and limit violations."""
     rows = []
     for run in runs:
         m = run.metrics
@@ -102,8 +111,8 @@ def comparison(runs: list[ScenarioRun]) -> list[dict]:
             {
                 "backend": run.backend,
                 "label": BACKEND_LABELS.get(run.backend, run.backend),
-                "frequency_hz": m["frequency_hz"],
                 "step_time_us_median": m["step_time_us"]["median"],
+                "median_step_rate_hz": m["median_step_rate_hz"],
                 "mse_m2": mse,
                 "mae_m": mae,
                 "waist_travel_rad": m["joint_travel_rad"].get("waist", float("nan")),
@@ -121,7 +130,8 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
     arms = sorted({a for r in rows for a in r["final_arm_energy_j"]})
     head = [
         "method",
-        "frequency (Hz)",
+        "median step (us)",
+        "1 / median step (Hz)",
         "MSE x (m²)",
         "MSE y (m²)",
         "MSE z (m²)",
@@ -136,7 +146,7 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
     head += ["failures", "limit violations"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["label"], f"{r['frequency_hz']:.0f}"]
+        cells = [r["label"], f"{r['step_time_us_median']:.0f}", f"{r['median_step_rate_hz']:.0f}"]
         cells += [f"{r['mse_m2'][a]:.2e}" for a in "xyz"]
         cells += [f"{r['mae_m'][a]:.2e}" for a in "xyz"]
         if waist:

@@ -32,12 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from wholebody.arm.stiffness import StiffnessModel
 from wholebody.control import Controller, RunLog, summary
+from wholebody.control.controller import _progress
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
 from wholebody.errors import ConfigError, DataError, FrameError
 from wholebody.files import read_npz
-from wholebody.humanlike.stiffness import StiffnessModel
 from wholebody.planning import obstacles as ob
 from wholebody.planning.demonstration import align_to_chord
 from wholebody.planning.dmp import DMP, DMPConfig, DMPTrajectory
@@ -304,9 +305,8 @@ def run_scenario(
 
 
 def _progress_bar(total: int, name: str):
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="step", desc=name)
+    """The run's progress: a bar on a terminal, plain lines in a log (never a bar there)."""
+    return _progress(total, True, name, leave=True)
 
 
 def _scaled(phase: PhaseSpec, duration: float) -> PhaseSpec:

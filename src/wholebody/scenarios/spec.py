@@ -221,89 +221,10 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     backend = r.string(head, "backend", "scenario", default="projection", choices=BACKENDS)
     rate = r.number(head, "rate_hz", "scenario", default=100.0, positive=True)
 
-    st = r.table(data, "stack", "", required=False)
-    r.only(st, "stack", tuple(StackSpec.__dataclass_fields__))
-    stiffness: float | str = "learned"
-    if "stiffness" in st:
-        if st["stiffness"] == "learned":
-            stiffness = "learned"
-        else:
-            stiffness = r.number(st, "stiffness", "stack")
-            if stiffness < 0:
-                raise r.fail("stack.stiffness", 'expected "learned" or a number >= 0 N m/rad')
-    stack = StackSpec(
-        **{
-            k: r.number(st, k, "stack", default=getattr(StackSpec, k))
-            for k in ("energy", "limits_arms", "limits_waist", "manipulability", "gain")
-        },
-        wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
-        stiffness=stiffness,
-        acceleration=r.boolean(st, "acceleration", "stack", default=True),
-    )
-    if stack.gain < 0:
-        raise r.fail("stack.gain", f"expected a number >= 0, got {stack.gain}")
-
-    hands: dict[str, HandSpec] = {}
-    for hname, table in r.table(data, "hands", "", required=True).items():
-        where = f"hands.{hname}"
-        if not isinstance(table, dict):
-            raise r.fail(where, "expected a table")
-        r.only(table, where, ("frame", "kp", "ki"))
-        kp = r.number(table, "kp", where, default=20.0)
-        ki = r.number(table, "ki", where, default=5.0)
-        if kp < 0 or ki < 0:
-            raise r.fail(where, "kp and ki must be >= 0")
-        hands[hname] = HandSpec(hname, r.string(table, "frame", where), kp, ki)
-    if not hands:
-        raise r.fail("hands", "expected at least one hand")
-
-    pl = r.table(data, "planner", "", required=False)
-    r.only(pl, "planner", ("demo", "n_basis", "stiffness"))
-    demo = None
-    if "demo" in pl:
-        demo = path.parent / r.string(pl, "demo", "planner")
-        if not demo.is_file():
-            raise r.fail("planner.demo", f"file {demo} does not exist")
-    n_basis = r.number(pl, "n_basis", "planner", default=50, positive=True)
-    if n_basis != int(n_basis):
-        raise r.fail("planner.n_basis", f"expected an integer, got {n_basis}")
-    planner = PlannerSpec(
-        demo, int(n_basis), r.number(pl, "stiffness", "planner", default=1050.0, positive=True)
-    )
-
-    objects: dict[str, ObjectSpec] = {}
-    raw_objects = data.get("objects", [])
-    if not isinstance(raw_objects, list):
-        raise r.fail("objects", "expected an array of tables ([[objects]])")
-    for i, table in enumerate(raw_objects):
-        where = f"objects[{i}]"
-        if not isinstance(table, dict):
-            raise r.fail(where, "expected a table")
-        r.only(
-            table,
-            where,
-            ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note"),
-        )
-        oname = r.string(table, "name", where)
-        if oname in objects:
-            raise r.fail(f"{where}.name", f"object {oname!r} is defined twice")
-        kind = r.string(table, "kind", where, choices=KINDS)
-        obj = ObjectSpec(
-            name=oname,
-            kind=kind,
-            position=r.vector(table, "position", where, 3),  # type: ignore[arg-type]
-            size=r.vector(table, "size", where, 3) if kind == "box" else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-            radius=r.number(table, "radius", where, positive=True) if kind != "box" else 0.0,
-            height=r.number(table, "height", where, positive=True) if kind == "cylinder" else 0.0,
-            obstacle=r.boolean(table, "obstacle", where, default=False),
-            margin=r.number(table, "margin", where, default=0.0),
-            note=r.string(table, "note", where, default=""),
-        )
-        if kind == "box" and min(obj.size) <= 0:
-            raise r.fail(f"{where}.size", f"box edges must be > 0 m, got {list(obj.size)}")
-        if obj.margin < 0:
-            raise r.fail(f"{where}.margin", "expected a number >= 0 m")
-        objects[oname] = obj
+    stack = _stack(r, r.table(data, "stack", "", required=False))
+    hands = _hands(r, r.table(data, "hands", "", required=True))
+    planner = _planner(r, path, r.table(data, "planner", "", required=False))
+    objects = _objects(r, data.get("objects", []))
 
     raw_phases = data.get("phases")
     if not isinstance(raw_phases, list) or not raw_phases:
@@ -327,6 +248,99 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         paper=r.string(head, "paper", "scenario", ""),
         start=_start(r, head),
     )
+
+
+def _stack(r: TomlReader, st: dict) -> StackSpec:
+    """``[stack]``: the paper's weights, the stiffness and the acceleration switch."""
+    r.only(st, "stack", tuple(StackSpec.__dataclass_fields__))
+    stiffness: float | str = "learned"
+    if "stiffness" in st and st["stiffness"] != "learned":
+        stiffness = r.number(st, "stiffness", "stack")
+        if stiffness < 0:
+            raise r.fail("stack.stiffness", 'expected "learned" or a number >= 0 N m/rad')
+    stack = StackSpec(
+        **{
+            k: r.number(st, k, "stack", default=getattr(StackSpec, k))
+            for k in ("energy", "limits_arms", "limits_waist", "manipulability", "gain")
+        },
+        wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
+        stiffness=stiffness,
+        acceleration=r.boolean(st, "acceleration", "stack", default=True),
+    )
+    if stack.gain < 0:
+        raise r.fail("stack.gain", f"expected a number >= 0, got {stack.gain}")
+    return stack
+
+
+def _hands(r: TomlReader, tables: dict) -> dict[str, HandSpec]:
+    """``[hands.NAME]``: a frame and the PI gains of each hand, at least one."""
+    hands: dict[str, HandSpec] = {}
+    for hname, table in tables.items():
+        where = f"hands.{hname}"
+        if not isinstance(table, dict):
+            raise r.fail(where, "expected a table")
+        r.only(table, where, ("frame", "kp", "ki"))
+        kp = r.number(table, "kp", where, default=20.0)
+        ki = r.number(table, "ki", where, default=5.0)
+        if kp < 0 or ki < 0:
+            raise r.fail(where, "kp and ki must be >= 0")
+        hands[hname] = HandSpec(hname, r.string(table, "frame", where), kp, ki)
+    if not hands:
+        raise r.fail("hands", "expected at least one hand")
+    return hands
+
+
+def _planner(r: TomlReader, path: Path, pl: dict) -> PlannerSpec:
+    """``[planner]``: the DMP's demonstration (relative to the file) and settings."""
+    r.only(pl, "planner", ("demo", "n_basis", "stiffness"))
+    demo = None
+    if "demo" in pl:
+        demo = path.parent / r.string(pl, "demo", "planner")
+        if not demo.is_file():
+            raise r.fail("planner.demo", f"file {demo} does not exist")
+    n_basis = r.number(pl, "n_basis", "planner", default=50, positive=True)
+    if n_basis != int(n_basis):
+        raise r.fail("planner.n_basis", f"expected an integer, got {n_basis}")
+    return PlannerSpec(
+        demo, int(n_basis), r.number(pl, "stiffness", "planner", default=1050.0, positive=True)
+    )
+
+
+def _objects(r: TomlReader, raw: Any) -> dict[str, ObjectSpec]:
+    """``[[objects]]``: boxes, cylinders and spheres, each named once."""
+    if not isinstance(raw, list):
+        raise r.fail("objects", "expected an array of tables ([[objects]])")
+    objects: dict[str, ObjectSpec] = {}
+    for i, table in enumerate(raw):
+        obj = _object(r, table, f"objects[{i}]")
+        if obj.name in objects:
+            raise r.fail(f"objects[{i}].name", f"object {obj.name!r} is defined twice")
+        objects[obj.name] = obj
+    return objects
+
+
+def _object(r: TomlReader, table: Any, where: str) -> ObjectSpec:
+    if not isinstance(table, dict):
+        raise r.fail(where, "expected a table")
+    keys = ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note")
+    r.only(table, where, keys)
+    kind = r.string(table, "kind", where, choices=KINDS)
+    obj = ObjectSpec(
+        name=r.string(table, "name", where),
+        kind=kind,
+        position=r.vector(table, "position", where, 3),  # type: ignore[arg-type]
+        size=r.vector(table, "size", where, 3) if kind == "box" else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+        radius=r.number(table, "radius", where, positive=True) if kind != "box" else 0.0,
+        height=r.number(table, "height", where, positive=True) if kind == "cylinder" else 0.0,
+        obstacle=r.boolean(table, "obstacle", where, default=False),
+        margin=r.number(table, "margin", where, default=0.0),
+        note=r.string(table, "note", where, default=""),
+    )
+    if kind == "box" and min(obj.size) <= 0:
+        raise r.fail(f"{where}.size", f"box edges must be > 0 m, got {list(obj.size)}")
+    if obj.margin < 0:
+        raise r.fail(f"{where}.margin", "expected a number >= 0 m")
+    return obj
 
 
 def _start(r: TomlReader, head: dict) -> str | dict[str, float]:
@@ -362,36 +376,48 @@ def _phase(
     closed = r.boolean(table, "closed_chain", where, default=False)
     primary = r.string(table, "primary", where, default="") or None
     hp = r.table(table, "hands", where, required=True)
-    out: dict[str, HandPhase] = {}
-    for hname, spec in hp.items():
-        w = f"{where}.hands.{hname}"
-        if hname not in hands:
-            raise r.fail(w, f"unknown hand {hname!r}; the [hands] are {', '.join(hands)}")
-        if not isinstance(spec, dict):
-            raise r.fail(w, "expected a table")
-        r.only(spec, w, ("planner", "goal", "rotate", "avoid", "carry", "shape"))
-        kind = r.string(spec, "planner", w, choices=PLANNERS)
-        goal = r.vector(spec, "goal", w, 3) if kind in ("dmp", "min_jerk") else None
-        if kind not in ("dmp", "min_jerk") and "goal" in spec:
-            raise r.fail(f"{w}.goal", f"planner {kind!r} takes no goal")
-        if kind == "dmp" and planner.demo is None:
-            raise r.fail(f"{w}.planner", 'planner "dmp" needs [planner] demo = a demonstration')
-        avoid = r.names(spec, "avoid", w) if "avoid" in spec else ()
-        for a in avoid:
-            if a not in objects or not objects[a].obstacle:
-                raise r.fail(f"{w}.avoid", f"{a!r} is not an object with obstacle = true")
-        if avoid and kind != "dmp":
-            raise r.fail(f"{w}.avoid", "only the dmp planner avoids obstacles")
-        carry = r.string(spec, "carry", w, default="") or None
-        if carry is not None and carry not in objects:
-            raise r.fail(f"{w}.carry", f"unknown object {carry!r}")
-        shape = r.string(spec, "shape", w, default="demo", choices=("demo", "aligned", "straight"))
-        if shape != "demo" and kind != "dmp":
-            raise r.fail(f"{w}.shape", "only the dmp planner has a shape")
-        if kind not in ("dmp", "min_jerk") and "rotate" in spec:
-            raise r.fail(f"{w}.rotate", f"planner {kind!r} takes no rotate")
-        rotate = _rotation_vector(r, spec, w)
-        out[hname] = HandPhase(kind, goal, rotate, avoid, carry, shape)  # type: ignore[arg-type]
+    out = {hname: _hand_phase(r, spec, f"{where}.hands.{hname}", hname, hands, objects, planner)
+           for hname, spec in hp.items()}  # fmt: skip
+    _check_phase_hands(r, where, out, hands, closed, primary)
+    return PhaseSpec(name, duration, out, closed, primary)
+
+
+def _hand_phase(r: TomlReader, spec: Any, w: str, hname: str, hands: dict[str, HandSpec],
+                objects: dict[str, ObjectSpec], planner: PlannerSpec) -> HandPhase:  # fmt: skip
+    """One hand's planner in a phase (``[phases.hands.NAME]``)."""
+    if hname not in hands:
+        raise r.fail(w, f"unknown hand {hname!r}; the [hands] are {', '.join(hands)}")
+    if not isinstance(spec, dict):
+        raise r.fail(w, "expected a table")
+    r.only(spec, w, ("planner", "goal", "rotate", "avoid", "carry", "shape"))
+    kind = r.string(spec, "planner", w, choices=PLANNERS)
+    moves = kind in ("dmp", "min_jerk")
+    for key in ("goal", "rotate"):
+        if not moves and key in spec:
+            raise r.fail(f"{w}.{key}", f"planner {kind!r} takes no {key}")
+    goal = r.vector(spec, "goal", w, 3) if moves else None
+    if kind == "dmp" and planner.demo is None:
+        raise r.fail(f"{w}.planner", 'planner "dmp" needs [planner] demo = a demonstration')
+    avoid = r.names(spec, "avoid", w) if "avoid" in spec else ()
+    for a in avoid:
+        if a not in objects or not objects[a].obstacle:
+            raise r.fail(f"{w}.avoid", f"{a!r} is not an object with obstacle = true")
+    if avoid and kind != "dmp":
+        raise r.fail(f"{w}.avoid", "only the dmp planner avoids obstacles")
+    carry = r.string(spec, "carry", w, default="") or None
+    if carry is not None and carry not in objects:
+        raise r.fail(f"{w}.carry", f"unknown object {carry!r}")
+    shape = r.string(spec, "shape", w, default="demo", choices=("demo", "aligned", "straight"))
+    if shape != "demo" and kind != "dmp":
+        raise r.fail(f"{w}.shape", "only the dmp planner has a shape")
+    return HandPhase(kind, goal, _rotation_vector(r, spec, w), avoid, carry, shape)  # type: ignore[arg-type]
+
+
+def _check_phase_hands(r: TomlReader, where: str, out: dict[str, HandPhase],
+                       hands: dict[str, HandSpec], closed: bool,
+                       primary: str | None) -> None:  # fmt: skip
+    """Every hand planned; a closed chain or a follower has a primary with its own planner;
+    at least one hand has a task."""
     missing = [h for h in hands if h not in out]
     if missing:
         raise r.fail(f"{where}.hands", f"no planner for hand(s) {', '.join(missing)}")
@@ -412,4 +438,3 @@ def _phase(
             )
     if all(s.planner == "free" for s in out.values()):
         raise r.fail(f"{where}.hands", 'at least one hand needs a task (not all "free")')
-    return PhaseSpec(name, duration, out, closed, primary)

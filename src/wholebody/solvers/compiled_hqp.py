@@ -23,7 +23,8 @@ from wholebody.solvers.qp import QPStatus
 from wholebody.solvers.result import SolverResult
 
 if TYPE_CHECKING:
-    from wholebody.solvers.hqp import HierarchicalQPSolver, LevelReport
+    from wholebody.solvers.hqp import HierarchicalQPSolver
+    from wholebody.solvers.level_report import LevelReport
 
 __all__ = ["Workspace", "run"]
 

@@ -28,8 +28,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wholebody import kernels
+from wholebody.arm.stiffness import ConstantStiffness
 from wholebody.errors import DimensionError
-from wholebody.humanlike.stiffness import ConstantStiffness
 from wholebody.kernels import layout as lay
 from wholebody.kernels.evaluate import evaluate
 from wholebody.kernels.objectives import AE_CONSTANT, AE_K, AE_NET, AE_WIDTH, ARM_PARTS

@@ -15,16 +15,13 @@ made only of objectives has rows ``s I``, so it is simply
 objectives, ``u = J+ v + N u0 = J+ v - k (I - J+ J) grad H``: the paper's
 law. The plain pseudo-inverse is the same solver on a stack without the objective level.
 
-Linear algebra: the Gram matrix ``G = M M^T`` is factored by Cholesky, ``G = L L^T``. When
-``trace(G^-1) = ||L^-1||_F^2 <= 1 / eps^2``, or else when ``G - eps^2 I`` has a Cholesky
-factor too (exact up to rounding, where the damping below is 0 anyway), the smallest
-eigenvalue of G is at least ``eps^2``: no damping applies and every direction counts, so
-``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M`` exactly, from ``W = L^-1 M``. A level with
-more rows than columns (a weighted sum of tasks) uses ``G = M^T M`` the same way: then
-``M^+ r = G^-1 M^T r`` and ``M^+ M = I``, provided also that ``trace(G) trace(G^-1) <= 1e8``
-(its normal equations lose ``kappa^2 eps``; refined once above 1e3). Otherwise (near a
-singularity) the eigen-decomposition (fast path) or the SVD (saturation) decides damping and
-rank as described below.
+Linear algebra (:mod:`wholebody.solvers.linalg`): where the Gram matrix of a level's rows is
+certified to have no eigenvalue below ``eps^2`` (a Cholesky factor, and a bound or a second
+factor of ``G - eps^2 I``; :func:`~wholebody.solvers.linalg.certified_gram`), no damping
+applies and every direction counts: ``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M``
+exactly, or, for a level with more rows than columns (a weighted sum of tasks), its
+well-conditioned normal equations. Otherwise (near a singularity) the eigen-decomposition
+(fast path) or the SVD (saturation) decides damping and rank as described below.
 
 Singularity robustness: each singular direction of a level whose singular value ``s_i`` is
 below ``eps`` is damped with the variable damping ``lambda_i^2 = (1 - (s_i/eps)^2)
@@ -33,21 +30,20 @@ numerical filtering of Maciejewski and Klein), the others not at all: away from 
 the solution is the exact pseudo-inverse, and near one only the nearly singular directions
 are damped. Damping every direction by the smallest singular value's factor would also damp
 a level's well-conditioned tasks whenever it holds a low-weight regulariser, whose singular
-values are small by its weight, not by the kinematics (the hands then missed by 3.7e-2
-instead of 3.2e-4 beside a posture task of weight 1e-5).
+values are small by its weight, not by the kinematics.
 
 Units of ``eps``: the singular values are those of the level's rows divided by
 ``reference_scale = sqrt(w_min)``, the smallest positive task weight of the level
 (:class:`~wholebody.solvers.stack.LevelProblem`), in the metric's scaled velocities ``u~``.
-So a weight common to a level's tasks changes nothing (weight 1e-2 on both hands damped 54 %
-of a far-from-singular task away before), and a heavier task never makes a lighter one
-count as singular. The price: in a level that also holds a light regulariser (a posture task
-of weight 1e-5 beside the hands), a task's singular directions are measured against that
-regulariser, and it is the regulariser, as in any weighted least squares, that bounds the
-velocity near the task's singularity; put singular-prone tasks in a level of their own, as the
-paper's stack does, for the damping proper. The metric is not normalised: ``eps`` is in the
-units of ``u~ = W^(1/2) u``, and a uniform metric ``c I`` moves the threshold on the task's
-own singular values to ``eps sqrt(c)`` (the damping of a weighted norm, like ``lambda``).
+So a weight common to a level's tasks changes nothing, and a heavier task never makes a
+lighter one count as singular. The price: in a level that also holds a light regulariser (a
+posture task of weight 1e-5 beside the hands), a task's singular directions are measured
+against that regulariser, and it is the regulariser, as in any weighted least squares, that
+bounds the velocity near the task's singularity; put singular-prone tasks in a level of their
+own, as the paper's stack does, for the damping proper. The metric is not normalised: ``eps``
+is in the units of ``u~ = W^(1/2) u``, and a uniform metric ``c I`` moves the threshold on the
+task's own singular values to ``eps sqrt(c)`` (the damping of a weighted norm, like
+``lambda``).
 
 Bounds: the unsaturated solution of the whole stack is computed first and returned when it is
 inside the box. Otherwise: **Saturation in the Null Space** (Flacco, De Luca, Khatib, IEEE
@@ -92,9 +88,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf, dtrtri
 
-from wholebody._numeric import NORMAL_KAPPA, normal_solve
 from wholebody._numeric import count_nonzero as _count
 from wholebody.errors import DimensionError, SolverError
 from wholebody.kernels import layout as lay
@@ -102,6 +96,13 @@ from wholebody.kernels import projection as kernel
 from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
+from wholebody.solvers.linalg import (
+    Gram,
+    certified_gram,
+    damped_gram_step,
+    damped_svd_solve,
+    identity,
+)
 from wholebody.solvers.plan import ProblemArena, first_call
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
@@ -109,7 +110,6 @@ from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 __all__ = ["ProjectionSolver"]
 
 _INSIDE_TOL = 1e-10
-_EPS = float(np.finfo(float).eps)
 _WIDEN = np.array([[-_INSIDE_TOL], [_INSIDE_TOL]])
 _FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
 
@@ -168,34 +168,6 @@ class _Box:
         return _count(u >= self.lo_tol) == n and _count(u <= self.hi_tol) == n
 
 
-class _Gram:
-    """The Gram matrix ``G`` of a level's rows restricted to its free directions, ``B``
-    (m x n), certified well conditioned (see the module docstring): ``G = B B^T`` when
-    ``m <= n`` (``W = L^-1 B``), ``G = B^T B`` when B is tall (``m > n``, full column rank;
-    ``W`` None); ``L`` its Cholesky factor, ``Linv = L^-1``; ``rank`` = min(m, n)."""
-
-    __slots__ = ("B", "Linv", "W", "kappa2", "rank")
-
-    def __init__(self, B: np.ndarray, Linv: np.ndarray, W: np.ndarray | None,
-                 kappa2: float = 0.0) -> None:  # fmt: skip
-        self.B, self.Linv, self.W, self.kappa2 = B, Linv, W, kappa2
-        self.rank = min(B.shape)
-
-    def solve(self, r: np.ndarray) -> np.ndarray:
-        """``B^+ r`` (r: (m,) or (m, k)): ``B^T G^-1 r``, or for a tall B its least-squares
-        solution ``G^-1 B^T r`` (:func:`~wholebody._numeric.normal_solve`)."""
-        if self.W is not None:
-            return self.W.T.dot(self.Linv.dot(r))
-        return normal_solve(self.B, self.Linv, r, self.kappa2)
-
-    def used(self) -> np.ndarray:
-        """``B^+ B``: the projector onto the directions the level uses (all of them when B is
-        tall)."""
-        if self.W is None:
-            return _eye(self.B.shape[1])
-        return self.W.T.dot(self.W)
-
-
 class ProjectionSolver(Solver):
     """Damped pseudo-inverse + recursive null-space projection + SNS for the box.
 
@@ -249,121 +221,6 @@ class ProjectionSolver(Solver):
         self.compiled = compiled
         self._par = np.zeros(kernel.PAR_WIDTH)
 
-    # ------------------------------------------------------------------ linear algebra
-    def _certified(self, B: np.ndarray) -> _Gram | None:
-        """The Cholesky route for ``B`` (m x n) when its Gram matrix ``G`` (``B B^T``, or
-        ``B^T B`` for a tall B) is certified to need neither damping nor a rank decision,
-        else None: ``lambda_min(G) >= eps^2`` because ``trace(G^-1) <= 1 / eps^2`` or, where
-        that bound is too loose, because ``G - eps^2 I`` has a Cholesky factor too (see the
-        module docstring). A tall B must also have
-        ``kappa_F = sqrt(trace(G) trace(G^-1)) <= 1e4`` (its normal equations lose
-        ``kappa^2 eps``; refined once above 1e3)."""
-        m, n = B.shape
-        if m == 0:
-            return None
-        tall = m > n
-        G = B.T.dot(B) if tall else B.dot(B.T)
-        top = float(G.trace())
-        eps = self.singular_threshold
-        # every eigenvalue is kept as a rank (rule: lambda > (rank_tolerance max(1, s_max))^2,
-        # s_max^2 <= trace(G))
-        if eps * eps <= (self.rank_tolerance**2) * max(1.0, top):
-            return None
-        L, info = dpotrf(G, lower=1, clean=1)
-        if info != 0:
-            return None
-        Linv, info = dtrtri(L, lower=1)
-        if info != 0:
-            return None
-        flat = Linv.ravel()
-        inv = float(flat.dot(flat))  # trace(G^-1) >= 1 / lambda_min(G)
-        if inv * eps * eps > 1.0:  # the bound does not settle it: the exact test
-            G -= self._shift(G.shape[0])  # G - eps^2 I (G is not needed any more)
-            if dpotrf(G, lower=1, clean=0, overwrite_a=1)[1] != 0:  # lambda_min(G) < eps^2
-                return None
-        if tall:
-            k2 = inv * top  # kappa_F^2 = trace(G^-1) trace(G)
-            if k2 > NORMAL_KAPPA * NORMAL_KAPPA:
-                return None
-            return _Gram(B, Linv, None, k2)
-        return _Gram(B, Linv, Linv.dot(B))
-
-    def _shift(self, k: int) -> np.ndarray:
-        """``eps^2 I`` (k x k), cached per size and threshold."""
-        key = (k, self.singular_threshold)
-        shift = _SHIFTS.get(key)
-        if shift is None:
-            shift = _SHIFTS[key] = self.singular_threshold**2 * np.eye(k)
-            shift.setflags(write=False)
-        return shift
-
-    def _damping(self, s: np.ndarray) -> np.ndarray:
-        """The damping ``mu_i = (1 - (s_i / eps)^2) lambda_max^2`` of each direction whose
-        singular value ``s_i`` is below ``eps``, 0 for the others."""
-        eps = self.singular_threshold
-        x = s * (1.0 / eps)
-        x *= x
-        np.subtract(1.0, x, out=x)
-        np.maximum(x, 0.0, out=x)
-        x *= self.damping**2
-        return x
-
-    def _solve_ls(self, M: np.ndarray, r: np.ndarray,
-                  damped: bool = True) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
-        """Damped least-squares ``y = M^+_damped r`` (r: (m,) or (m, k)), the null-space basis
-        of M and its rank, from the SVD."""
-        n = M.shape[1]
-        if M.shape[0] == 0 or n == 0:
-            return np.zeros((n, *r.shape[1:])), np.eye(n), 0
-        U, s, Vt = np.linalg.svd(M, full_matrices=True)
-        smax = s[0] if s.size else 0.0
-        rank = int(np.sum(s > self.rank_tolerance * max(1.0, smax)))
-        sr = s[:rank]
-        inv = sr / (sr * sr + self._damping(sr)) if damped else 1.0 / sr
-        c = U[:, :rank].T @ r
-        y = Vt[:rank].T @ (inv[:, None] * c if c.ndim == 2 else inv * c)
-        return y, Vt[rank:].T, rank
-
-    def _gram_step(self, M: np.ndarray, r: np.ndarray,
-                   exact: bool = False) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """``M^+_damped r`` and the exact projector ``M^+ M`` (from the eigen-decomposition
-        of ``M M^T``, or the SVD of a tall M).
-
-        An eigenvalue of ``M M^T`` counts as zero below the rank tolerance or below the
-        eigen-solver's round-off, ``10 m eps_mach lambda_max``, whichever is larger: a level
-        with more rows than columns (``m > n``) has ``m - n`` exact zeros that come out as
-        +-1e-16, and counting them as directions would put round-off into the projector.
-
-        A tall M goes through its own SVD instead (n x n work, not m x m), with the same
-        rule on ``s^2``; except where ``exact`` says that M's columns are the level's rows
-        themselves (no computed projector of the levels above): there only the rank tolerance
-        applies, because ``M M^T`` squares the condition number and the round-off floor would
-        drop genuine directions (at ``kappa = 1e7`` a level lost its smallest directions and
-        missed its least squares by 100 %). Below a computed projector the floor stays: its
-        round-off leaves tiny singular values in M (4e-7 where 0 is exact, on a fuzzed
-        stack) that would otherwise count as directions of the level."""
-        m, n = M.shape
-        if m > n:
-            U, sv, Vt = np.linalg.svd(M, full_matrices=False)
-            top = float(sv[0]) ** 2 if n else 0.0
-            floor = (self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2
-            if not exact:
-                floor = max(floor, 10.0 * m * _EPS * top)
-            keep = sv * sv > floor
-            s_r = sv[keep]
-            V_r = Vt[keep].T
-            return (V_r.dot((U[:, keep].T.dot(r)) * (s_r / (s_r * s_r + self._damping(s_r)))),
-                    V_r.dot(V_r.T))  # fmt: skip
-        lam, U = np.linalg.eigh(M @ M.T)
-        top = max(float(lam[-1]), 0.0) if lam.size else 0.0
-        floor = max((self.rank_tolerance * max(1.0, math.sqrt(top))) ** 2,
-                    10.0 * lam.size * _EPS * top)  # fmt: skip
-        keep = lam > floor
-        lam_r, U_r = lam[keep], U[:, keep]
-        MtU = M.T @ U_r
-        y = MtU @ ((U_r.T @ r) / (lam_r + self._damping(np.sqrt(lam_r))))
-        return y, (MtU / lam_r) @ MtU.T
-
     def _level(self, lp: LevelProblem, prev: _Level, box: _Box, need_next: bool,
                saturate: bool) -> _Level:  # fmt: skip
         A, b = lp.A, lp.b
@@ -386,14 +243,15 @@ class ProjectionSolver(Solver):
                 else A.dot(prev.P)
             )
             r = b - A.dot(u0)
-            gram = self._certified(B)
+            gram = certified_gram(B, self.singular_threshold, self.rank_tolerance)
             if gram is not None:
                 u = u0 + gram.solve(r)
                 Pn = None
                 if need_next:
                     Pn = prev.projector() - gram.used()
             else:
-                y, used = self._gram_step(B, r, prev.P is None)
+                y, used = damped_gram_step(B, r, self.singular_threshold, self.damping,
+                                           self.rank_tolerance, prev.P is None)  # fmt: skip
                 u, Pn = u0 + y, prev.projector() - used
             nxt = _Level(u, Pn, 1.0, prev.saturated)
         if not saturate or box.inside(u):
@@ -421,13 +279,14 @@ class ProjectionSolver(Solver):
         for _ in range(u0.size + 1):
             base = free.base
             Rc[:] = -A.dot(base)
-            gram = self._certified(free.restrict(A))
+            gram = certified_gram(free.restrict(A), self.singular_threshold, self.rank_tolerance)
             if gram is not None:
                 Y = gram.solve(R)
                 a, rest, rank, null = Y[:, 0], base + Y[:, 1], gram.rank, gram
             else:  # near a singularity or out of directions: the SVD decides
                 Zf = free.basis()
-                Yz, Nf, rank = self._solve_ls(A.dot(Zf), R)
+                Yz, Nf, rank = damped_svd_solve(A.dot(Zf), R, self.singular_threshold,
+                                                self.damping, self.rank_tolerance)  # fmt: skip
                 a, rest, null = Zf.dot(Yz[:, 0]), base + Zf.dot(Yz[:, 1]), Zf.dot(Nf)
             if needed < 0:
                 needed = rank
@@ -739,28 +598,15 @@ class _Free:
 def _null_projector(free: _Free, null: object) -> np.ndarray:
     """The projector onto what a level leaves free: from the certified Gram (``F - B^T G^-1
     B``) or an explicit basis ``Zn`` (``Zn Zn^T``)."""
-    if isinstance(null, _Gram):
+    if isinstance(null, Gram):
         return free.matrix() - null.used()
     return null @ null.T
-
-
-_EYES: dict[int, np.ndarray] = {}
-_SHIFTS: dict[tuple[int, float], np.ndarray] = {}
-
-
-def _eye(n: int) -> np.ndarray:
-    """The identity (n x n), cached, read-only."""
-    eye = _EYES.get(n)
-    if eye is None:
-        eye = _EYES[n] = np.eye(n)
-        eye.setflags(write=False)
-    return eye
 
 
 def _diag(mask: np.ndarray) -> np.ndarray:
     """``diag(mask)`` as floats (a fresh array): the identity times the 0/1 mask, column by
     column (exact: every entry is 1 * m_j or 0 * m_j)."""
-    return _eye(mask.size) * mask
+    return identity(mask.size) * mask
 
 
 def _none(n: int, null: np.ndarray | None) -> np.ndarray | None:

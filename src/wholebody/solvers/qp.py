@@ -13,25 +13,22 @@ solve is then an update of the data and, with ``warm_start=True``, starts from t
 solution (daqp: the previous working set; proxsuite: previous primal and dual iterates;
 osqp: previous primal and dual iterates). A change of structure re-creates the workspace.
 
-The adapters are written against each engine's own Python API (not qpsolvers), because the
-hot path needs the workspace kept between calls: qpsolvers builds a new problem on every call.
-
-Engines, measured on this machine on 1071 per-level problems of the hierarchical solver
-(11 or 23 variables, 23 rows or a box; median / p90, warm-started; see
-:mod:`wholebody.solvers.hqp` for the whole solve):
+The adapters are written against each engine's own Python API, because the hot path needs
+the workspace kept between calls; any other solver that :mod:`qpsolvers` can call serves
+through the generic engine ``"qpsolvers:<solver>"``
+(:mod:`wholebody.solvers.qpsolvers_engine`), which builds a new problem on every call.
 
 ``daqp``
-    Dual active-set method; exact up to round-off on strictly convex problems: 18 / 21 us, no
-    failure. The default.
+    Dual active-set method; exact up to round-off on strictly convex problems: the fastest
+    on the hierarchical solver's problems, and the default.
 ``proxsuite``
-    Proximal augmented Lagrangian (dense backend), ``eps_abs`` 1e-9: 130 / 300 us, 0.3-0.7 %
-    not solved, answers up to 0.2 off daqp's. Warm start is configured *before* ``init()``:
-    proxsuite 0.8.0 crashed when it was switched on between ``init()`` and the first
-    ``solve()``.
+    Proximal augmented Lagrangian (dense backend), ``eps_abs`` 1e-9; its answers are less
+    exact than daqp's. Warm start is configured *before* ``init()`` (switching it on between
+    ``init()`` and the first ``solve()`` is not safe).
 ``osqp``
-    ADMM (sparse, here with a dense pattern), ``eps`` 1e-7 and polishing: 88 / 130 us, every
-    problem "solved", but answers up to 0.3-1.6 off daqp's. Provided for comparison. Its
-    polishing prints to the C stdout whatever ``verbose`` says; the adapter silences it.
+    ADMM (sparse, here with a dense pattern), ``eps`` 1e-7 and polishing; its answers are the
+    least exact. Provided for comparison. Its polishing prints to the C stdout whatever
+    ``verbose`` says; the adapter silences it.
 """
 
 from __future__ import annotations
@@ -286,10 +283,9 @@ class ProxsuiteEngine(QPEngine):
 
     @staticmethod
     def default_settings() -> dict[str, Any]:
-        # The infeasibility certificates' tolerances (1e-4 by default) far below proxsuite's:
-        # with its defaults it declared 1-variable QPs with a feasible y = 0 infeasible after
-        # 1-3 iterations (primal residual 0), on 0.16 % of the paper stack's closed-loop steps;
-        # the cascade's QPs are feasible and strictly convex by construction.
+        # The infeasibility certificates' tolerances far below proxsuite's (1e-4): at its
+        # defaults it declares benign, feasible 1-variable QPs infeasible, and the cascade's
+        # QPs are feasible and strictly convex by construction.
         return {
             "eps_abs": 1e-9,
             "eps_rel": 0.0,
@@ -320,8 +316,8 @@ class ProxsuiteEngine(QPEngine):
         qp = pq.dense.QP(n, 0, m, lb is not None)
         for key, value in self.settings.items():
             setattr(qp.settings, key, value)
-        # Before init(): switching warm start on between init() and the first solve() crashed
-        # proxsuite 0.8.0.
+        # Before init(): switching warm start on between init() and the first solve() is not
+        # safe.
         guess = pq.InitialGuess
         qp.settings.initial_guess = (
             guess.WARM_START_WITH_PREVIOUS_RESULT if self.warm_start else guess.NO_INITIAL_GUESS
@@ -460,11 +456,17 @@ class OsqpEngine(QPEngine):
 
 
 class _quiet_stdout:  # noqa: N801 - used as a context manager
-    """Silence file descriptor 1 (C-level prints) for the duration of a ``with`` block."""
+    """Silence file descriptor 1 (C-level prints) for the duration of a ``with`` block
+    (nothing is silenced with ``keep=True``)."""
 
     _null: int | None = None
 
+    def __init__(self, keep: bool = False) -> None:
+        self.keep = keep
+
     def __enter__(self) -> None:
+        if self.keep:
+            return
         if _quiet_stdout._null is None:
             _quiet_stdout._null = os.open(os.devnull, os.O_WRONLY)
         sys.stdout.flush()
@@ -472,6 +474,8 @@ class _quiet_stdout:  # noqa: N801 - used as a context manager
         os.dup2(_quiet_stdout._null, 1)
 
     def __exit__(self, *exc: object) -> None:
+        if self.keep:
+            return
         os.dup2(self._saved, 1)
         os.close(self._saved)
 
@@ -485,12 +489,15 @@ _CLASSES: dict[str, tuple[type[QPEngine], str]] = {
 
 
 def available_engines() -> list[str]:
-    """The engine names whose Python package is importable here."""
+    """The built-in engine names whose Python package is importable here (the qpsolvers
+    ones: :func:`wholebody.solvers.qpsolvers_engine.qpsolvers_engines`)."""
     return [name for name, (_, mod) in _CLASSES.items() if importlib.util.find_spec(mod)]
 
 
 def make_engine(name: str, *, warm_start: bool = True, **settings: Any) -> QPEngine:
-    """A new engine workspace by name (``"daqp"``, ``"proxsuite"`` or ``"osqp"``).
+    """A new engine workspace by name: ``"daqp"``, ``"proxsuite"``, ``"osqp"``, or
+    ``"qpsolvers:<solver>"`` for any solver in ``qpsolvers.available_solvers``
+    (:mod:`wholebody.solvers.qpsolvers_engine`).
 
     Raises
     ------
@@ -498,8 +505,13 @@ def make_engine(name: str, *, warm_start: bool = True, **settings: Any) -> QPEng
         Unknown name, or the engine's package is not installed.
     """
     key = str(name).lower()
+    if key.startswith("qpsolvers:"):
+        from wholebody.solvers.qpsolvers_engine import PREFIX, QpsolversEngine
+
+        return QpsolversEngine(key[len(PREFIX) :], warm_start=warm_start, **settings)
     if key not in _CLASSES:
-        raise SolverError(f"unknown QP engine {name!r}; expected one of {', '.join(ENGINES)}")
+        raise SolverError(f"unknown QP engine {name!r}; expected one of {', '.join(ENGINES)} "
+                          "or 'qpsolvers:<solver>'")  # fmt: skip
     cls, module = _CLASSES[key]
     if importlib.util.find_spec(module) is None:
         raise SolverError(f"QP engine {name!r} needs the Python package {module!r}, which is "

@@ -416,50 +416,70 @@ class Stack:
         state.prefetch(self._frames)
         values: dict[str, ObjectiveValue] = {}
         for plan in self._plans:
-            level, buf = plan.level, plan.buffer
             if plan.tasks:
-                if plan.scale_version != self._scale_version:
-                    plan.rescale(D, self._scale_version)
-                keys = plan.weight_keys
-                for i, t in enumerate(plan.tasks):
-                    Ji, vi = plan.views[i]
-                    w = t.write_rows(state, Ji, vi)
-                    key = keys[i]
-                    if isinstance(w, (float, int)):
-                        if key.__class__ is not float or w != key:
-                            plan.set_weight(i, w, D)
-                    elif not (key.__class__ is np.ndarray and np.array_equal(w, key)):
-                        plan.set_weight(i, w, D)
-                np.multiply(plan.task_A, plan.factor, out=plan.task_A)
-                np.multiply(plan.task_b, plan.row_scale, out=plan.task_b)
+                self._task_rows(plan, state)
             if plan.objectives:
-                grad = np.zeros(D.size)
-                curv = None
-                for o in plan.objectives:
-                    val = o.evaluate(state)
-                    values[o.name] = val
-                    w = o.weight
-                    grad += w * val.gradient
-                    if val.curvature is not None and w > 0:
-                        curv = w * val.curvature if curv is None else w * val.curvature + curv
-                sw = math.sqrt(level.objective_weight)
-                if sw != plan.objective_scale:
-                    np.fill_diagonal(plan.objective_A, sw)
-                    plan.objective_scale = sw
-                if not plan.tasks:
-                    buf.identity_scale = sw
-                # u0 = -k W^-1 grad / (1 + k dt W^-1 curv); rows in u~: D^-1 u0 = -k D grad / ...
-                step = np.multiply(-level.gain * sw * D, grad, out=plan.objective_b)
-                if curv is not None:
-                    curv *= level.gain * dt * self._scale_sq
-                    curv += 1.0
-                    step /= curv
+                self._objective_rows(plan, state, dt, values)
             for t in plan.inequalities:
                 r = t.compute(state, dt)
-                sl = buf.inequality_rows[t.name]
-                np.multiply(r.C, D, out=buf.C[sl])
-                buf.lower[sl] = r.lower
-                buf.upper[sl] = r.upper
+                sl = plan.buffer.inequality_rows[t.name]
+                np.multiply(r.C, D, out=plan.buffer.C[sl])
+                plan.buffer.lower[sl] = r.lower
+                plan.buffer.upper[sl] = r.upper
+        lower, upper = self._box(state, dt)
+        self._evaluated = state
+        return StackProblem(self._buffers, lower / D, upper / D, D, values, self.anchor)
+
+    def _task_rows(self, plan: _LevelPlan, state: RobotState) -> None:
+        """A level's task rows, weighted and scaled into its buffer (the reference path)."""
+        D = self._scale
+        if plan.scale_version != self._scale_version:
+            plan.rescale(D, self._scale_version)
+        keys = plan.weight_keys
+        for i, t in enumerate(plan.tasks):
+            Ji, vi = plan.views[i]
+            w = t.write_rows(state, Ji, vi)
+            key = keys[i]
+            if isinstance(w, (float, int)):
+                if key.__class__ is not float or w != key:
+                    plan.set_weight(i, w, D)
+            elif not (key.__class__ is np.ndarray and np.array_equal(w, key)):
+                plan.set_weight(i, w, D)
+        np.multiply(plan.task_A, plan.factor, out=plan.task_A)
+        np.multiply(plan.task_b, plan.row_scale, out=plan.task_b)
+
+    def _objective_rows(self, plan: _LevelPlan, state: RobotState, dt: float,
+                        values: dict[str, ObjectiveValue]) -> None:  # fmt: skip
+        """A level's objectives as the descent rows ``s I x = s D^-1 u0`` with
+        ``u0 = -k W^-1 grad / (1 + k dt W^-1 curv)`` (the reference path)."""
+        level, buf, D = plan.level, plan.buffer, self._scale
+        grad = np.zeros(D.size)
+        curv = None
+        for o in plan.objectives:
+            val = o.evaluate(state)
+            values[o.name] = val
+            w = o.weight
+            grad += w * val.gradient
+            if val.curvature is not None and w > 0:
+                curv = w * val.curvature if curv is None else w * val.curvature + curv
+        sw = math.sqrt(level.objective_weight)
+        if sw != plan.objective_scale:
+            np.fill_diagonal(plan.objective_A, sw)
+            plan.objective_scale = sw
+        if not plan.tasks:
+            buf.identity_scale = sw
+        # rows in u~: D^-1 u0 = -k D grad / ...
+        step = np.multiply(-level.gain * sw * D, grad, out=plan.objective_b)
+        if curv is not None:
+            curv *= level.gain * dt * self._scale_sq
+            curv += 1.0
+            step /= curv
+
+    def _box(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The intersection of the limits' boxes (rad/s, m/s). Where position recovery and
+        velocity limits disagree (a state outside its limits asks for more than the joint's
+        speed), the velocity limit wins: move back at full speed rather than declare the box
+        empty."""
         lower, upper = self._lower, self._upper
         for k, c in enumerate(self.constraints):
             b = c.bounds(state, dt)
@@ -472,16 +492,12 @@ class Stack:
         if not self.constraints:
             lower.fill(-np.inf)
             upper.fill(np.inf)
-        # Where position recovery and velocity limits disagree (a state outside its limits
-        # asks for more than the joint's speed), the velocity limit wins: move back at full
-        # speed rather than declare the box empty.
         crossed = lower > upper
         if _count_nonzero(crossed):
             mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
             lower[crossed] = mid
             upper[crossed] = mid
-        self._evaluated = state
-        return StackProblem(self._buffers, lower / D, upper / D, D, values, self.anchor)
+        return lower, upper
 
     def advance(
         self,

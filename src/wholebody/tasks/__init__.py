@@ -1,4 +1,4 @@
-"""Composable tasks, objectives and constraints (velocity level, actuated coordinates)."""
+"""Composable tasks, objectives and limits (velocity level, actuated coordinates)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from wholebody.tasks.base import (
     Constraint,
     InequalityRows,
     InequalityTask,
+    Limit,
     Objective,
     ObjectiveValue,
     Task,
@@ -32,6 +33,7 @@ __all__ = [
     "InequalityTask",
     "JointLimitAvoidance",
     "JointPositionLimits",
+    "Limit",
     "Manipulability",
     "Objective",
     "ObjectiveValue",

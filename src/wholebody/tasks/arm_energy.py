@@ -9,9 +9,9 @@
   method is meant to avoid.) The stiffness label ``d f_g / d alpha`` at fixed shoulder and
   wrist is the same with either reference.
 * Virtual torsion spring about the shoulder-wrist line: ``f_e = 1/2 k (pi - |alpha|_s)^2 w``
-  with the arm angle alpha (:mod:`wholebody.humanlike.arm_geometry`, 0 = elbow lowest), rest
+  with the arm angle alpha (:mod:`wholebody.arm.angle`, 0 = elbow lowest), rest
   angle pi, and stiffness k constant or a model ``k(wrist)``
-  (:class:`~wholebody.humanlike.stiffness.StiffnessModel`).
+  (:class:`~wholebody.arm.stiffness.StiffnessModel`).
 
 Two regularisations make the energy smooth everywhere (documented decisions):
 
@@ -36,7 +36,7 @@ adds ``g m_i h_i`` per link; the kernels hold one link per segment, so an arm wi
 evaluated here: the kernel's two, plus the others with their centre-of-mass Jacobians.
 
 The stiffness model's input is the wrist relative to the shoulder in the arm's canonical body
-axes (x forward, y medial, z up; see :mod:`wholebody.humanlike.stiffness`):
+axes (x forward, y medial, z up; see :mod:`wholebody.arm.stiffness`):
 ``p = Mirror R_b^T (W - S)`` with ``R_b`` the base yaw, so
 ``dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang)``.
 """
@@ -47,8 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.errors import DimensionError
-from wholebody.humanlike.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.kernels.objectives import (
     AE_COM1,
     AE_COM2,
@@ -118,8 +118,7 @@ class ArmPotentialEnergy(Objective):
     ) -> None:
         self.robot = robot
         self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
-        self.name = name or f"{self.arm.name}_arm_energy"
-        self.weight = float(weight)
+        super().__init__(name or f"{self.arm.name}_arm_energy", weight)
         if isinstance(stiffness, StiffnessModel):
             self.stiffness = stiffness
         else:

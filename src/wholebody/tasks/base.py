@@ -8,8 +8,8 @@ see :class:`wholebody.Robot`), for one control step of ``dt`` seconds:
 * an :class:`InequalityTask` returns rows ``lower <= C u <= upper`` (:class:`InequalityRows`);
 * an :class:`Objective` returns a cost ``f(q)`` and its gradient in actuated coordinates,
   ``g_k = d f / d t`` along ``u = e_k`` (:class:`ObjectiveValue`); a solver descends it;
-* a :class:`Constraint` returns a box ``lower <= u <= upper`` (:class:`Bounds`) that every
-  level must respect.
+* a :class:`Limit` returns a box ``lower <= u <= upper`` (:class:`Bounds`) that every
+  level must respect (pink and mink call these limits; ``Constraint`` is the same class).
 
 Tasks never call solvers and solvers know tasks only through these contracts.
 
@@ -21,11 +21,14 @@ rows into a caller's buffer instead of allocating them.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from wholebody.errors import DimensionError
 from wholebody.robot import Frame, RobotState
 
 __all__ = [
@@ -33,6 +36,7 @@ __all__ = [
     "Constraint",
     "InequalityRows",
     "InequalityTask",
+    "Limit",
     "Objective",
     "ObjectiveValue",
     "Task",
@@ -80,8 +84,42 @@ class ObjectiveValue:
     curvature: np.ndarray | None = None  # (nu,) >= 0, or None when not available
 
 
+def check_name(name: object, kind: str) -> str:
+    """A task's, objective's or limit's name: a non-empty string, or DimensionError."""
+    if not (isinstance(name, str) and name):
+        raise DimensionError(f"{kind} name must be a non-empty string, got {name!r}")
+    return name
+
+
+def check_weight(weight: object, name: str) -> float | np.ndarray:
+    """A weight: a finite number >= 0 or a 1-D array of them (read-only), or DimensionError
+    naming the owner."""
+    if isinstance(weight, bool):
+        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row, got "
+                             f"{weight!r}")  # fmt: skip
+    if isinstance(weight, (int, float, np.floating, np.integer)):
+        w = float(weight)
+        if not (math.isfinite(w) and w >= 0):
+            raise DimensionError(f"{name}: weight must be finite and >= 0, got {weight!r}")
+        return w
+    try:
+        arr = np.array(weight, dtype=float)
+    except (TypeError, ValueError):
+        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row, got "
+                             f"{weight!r}") from None  # fmt: skip
+    if arr.ndim != 1 or not (np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row (finite, "
+                             f">= 0), got {weight!r}")  # fmt: skip
+    arr.setflags(write=False)
+    return arr
+
+
 class Task(ABC):
     """Equality rows ``J u = v`` at the velocity level.
+
+    Subclasses call ``super().__init__(name, weight)`` (both checked), say their number of
+    rows (:attr:`dim`) and compute their rows (:meth:`compute`); :meth:`error` is what the
+    feedback drives to zero, for logs.
 
     Attributes
     ----------
@@ -89,11 +127,32 @@ class Task(ABC):
         Unique within a stack; used in logs, results and error messages.
     weight
         Scalar or per-row weight inside its level (relative importance among the tasks of
-        one level; priorities between levels are strict).
+        one level; priorities between levels are strict): finite, >= 0.
     """
 
-    name: str
-    weight: float | np.ndarray
+    def __init__(self, name: str, weight: float | Sequence[float] | np.ndarray = 1.0) -> None:
+        self.name = check_name(name, type(self).__name__)
+        self.weight = weight
+
+    @property
+    def weight(self) -> float | np.ndarray:
+        """Scalar or per-row weight in its level (finite, >= 0; arrays are read-only)."""
+        return self._weight
+
+    @weight.setter
+    def weight(self, value: float | Sequence[float] | np.ndarray) -> None:
+        self._weight = check_weight(value, getattr(self, "name", type(self).__name__))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """The weight of each row, shape ``(dim,)`` (DimensionError if a per-row weight has
+        another length)."""
+        w = self.weight
+        if isinstance(w, float):
+            return np.full(self.dim, w)
+        if w.shape != (self.dim,):
+            raise DimensionError(f"{self.name}: {w.size} weights for {self.dim} rows")
+        return w.copy()
 
     @property
     @abstractmethod
@@ -107,8 +166,10 @@ class Task(ABC):
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         """Write the rows at ``state`` into ``J`` (dim x nu) and ``v`` (dim,) and return their
         weights (a scalar or one per row): :meth:`compute` without its allocations, for the
-        stack's buffers. The default copies :meth:`compute`'s result."""
+        stack's buffers. The default copies :meth:`compute`'s result, its shapes checked
+        (DimensionError naming the task: numpy would broadcast a row over all rows)."""
         rows = self.compute(state)
+        check_rows(self.name, rows.J, rows.v, J.shape)
         J[...] = rows.J
         v[...] = rows.v
         return rows.weights
@@ -118,8 +179,9 @@ class Task(ABC):
         return ()
 
     def error(self, state: RobotState) -> np.ndarray:
-        """The task error at ``state`` (what the feedback drives to zero), for logging."""
-        return np.zeros(self.dim)
+        """The task error at ``state`` (what the feedback drives to zero), for logging. A task
+        that does not define one logs NaN (not a zero that would read as "met")."""
+        return np.full(self.dim, np.nan)
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:  # noqa: B027
         """Advance internal state (integrators) by one control step of ``dt`` seconds, after
@@ -130,10 +192,6 @@ class Task(ABC):
 
     def reset(self) -> None:  # noqa: B027
         """Forget internal state (integrators)."""
-
-    def _weights(self) -> np.ndarray:
-        w = np.broadcast_to(np.asarray(self.weight, dtype=float), (self.dim,))
-        return np.ascontiguousarray(w)
 
 
 class InequalityTask(ABC):
@@ -167,8 +225,13 @@ class Objective(ABC):
         negative weight maximises, as the paper's manipulability term).
     """
 
-    name: str
-    weight: float
+    def __init__(self, name: str, weight: float = 1.0) -> None:
+        self.name = check_name(name, type(self).__name__)
+        if isinstance(weight, bool) or not isinstance(weight, (int, float, np.floating)):
+            raise DimensionError(f"{name}: weight must be a finite number, got {weight!r}")
+        if not math.isfinite(weight):
+            raise DimensionError(f"{name}: weight must be a finite number, got {weight!r}")
+        self.weight = float(weight)
 
     @abstractmethod
     def evaluate(self, state: RobotState) -> ObjectiveValue:
@@ -179,8 +242,9 @@ class Objective(ABC):
         return ()
 
 
-class Constraint(ABC):
-    """A hard box on the actuated velocity for one control step."""
+class Limit(ABC):
+    """A hard box on the actuated velocity for one control step (what pink and mink call a
+    limit; ``Constraint`` is another name for it)."""
 
     name: str
 
@@ -194,3 +258,16 @@ class Constraint(ABC):
 
     def reset(self) -> None:  # noqa: B027 - a hook
         """Forget what :meth:`advance` kept (a new run starts at rest)."""
+
+
+Constraint = Limit
+"""Another name of :class:`Limit`."""
+
+
+def check_rows(name: str, J: np.ndarray, v: np.ndarray, shape: tuple[int, ...]) -> None:
+    """Rows ``J`` (m x nu) and ``v`` (m,) of task ``name`` as its buffer ``shape`` expects, or
+    DimensionError naming the task."""
+    J, v = np.asarray(J), np.asarray(v)
+    if J.shape != shape or v.shape != shape[:1]:
+        raise DimensionError(f"task {name!r}: compute() returned J {J.shape} and v {v.shape}; "
+                             f"expected J {shape} and v ({shape[0]},) (dim x nu)")  # fmt: skip

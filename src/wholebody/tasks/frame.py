@@ -34,8 +34,9 @@ import pinocchio as pin
 
 from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody._numeric import float_array
+from wholebody._poses import check_pose
 from wholebody.errors import DimensionError
-from wholebody.kernels.rows import POSE_LAST_ROW, POSE_NON_FINITE, pose_defect, pose_rows
+from wholebody.kernels.rows import pose_rows
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Task, TaskRows
 
@@ -47,23 +48,6 @@ __all__ = [
     "integrate_error",
     "pose_error",
 ]
-
-
-def check_pose(pose: np.ndarray, what: str) -> np.ndarray:
-    """A 4x4 homogeneous transform with an orthonormal rotation (a new array), or
-    DimensionError."""
-    T = float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, what).copy()
-    if T.shape != (4, 4):
-        raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    defect = pose_defect(T)
-    if defect == POSE_NON_FINITE:
-        raise DimensionError(f"{what}: expected a finite 4x4 pose, got shape {T.shape}")
-    if defect == POSE_LAST_ROW:
-        raise DimensionError(f"{what}: the last row of a 4x4 pose must be [0, 0, 0, 1], got "
-                             f"{T[3].tolist()} (a transposed matrix?)")  # fmt: skip
-    if defect:
-        raise DimensionError(f"{what}: the rotation part is not a rotation matrix")
-    return T
 
 
 _NO_TWIST = np.zeros(6)
@@ -125,15 +109,14 @@ class PoseTask(Task):
             raise DimensionError(f"{type(self).__name__}: track the position, the orientation "
                                  "or both")  # fmt: skip
         self.robot = robot
-        self.name = name
         self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
         self.rows.setflags(write=False)
+        super().__init__(name, weight)
         self.kp = kp
         self.ki = ki
         if not integral_limit >= 0:
             raise DimensionError(f"{self.name}: integral_limit must be >= 0")
         self.integral_limit = float(integral_limit)
-        self.weight = weight
         self._target: np.ndarray | None = None
         self._twist = _readonly(np.zeros(6))
         self.integral = np.zeros(6)
@@ -201,7 +184,7 @@ class PoseTask(Task):
         A = np.empty((self.rows.size, self.robot.nu))
         v = np.empty(self.rows.size)
         self.write_rows(state, A, v)
-        return TaskRows(A, v, self._weights())
+        return TaskRows(A, v, self.weights)
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         Jm, p, R = self._measured(state)

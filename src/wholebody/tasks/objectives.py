@@ -69,7 +69,8 @@ class JointLimitAvoidance(Objective):
                 raise WholebodyError(f"{name}: joints without position limits: {bad}")
         if idx.size == 0:
             raise WholebodyError(f"{name}: no joint with finite limits to act on")
-        self.name, self.weight, self.robot = name, float(weight), robot
+        super().__init__(name, weight)
+        self.robot = robot
         self.indices = idx
         # Evaluated over all nu entries at once (no gather/scatter): every joint with finite
         # limits over its range, the others over the dummy range [-1, 1]; the joints left out
@@ -109,7 +110,8 @@ class Manipulability(Objective):
             frames = [frames]
         if not frames:
             raise DimensionError(f"{name}: needs at least one frame")
-        self.name, self.weight, self.robot = name, float(weight), robot
+        super().__init__(name, weight)
+        self.robot = robot
         self.frames = [robot.frame(f) for f in frames]
         if 6 * len(self.frames) > robot.nu:
             raise DimensionError(f"{name}: {6 * len(self.frames)} rows exceed nu = {robot.nu}; "

@@ -63,7 +63,7 @@ class PostureTask(Task):
             label = "posture"
         self.indices = np.array(idx, dtype=np.int64)
         self.indices.setflags(write=False)
-        self.name = name or label
+        super().__init__(name or label, weight)
         base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, planar actuators
         self.tracked = (~base)[idx]
         """Per joint, whether it has a position error (False: wheels, a planar base)."""
@@ -72,7 +72,6 @@ class PostureTask(Task):
         for a in (self.tracked, self.wrapped):
             a.setflags(write=False)
         self.kp = kp
-        self.weight = weight
         self.set_target(robot.joint_positions(robot.home())[idx] if target is None else target)
 
     @property
@@ -123,7 +122,7 @@ class PostureTask(Task):
         J = np.empty((self.dim, self.robot.nu))
         v = np.empty(self.dim)
         self._rows(state, J, v, np.empty(self.dim))
-        return TaskRows(J, v, self._weights())
+        return TaskRows(J, v, self.weights)
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         self._rows(state, J, v, np.empty(self.dim))

@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from wholebody.arm.stiffness import StiffnessModel
 from wholebody.errors import DataError, DimensionError
 from wholebody.files import read_npz, write_npz
-from wholebody.humanlike.stiffness import StiffnessModel
 from wholebody.resources import npz_path, robots_dir
 
 __all__ = ["FORMAT", "NetworkStiffness", "default_stiffness"]

@@ -18,9 +18,8 @@ the same constraints and metric) until every posture joint is within ``tolerance
 posture (or ``max_retreat`` seconds passed), zeroes the watched tasks' integrals and resumes.
 At most ``max_retreats`` retreats per run. The ready posture defaults to the middle of every
 limited joint's range, 0 for the others: the posture farthest from the limits that block, and
-the one from which the same targets are reached most often (measured: from it 87 % and 91 %
-with the projection and the HQP, from the home posture 78 % and 86 %, from the neutral one
-55 % and 66 %; 100 targets).
+the one from which the same targets are reached most often (``benchmarks/README.md``,
+"Convergence to random reachable targets").
 
 Use it in a loop of your own in place of ``stack.advance``::
 

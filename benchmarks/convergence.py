@@ -23,6 +23,7 @@ in ``peers.py`` (with those, the weighted compromise alone leaves the hands mill
 their targets). See ``peers.py`` for how the base is matched.
 
     python benchmarks/convergence.py [--n N] [--seed S] [--duration T] [--acceleration]
+                                     [--engine daqp|proxsuite|osqp|qpsolvers:NAME]
 
 Prints per case the success rate, the final position and orientation error percentiles (the
 worse hand), the share of steps whose solve FAILED (pink: found no solution), the retreats,
@@ -76,12 +77,17 @@ def errors(poses: list[np.ndarray], goal: list[np.ndarray]) -> tuple[float, floa
 
 
 def wholebody_case(
-    robot: wholebody.Robot, stack_kind: str, backend: str, acceleration: bool, recovery: bool
+    robot: wholebody.Robot,
+    stack_kind: str,
+    backend: str,
+    acceleration: bool,
+    recovery: bool,
+    engine: str = "daqp",
 ) -> Callable:
     """A run function ``goal -> (final hand poses, failed steps, retreats)`` for one wholebody
     stack and backend (with ``acceleration``: the robot's acceleration limits too; with
     ``recovery``: :class:`~wholebody.control.recovery.StallRecovery` at its defaults)."""
-    solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver()
+    solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(engine=engine)
 
     def run(goal: list[np.ndarray], steps: int) -> tuple[list[np.ndarray], int, int]:
         if stack_kind == "paper":
@@ -150,6 +156,8 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=50, help="number of random targets")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--duration", type=float, default=3.0, help="s per run")
+    parser.add_argument("--engine", default="daqp",
+                        help="the HQP cases' QP engine (daqp, proxsuite, osqp, ...)")  # fmt: skip
     parser.add_argument("--acceleration", action="store_true",
                         help="wholebody's stacks with the robot's acceleration limits")  # fmt: skip
     args = parser.parse_args()
@@ -157,8 +165,10 @@ def main() -> None:
     cases: dict[str, Callable] = {}
     for kind, recovery in (("paper", False), ("paper", True), ("hierarchy", False)):
         for backend in ("projection", "hqp"):
-            name = f"wholebody {kind}{' + recovery' if recovery else ''} {backend}"
-            cases[name] = wholebody_case(robot, kind, backend, args.acceleration, recovery)
+            engine = f" {args.engine}" if backend == "hqp" and args.engine != "daqp" else ""
+            name = f"wholebody {kind}{' + recovery' if recovery else ''} {backend}{engine}"
+            cases[name] = wholebody_case(robot, kind, backend, args.acceleration, recovery,
+                                         args.engine)  # fmt: skip
     pink = pink_case(robot)
     if pink is not None:
         cases["pink single daqp"] = pink

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -95,17 +96,37 @@ def test_no_surviving_frame_is_a_data_error(recordings, params, tmp_path: Path):
 
 
 def test_shipped_dataset():
+    """Real recordings only (issue 20): the four tasks of the 12 participants, every trial
+    alike, the default held-out participants among them."""
     ds = StiffnessDataset.load(data_dir() / "stiffness" / "mobile_humanoid.npz")
     assert 4900 <= len(ds) <= 5000
-    assert set(ds.source) == {"real", "synthetic"}
+    assert set(ds.source) == {"real"} and "synthetic" not in ds.meta
     assert set(DEFAULT_TEST_PARTICIPANTS) <= set(ds.participant)
-    assert all(p.startswith("SYN") for p in ds.participant[ds.source == "synthetic"])
+    assert all(p.startswith("ADL") for p in DEFAULT_TEST_PARTICIPANTS)
+    assert ds.meta["real"]["tasks"] == {t: 120 for t in ("across", "combing", "drinking",
+                                                         "forward")}  # fmt: skip
+    tasks = {t.split("_")[1] for t in ds.trial}
+    assert tasks == {"forward", "across", "drinking", "combing"}
+    per_trial = np.unique(ds.trial, return_counts=True)[1]
+    assert len(per_trial) == 480 and per_trial.max() - per_trial.min() <= 1
     assert np.all(ds.k >= 0)
     assert ds.meta["real"]["turned_180"] and all(
         t.startswith("ADL009") for t in ds.meta["real"]["turned_180"]
     )
-    # no held-out participant shaped the synthetic data
-    assert ds.meta["arm_angle_model"]["calibrated_on"] == list(CALIBRATED_ON)
+    # the hand goes above the shoulder only in the new tasks
+    up = ds.wrist[:, 2] > 0
+    assert up.any() and {t.split("_")[1] for t in ds.trial[up]} <= {"drinking", "combing"}
+
+
+def test_real_data_by_default_and_tasks_on_request(params):
+    ds, report, info = make_dataset(params, tasks=("forward",), n_records=120)
+    assert set(ds.source) == {"real"} and "synthetic" not in report.counts
+    assert "arm_angle_model" not in info  # nothing synthetic to shape
+    assert info["real"]["tasks"] == {"forward": 120}
+    assert {t.split("_")[1] for t in ds.trial} == {"forward"}
+    syn, _, info = make_dataset(params, real=False, synthetic=DEFAULT_PARTICIPANTS[:1],
+                                n_records=60)  # fmt: skip
+    assert set(syn.source) == {"synthetic"} and info["arm_angle_model"]["calibrated_on"]
 
 
 def test_participants_that_shaped_the_synthetic_data_cannot_be_held_out(params):
@@ -117,3 +138,50 @@ def test_participants_that_shaped_the_synthetic_data_cannot_be_held_out(params):
     assert not set(CALIBRATED_ON) & set(DEFAULT_TEST_PARTICIPANTS)
     with pytest.raises(DataError, match="ADL001 shaped the synthetic training data"):
         fit_and_evaluate(ds, test_participants=["ADL001", "SYN02"])
+
+
+def test_reference_networks_are_scored_alike_and_must_not_have_seen_the_test_people(
+    params, tmp_path: Path
+):
+    """fit_and_evaluate scores a reference (the network shipped before) on the same records
+    in the same way, per real participant with intervals; one that trained on a test
+    participant is refused."""
+    pytest.importorskip("torch")
+    from wholebody.arm.network import default_stiffness
+    from wholebody.humanlike.evaluation import regression_scores
+    from wholebody.humanlike.training import TrainingConfig
+
+    for person in ("ADL001", "ADL003", "ADL005", "ADL008"):  # a slice of the recordings
+        for name in (f"{person}_forward_R1", f"{person}_forward_L2", f"{person}_drinking_R3",
+                     f"{person}_drinking_L4", f"{person}_combing_R1"):  # fmt: skip
+            shutil.copy(real_recordings_dir() / f"{name}.csv", tmp_path)
+    ds, _, _ = make_dataset(params, recordings_dir=tmp_path, tasks=("forward", "drinking"),
+                            n_records=400)  # fmt: skip
+    assert {t.split("_")[1] for t in ds.trial} == {"forward", "drinking"}
+    ref = default_stiffness()
+    held = ref.meta["split"]["test_participants"]
+    out = fit_and_evaluate(ds, test_participants=["ADL003", "ADL008"], svr=False,
+                           config=TrainingConfig(hidden=(4,), epochs=2),
+                           references={"before": ref}, n_boot=30)  # fmt: skip
+    det = out.network.meta["scores_real_held_out"]
+    _, test = ds.split(["ADL003", "ADL008"])
+    for name, net in (("network", out.network), ("before", ref)):
+        pred = net.predict(test.wrist)
+        assert out.scores[name]["r2"] == pytest.approx(regression_scores(test.k, pred)["r2"])
+        for person in ("ADL003", "ADL008"):
+            s = test.participant == person
+            row = det["per_participant"][name][person]
+            assert row["r2"] == pytest.approx(regression_scores(test.k[s], pred[s])["r2"])
+            assert row["low"] <= row["r2"] <= row["high"]
+        assert det["per_participant"][name]["all"]["r2"] == pytest.approx(out.scores[name]["r2"])
+    assert set(det["by_task"]["network"]) == {"forward", "drinking", "all"}
+    assert set(det["by_task_group"]["before"]) == {"forward+across", "drinking+combing", "all"}
+    s = np.array(["_forward_" in t for t in test.trial])
+    assert det["by_task"]["before"]["forward"]["r2"] == pytest.approx(
+        regression_scores(test.k[s], ref.predict(test.wrist[s]))["r2"]
+    )
+    assert out.network.meta["references"]["before"]["split"]["test_participants"] == held
+    seen = sorted(set(ds.participant) - set(held))[0]
+    with pytest.raises(DataError, match=f"trained on test participant.*{seen}"):
+        fit_and_evaluate(ds, test_participants=[seen], svr=False, references={"before": ref},
+                         config=TrainingConfig(hidden=(4,), epochs=1))  # fmt: skip

@@ -11,6 +11,7 @@ import pytest
 from wholebody.arm.angle import arm_angle
 from wholebody.errors import DataError
 from wholebody.humanlike.recordings import (
+    TASKS,
     load_csv_recording,
     load_npz_recording,
     load_participants,
@@ -87,6 +88,7 @@ def test_participant_facing_minus_y_is_turned():
     raw = load_recording(real_recordings_dir() / "ADL009_forward_R1.csv", facing="as-is")
     assert "turned 180" in rec.note and raw.note == ""
     np.testing.assert_allclose(rec.wrist[:, :2], -raw.wrist[:, :2])
+    np.testing.assert_allclose(rec.fingertip[:, :2], -raw.fingertip[:, :2])  # turned with it
     # the reach goes forward (+y) once turned; the arm angle does not change
     assert rec.wrist[-1, 1] - rec.shoulder[-1, 1] > 0.2
     np.testing.assert_allclose(
@@ -104,6 +106,8 @@ def test_npz_recordings_take_the_csv_options_and_csv_blank_lines_are_skipped(tmp
     assert path.name == "ADL009_forward_R1.npz" and path.is_file()
     back = load_recording(path, facing="as-is", source="synthetic")
     np.testing.assert_array_equal(back.wrist, raw.wrist)
+    np.testing.assert_array_equal(back.fingertip, raw.fingertip)
+    np.testing.assert_array_equal(back.sternum, raw.sternum)
     assert back.source == "synthetic"
     text = (real_recordings_dir() / "ADL001_forward_R1.csv").read_text()
     (tmp_path / "ADL001_forward_R1.csv").write_text(text + "\n\n")
@@ -115,10 +119,47 @@ def test_npz_recordings_take_the_csv_options_and_csv_blank_lines_are_skipped(tmp
 
 def test_directory_and_participants():
     recs = load_recordings(real_recordings_dir())
-    assert len(recs) == 240
+    assert len(recs) == 480
     assert {r.participant for r in recs} == {f"ADL{i:03d}" for i in range(1, 13)}
+    for task in TASKS:  # 12 participants x 2 arms x 5 trials of each task
+        assert sum(r.task == task for r in recs) == 120, task
+    assert all(r.fingertip is not None and r.sternum is not None for r in recs)
     people = load_participants()
     assert people["ADL003"].stature == pytest.approx(1.8)
+
+
+def test_tasks_are_selected_by_name(tmp_path: Path):
+    for name in ("ADL002_forward_R1", "ADL002_across_L2", "ADL002_drinking_L1"):
+        (tmp_path / f"{name}.csv").write_text((real_recordings_dir() / f"{name}.csv").read_text())
+    seated = load_recordings(tmp_path, tasks=("forward", "across"))
+    assert sorted(r.task for r in seated) == ["across", "forward"]
+    # a file named otherwise is read and kept by the task it holds
+    rec = load_recording(real_recordings_dir() / "ADL002_combing_L3.csv")
+    path = save_npz_recording(rec, tmp_path / "some_file")
+    got = load_recordings(tmp_path, tasks=["combing"])
+    assert [r.path for r in got] == [str(path)] and got[0].task == "combing"
+    assert len(load_recordings(tmp_path)) == 4  # all tasks by default
+    with pytest.raises(DataError, match="no recording of task"):
+        load_recordings(tmp_path, tasks=["reaching"])
+
+
+def test_drinking_and_combing_raise_the_hand_above_the_table():
+    """The new tasks are where the robot works: the wrist goes to the mouth (drinking) and
+    over the head (combing), above the shoulder, while the seated reaches stay below it
+    (the README's per-task table of the highest wrist point, shoulder-relative)."""
+    peaks: dict[str, list[float]] = {}
+    for task in TASKS:
+        for name in (f"ADL005_{task}_R2", f"ADL010_{task}_L4"):
+            rec = load_recording(real_recordings_dir() / f"{name}.csv")
+            assert rec.task == task and rec.n_frames > 200
+            peaks.setdefault(task, []).append(float(np.max(rec.wrist[:, 2] - rec.shoulder[:, 2])))
+    assert max(peaks["forward"] + peaks["across"]) < -0.10
+    assert min(peaks["combing"]) > 0.15
+    assert max(peaks["drinking"]) > 0.0 > max(peaks["forward"])
+    # ... and the hand points up the forearm: the fingertip is beyond the wrist
+    rec = load_recording(real_recordings_dir() / "ADL005_combing_R2.csv")
+    hand = np.linalg.norm(rec.fingertip - rec.wrist, axis=1)
+    assert 0.08 < np.median(hand) < 0.25
 
 
 def _mutate(rows: np.ndarray, r: int, c: str, value) -> list:
@@ -231,6 +272,14 @@ def test_a_missing_sternum_sample_does_not_turn_the_facing_check_off(tmp_path: P
     assert "turned 180" in gap.note and "sternum seen in" in gap.note
     assert gap.sternum is None  # a recording's sternum is complete or absent
     np.testing.assert_allclose(gap.wrist, whole.wrist)
+    np.testing.assert_allclose(gap.fingertip, whole.fingertip)  # turned as well
+    cell = body[60][header.index("fingertip_z")]
+    body[60][header.index("fingertip_z")] = ""  # so is its fingertip, said in the note
+    hole = load_recording(_write(tmp_path / "ADL009_forward_R3.csv", body, header))
+    body[60][header.index("fingertip_z")] = cell
+    assert hole.fingertip is None
+    assert f"fingertip seen in {len(body) - 1} of {len(body)} samples: left out" in hole.note
+    np.testing.assert_allclose(hole.wrist, whole.wrist)
     for line in body:
         for a in "xyz":
             line[header.index(f"sternum_{a}")] = ""

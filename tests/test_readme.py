@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from wholebody.arm import arm_angle
+
 README = Path(__file__).resolve().parents[1] / "README.md"
 BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
 
@@ -32,7 +34,8 @@ def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
 
 def test_the_examples_do_what_they_say(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False}
+    found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False,
+             "arm angle": False}  # fmt: skip
     for i, code in enumerate(BLOCKS):
         ns, _ = run_block(code, f"README.md python block {i + 1}")
         if "hand.set_target(goal)" in code:  # the quickstart reaches its goal
@@ -49,4 +52,11 @@ def test_the_examples_do_what_they_say(monkeypatch):
         if "StallRecovery(robot, stack)" in code:  # out of its local minimum, one retreat
             assert len(ns["run"].meta["retreats"]) == 1 and ns["miss"] < 1e-3
             found["recovery"] = True
+        if "human_arm_angle_kp" in code:  # the elbow where people hold it, the hand reached
+            robot, state, arm = ns["robot"], ns["state"], ns["robot"].arm("right")
+            S, E, W = (state.position(f) for f in (arm.shoulder, arm.elbow, arm.wrist))
+            assert abs(arm_angle(S, E, W, -1.0) - ns["alpha_h"]) < 0.01
+            hand = ns["log"].frame_positions["right_tool"][-1]
+            assert np.linalg.norm(hand - ns["goal"][:3, 3]) < 1e-3
+            found["arm angle"] = True
     assert all(found.values()), found

@@ -72,6 +72,18 @@ CASES = [
         ["[stack.stiffness]", "expected a number"],
     ),
     (
+        "unknown spring",
+        "wheel_metric = 0.01",
+        'wheel_metric = 0.01\nspring = "curly"',
+        ["[stack.spring]", "'curly'", "paper, signed, none"],
+    ),
+    (
+        "negative arm-angle rate",
+        "wheel_metric = 0.01",
+        "wheel_metric = 0.01\nhuman_arm_angle_kp = -1.0",
+        ["[stack.human_arm_angle_kp]", "rate >= 0"],
+    ),
+    (
         "missing demo file",
         'demo = "demos/reach_demo.npz"',
         'demo = "demos/nope.npz"',

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from wholebody import DimensionError
-from wholebody.tasks import FrameTask, PostureTask, RelativeFrameTask
+from wholebody.tasks import FrameTask, PostureTask, RelativeFrameTask, RelativePositionTask
 from wholebody.tasks.frame import pose_error
 
 
@@ -83,6 +83,22 @@ def test_relative_frame_task_jacobian_is_the_exact_error_rate(humanoid, rng):
     for q in configurations(humanoid, rng):
         task.set_target(random_target(rng))
         rows = task.compute(humanoid.update(q))
+        np.testing.assert_allclose(-rows.J, error_rate_fd(humanoid, q, task), atol=5e-7)
+
+
+@pytest.mark.parametrize("axes", [None, "right_elbow_centre"])
+def test_relative_position_task_jacobian_is_the_exact_error_rate(humanoid, rng, axes):
+    """b relative to a in a third frame's axes (its rotation counts: the [r]x w_c term)."""
+    task = RelativePositionTask(humanoid, "right_shoulder_centre", "right_wrist_centre",
+                                axes=axes, kp=0.0)  # fmt: skip
+    assert task.dim == 3
+    for q in configurations(humanoid, rng):
+        task.set_target(random_target(rng))
+        state = humanoid.update(q)
+        rows = task.compute(state)
+        Rc = state.rotation(task.axes)
+        r = state.position(task.frame_b) - state.position(task.frame_a)
+        np.testing.assert_allclose(task.relative_position(state), Rc.T @ r, atol=1e-12)
         np.testing.assert_allclose(-rows.J, error_rate_fd(humanoid, q, task), atol=5e-7)
 
 

@@ -304,6 +304,72 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
     demo.set_defaults(func=_demo)
 
 
+def _add_humanlike_command(sub: argparse._SubParsersAction) -> None:
+    """``humanlike evaluate``: the motion test on people."""
+    hl = sub.add_parser("humanlike", help="the motion test on people: the robot's arm angle "
+                        "against recorded persons'")  # fmt: skip
+    hsub = hl.add_subparsers(dest="humanlike_command", required=True, metavar="COMMAND")
+    ev = hsub.add_parser("evaluate", help="drive the robot's wrist along recorded wrist paths "
+                         "with each controller; compare arm angles frame by frame")  # fmt: skip
+    ev.add_argument("--recordings", default=None,
+                    help="a directory of recordings (CSV or NPZ, the shipped format); default "
+                    "the bundled real ones")  # fmt: skip
+    ev.add_argument("--out", required=True, help="output directory (humanlike.json, .png)")
+    ev.add_argument("--participants", default=None,
+                    help="comma-separated participants to keep (default: all)")  # fmt: skip
+    ev.add_argument("--robot", default="mobile_humanoid")
+    ev.add_argument("--every", type=int, default=1, help="every N-th trial (default all)")
+    ev.add_argument("--held-out", action="store_true",
+                    help="pull each participant's trials towards an arm-angle network trained "
+                    "without them (one per participant, on every recording of --recordings; "
+                    "needs the learn extra), not the shipped one")  # fmt: skip
+    ev.set_defaults(func=_humanlike_evaluate)
+
+
+def _humanlike_evaluate(args: argparse.Namespace) -> int:
+    from wholebody.humanlike.recordings import load_recordings
+    from wholebody.robot import load_robot
+    from wholebody.scenarios.human_motion import (
+        CONTROLLERS,
+        evaluate,
+        held_out_arm_angle_models,
+        write_report,
+    )
+
+    if args.every < 1:
+        raise ConfigError(f"--every must be >= 1, got {args.every}")
+    recs = load_recordings(args.recordings)
+    models = held_out_arm_angle_models(recs) if args.held_out else None
+    if args.participants:
+        keep = {p.strip() for p in args.participants.split(",") if p.strip()}
+        recs = [r for r in recs if r.participant in keep]
+        missing = keep - {r.participant for r in recs}
+        if missing:
+            raise ConfigError(f"--participants: no recordings of {', '.join(sorted(missing))}")
+    recs = recs[:: args.every]
+    robot = load_robot(args.robot)
+    scores = evaluate(robot, recs, CONTROLLERS, arm_angle_model=models)
+    meta = {"robot": robot.name, "trials": [r.name for r in recs],
+            "participants": sorted({r.participant for r in recs}),
+            "arm_angle_model": "held out (one per participant)" if args.held_out
+            else "shipped"}  # fmt: skip
+    written = write_report(scores, Path(args.out), meta)
+    print(f"{len(recs)} trials of {len(meta['participants'])} participants on {robot.name}")
+    people = meta["participants"]
+    print(f"  {'arm angle rms (deg)':<19}{'all':>6}{'95 % (people)':>15}"
+          + "".join(f"{p:>8}" for p in people))  # fmt: skip
+    for name, sc in scores.items():
+        by, (lo, hi) = sc.alpha_rms_deg_by_participant, sc.alpha_rms_deg_interval
+        print(f"  {name:<19}{sc.alpha_rms_deg:6.1f}{f'[{lo:.1f}, {hi:.1f}]':>15}"
+              + "".join(f"{by[p]:8.1f}" for p in people))  # fmt: skip
+    for name, sc in scores.items():
+        print(f"  {name:<19}waist travel {sc.waist_travel_rad:.2f} rad, wrist error median "
+              f"{sc.wrist_error_median_mm:.2f} mm, max {sc.wrist_error_mm:.1f} mm")  # fmt: skip
+    for what, path in written.items():
+        print(f"  {what:<5} {path}")
+    return 0
+
+
 def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     """The command line's parser. ``stiffness``: the ``stiffness`` subcommands' real parser
     (it imports the stiffness pipeline); else a placeholder with the same help line."""
@@ -323,6 +389,7 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     _add_scenario_commands(sub)
     warm = sub.add_parser("warmup", help="compile the kernels now (once per machine, cached)")
     warm.set_defaults(func=_warmup)
+    _add_humanlike_command(sub)
     if stiffness:
         from wholebody.humanlike.cli import add_stiffness_parser
 

@@ -25,6 +25,7 @@ trunk upright while the base and the arm reach.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -33,11 +34,15 @@ import numpy as np
 from wholebody.arm.network import default_stiffness as network_stiffness
 from wholebody.arm.network import stiffness_path
 from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.errors import DimensionError
 from wholebody.robot import Robot
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import (
     AccelerationLimits,
+    ArmAngleSpring,
     ArmPotentialEnergy,
+    HumanArmAngle,
+    HumanArmAngleTask,
     JointLimitAvoidance,
     JointPositionLimits,
     Manipulability,
@@ -45,13 +50,23 @@ from wholebody.tasks import (
     Task,
     VelocityLimits,
 )
+from wholebody.tasks.arm_angle import ArmAngleModel
 
-__all__ = ["PaperWeights", "paper_metric", "paper_objectives", "paper_stack"]
+__all__ = ["SPRINGS", "PaperWeights", "paper_metric", "paper_objectives", "paper_stack"]
+
+
+SPRINGS = ("paper", "signed", "none")
+"""The arm energy's spring: the paper's ``1/2 k (pi - |alpha|)^2``, the signed
+``1/2 k (pi - alpha)^2`` (:class:`~wholebody.tasks.ArmAngleSpring`), or none (gravity only)."""
 
 
 @dataclass(frozen=True)
 class PaperWeights:
-    """Weights of ``H`` and the descent gain (see the module docstring)."""
+    """Weights of ``H`` and the descent gain (see the module docstring); beyond the paper,
+    the spring's form (:data:`SPRINGS`), the weight of the pull towards the human arm angle
+    in ``H`` (:class:`~wholebody.tasks.HumanArmAngle`, 0: off) and the rate (1/s) of the arm
+    angle as a task level between the tasks and ``H``
+    (:class:`~wholebody.tasks.HumanArmAngleTask`, 0: no such level)."""
 
     energy: float = 0.5
     limits_arms: float = 0.05
@@ -59,6 +74,9 @@ class PaperWeights:
     manipulability: float = 0.0
     gain: float = 1.0
     wheel_metric: float = 0.01
+    spring: str = "paper"
+    human_arm_angle: float = 0.0
+    human_arm_angle_kp: float = 0.0
 
 
 def default_stiffness(robot: Robot) -> StiffnessModel:
@@ -77,16 +95,40 @@ def paper_metric(robot: Robot, weights: PaperWeights = PaperWeights()) -> np.nda
     return metric
 
 
+def _arm_angle_model(model: ArmAngleModel | None) -> ArmAngleModel:
+    """``model``, or the shipped model of the human arm angle."""
+    if model is not None:
+        return model
+    from wholebody.arm import default_arm_angle_model
+
+    return default_arm_angle_model()
+
+
 def paper_objectives(
     robot: Robot,
     weights: PaperWeights = PaperWeights(),
     stiffness: float | StiffnessModel | None = None,
+    arm_angle_model: ArmAngleModel | None = None,
 ) -> list[Objective]:
-    """``f_p`` of every arm, ``h1`` (per group) and, if weighted, ``h2`` of the arms' tools."""
+    """``f_p`` of every arm (with the spring ``weights.spring`` says), the pull towards the
+    human arm angle if weighted, ``h1`` (per group) and, if weighted, ``h2`` of the arms'
+    tools. ``arm_angle_model``: the human arm angle the pull aims at (default: the shipped
+    model, :func:`wholebody.arm.default_arm_angle_model`)."""
+    if weights.spring not in SPRINGS:
+        raise DimensionError(f"PaperWeights.spring must be one of {', '.join(SPRINGS)}, got "
+                             f"{weights.spring!r}")  # fmt: skip
     k = default_stiffness(robot) if stiffness is None else stiffness
-    objectives: list[Objective] = [
-        ArmPotentialEnergy(robot, arm, k, weight=weights.energy) for arm in robot.arms
-    ]
+    objectives: list[Objective] = []
+    for arm in robot.arms:
+        paper = weights.spring == "paper"
+        objectives.append(ArmPotentialEnergy(robot, arm, k if paper else 0.0,
+                                             weight=weights.energy))  # fmt: skip
+        if weights.spring == "signed":
+            objectives.append(ArmAngleSpring(robot, arm, k, signed=True, weight=weights.energy))
+    if weights.human_arm_angle:
+        model = _arm_angle_model(arm_angle_model)
+        objectives += [HumanArmAngle(robot, arm, model, weight=weights.human_arm_angle)
+                       for arm in robot.arms]  # fmt: skip
     # h1 acts on the joints with position limits: continuous joints (wheels, an endless
     # wrist) have no range to stay inside
     arm_groups = [a.group.name for a in robot.arms.values() if a.group is not None]
@@ -135,10 +177,16 @@ def paper_stack(
     stiffness: float | StiffnessModel | None = None,
     first: Sequence[Task] = (),
     acceleration: bool = False,
+    arm_angle_model: ArmAngleModel | None = None,
 ) -> Stack:
     """The paper's stack: ``tasks`` on top, then ``H`` (omitted with ``objectives=False``:
     the plain pseudo-inverse baseline), joint position and velocity limits (and with
     ``acceleration`` the robot's acceleration limits), the metric.
+
+    With ``weights.human_arm_angle_kp > 0`` a level of
+    :class:`~wholebody.tasks.HumanArmAngleTask` (one per arm, ``arm_angle_model`` or the
+    shipped model) sits between ``tasks`` and ``H``: the arm angles follow the human one
+    wherever the tasks leave the arms' self-motion free.
 
     ``first`` puts tasks in a level above ``tasks``: for a carried object, the closed chain
     (the hands' relative pose) above the hands' absolute poses, the usual cooperative
@@ -146,10 +194,17 @@ def paper_stack(
     rows, redundant with them, in the least-squares sense below."""
     levels: list[Level] = [Level(tuple(first), name="closed chain")] if first else []
     levels.append(Level(tuple(tasks), name="tasks"))
+    kp = weights.human_arm_angle_kp
+    if not (math.isfinite(kp) and kp >= 0):
+        raise DimensionError(f"PaperWeights.human_arm_angle_kp must be >= 0 (1/s), got {kp}")
+    if kp > 0:
+        model = _arm_angle_model(arm_angle_model)
+        pulls = [HumanArmAngleTask(robot, arm, model, kp=kp) for arm in robot.arms]
+        levels.append(Level(tuple(pulls), name="arm angle"))
     if objectives:
         levels.append(
             Level(
-                tuple(paper_objectives(robot, weights, stiffness)),
+                tuple(paper_objectives(robot, weights, stiffness, arm_angle_model)),
                 gain=weights.gain,
                 name="objectives",
             )

@@ -32,24 +32,23 @@ split, training settings, scores, date).
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from wholebody.arm import mlp
 from wholebody.arm.stiffness import StiffnessModel
 from wholebody.errors import DataError, DimensionError
-from wholebody.files import read_npz, write_npz
-from wholebody.resources import npz_path, robots_dir
+from wholebody.resources import robots_dir
 
 __all__ = ["FORMAT", "NetworkStiffness", "default_stiffness"]
 
 FORMAT = "wholebody.stiffness_mlp/1"
 
 
-class NetworkStiffness(StiffnessModel):
+class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
     """The trained stiffness network as a :class:`StiffnessModel` (module docstring).
 
     Parameters
@@ -81,27 +80,18 @@ class NetworkStiffness(StiffnessModel):
         input_high: np.ndarray | None = None,
         meta: dict | None = None,
     ) -> None:
-        if len(weights) != len(biases) or len(weights) < 2:
-            raise DimensionError("NetworkStiffness: need matching weights and biases for at "
-                                 "least one hidden layer and the output layer")  # fmt: skip
-        self.weights = [np.array(w, dtype=float) for w in weights]
-        self.biases = [np.array(b, dtype=float).reshape(-1) for b in biases]
-        fan_in = 3
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
-                raise DimensionError(f"NetworkStiffness: layer {i}: weight {w.shape} and bias "
-                                     f"{b.shape} do not fit an input of {fan_in}")  # fmt: skip
-            fan_in = w.shape[0]
-        if fan_in != 1:
-            raise DimensionError("NetworkStiffness: the output layer must have 1 unit")
-        self.x_mean = _vector3(x_mean, "x_mean")
-        self.x_scale = _vector3(x_scale, "x_scale")
-        self.k_mean, self.k_scale = _number(k_mean, "k_mean"), _number(k_scale, "k_scale")
-        self.floor_beta = _number(floor_beta, "floor_beta")
+        who = "NetworkStiffness"
+        self.weights, self.biases = mlp.check_layers(weights, biases, who)
+        self.x_mean = mlp.vector3(x_mean, "x_mean", who)
+        self.x_scale = mlp.vector3(x_scale, "x_scale", who)
+        self.k_mean = mlp.number(k_mean, "k_mean", who)
+        self.k_scale = mlp.number(k_scale, "k_scale", who)
+        self.floor_beta = mlp.number(floor_beta, "floor_beta", who)
         if not (np.all(self.x_scale > 0) and self.k_scale > 0 and self.floor_beta > 0):
             raise DimensionError("NetworkStiffness: x_scale, k_scale and floor_beta must be > 0")
-        self.input_low = None if input_low is None else _vector3(input_low, "input_low")
-        self.input_high = None if input_high is None else _vector3(input_high, "input_high")
+        self.input_low = None if input_low is None else mlp.vector3(input_low, "input_low", who)
+        self.input_high = (None if input_high is None
+                           else mlp.vector3(input_high, "input_high", who))  # fmt: skip
         numbers = [*self.weights, *self.biases, self.x_mean, self.x_scale,
                    np.array([self.k_mean, self.k_scale, self.floor_beta])]  # fmt: skip
         numbers += [v for v in (self.input_low, self.input_high) if v is not None]
@@ -109,23 +99,16 @@ class NetworkStiffness(StiffnessModel):
             raise DimensionError("NetworkStiffness: weights, biases and normalisations must be "
                                  "finite (a NaN here makes every control step fail)")  # fmt: skip
         self.meta = dict(meta or {})
-        # Fold the normalisations into the first and last layers for the control loop:
-        # W_1 z + b_1 = (W_1 / x_scale) p + (b_1 - (W_1 / x_scale) x_mean)
-        # r = (k_scale w_out) . h + (k_mean + k_scale b_out)
-        W1 = self.weights[0] / self.x_scale
-        self._layers = [(W1, self.biases[0] - W1 @ self.x_mean)]
-        self._layers += list(zip(self.weights[1:-1], self.biases[1:-1], strict=True))
-        self._w_out = self.k_scale * self.weights[-1][0]
-        self._b_out = float(self.k_mean + self.k_scale * self.biases[-1][0])
+        # the normalisations folded into the first and last layers for the control loop
+        self._layers, self._w_out, self._b_out = mlp.fold(
+            self.weights, self.biases, self.x_mean, self.x_scale, self.k_mean, self.k_scale
+        )
         self._wT = [W.T.copy() for W, _ in self._layers]
 
     # ----------------------------------------------------------------- inference
     def raw(self, P: np.ndarray) -> np.ndarray:
         """The network output before the floor, ``r`` (N m/rad), for points (..., 3)."""
-        h = np.asarray(P, dtype=float)
-        for W, b in self._layers:
-            h = np.tanh(h @ W.T + b)
-        return h @ self._w_out + self._b_out
+        return mlp.forward(self._layers, P)[-1] @ self._w_out + self._b_out
 
     def predict(self, P: np.ndarray) -> np.ndarray:
         """Stiffness (N m/rad) at canonical wrist positions (..., 3) (m), vectorised."""
@@ -134,17 +117,10 @@ class NetworkStiffness(StiffnessModel):
 
     def gradient(self, P: np.ndarray) -> np.ndarray:
         """``dk/dp`` (..., 3) (N m/rad per m), vectorised."""
-        P = np.asarray(P, dtype=float)
-        hs = []
-        h = P
-        for W, b in self._layers:
-            h = np.tanh(h @ W.T + b)
-            hs.append(h)
-        r = h @ self._w_out + self._b_out
+        hs = mlp.forward(self._layers, P)
+        r = hs[-1] @ self._w_out + self._b_out
         g = (0.5 * (1.0 + np.tanh(0.5 * self.floor_beta * r)))[..., None] * self._w_out
-        for (W, _), h in zip(reversed(self._layers), reversed(hs), strict=True):
-            g = (g * (1.0 - h * h)) @ W
-        return g
+        return mlp.backward_batch(self._layers, hs, g)
 
     def evaluate(self, wrist: np.ndarray) -> tuple[float, np.ndarray]:
         """``k`` (N m/rad) and ``dk/dwrist`` (3,) at one canonical wrist position (m).
@@ -155,11 +131,8 @@ class NetworkStiffness(StiffnessModel):
         if h.shape != (3,):
             raise DimensionError(f"stiffness network: the wrist position is a (3,) array (m), "
                                  f"got shape {h.shape}")  # fmt: skip
-        hs = []
-        for W, b in self._layers:
-            h = np.tanh(W @ h + b)
-            hs.append(h)
-        r = float(self._w_out @ h) + self._b_out
+        hs = mlp.forward_states(self._layers, h)
+        r = float(self._w_out @ hs[-1]) + self._b_out
         br = self.floor_beta * r
         if br > 30.0:
             k, s = r, 1.0
@@ -167,10 +140,7 @@ class NetworkStiffness(StiffnessModel):
             e = math.exp(br) if br < 0 else math.exp(-br)
             k = (max(br, 0.0) + math.log1p(e)) / self.floor_beta
             s = 1.0 / (1.0 + e) if br >= 0 else e / (1.0 + e)
-        g = self._w_out * s
-        for WT, h in zip(reversed(self._wT), reversed(hs), strict=True):
-            g = WT @ (g * (1.0 - h * h))
-        return k, g
+        return k, mlp.backward(self._wT, hs, self._w_out * s)
 
     def packed(self) -> np.ndarray | None:
         """The network as one flat array, the layout the compiled core reads
@@ -190,17 +160,6 @@ class NetworkStiffness(StiffnessModel):
             self._packed.setflags(write=False)
         return self._packed
 
-    def in_range(self, P: np.ndarray) -> np.ndarray:
-        """Whether points (..., 3) lie in the bounding box of the training inputs."""
-        if self.input_low is None or self.input_high is None:
-            raise DataError("this network has no stored training range")
-        P = np.asarray(P, dtype=float)
-        return np.all((self.input_low <= P) & (self.input_high >= P), axis=-1)
-
-    @property
-    def hidden_sizes(self) -> tuple[int, ...]:
-        return tuple(w.shape[0] for w in self.weights[:-1])
-
     def __repr__(self) -> str:
         return f"NetworkStiffness(hidden={self.hidden_sizes}, tanh)"
 
@@ -208,23 +167,11 @@ class NetworkStiffness(StiffnessModel):
     def save(self, path: str | Path) -> Path:
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it, as numpy does)."""
-        arrays: dict[str, np.ndarray] = {}
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            arrays[f"W{i}"], arrays[f"b{i}"] = w, b
-        if self.input_low is not None and self.input_high is not None:  # else: no range stored
-            arrays["input_low"], arrays["input_high"] = self.input_low, self.input_high
-        header = dict(
-            format=np.array(FORMAT),
-            n_layers=np.array(len(self.weights)),
-            activation=np.array("tanh"),
-            x_mean=self.x_mean,
-            x_scale=self.x_scale,
-            k_mean=np.array(self.k_mean),
-            k_scale=np.array(self.k_scale),
-            floor_beta=np.array(self.floor_beta),
-            meta=np.array(json.dumps(self.meta, sort_keys=True)),
-        )
-        return write_npz(npz_path(path), {**header, **arrays}, compress=False)
+        numbers = ("k_mean", "k_scale", "floor_beta")
+        own = {"x_mean": self.x_mean, "x_scale": self.x_scale,
+               **{k: np.array(getattr(self, k)) for k in numbers}}  # fmt: skip
+        return mlp.write_network(path, FORMAT, self.weights, self.biases, own,
+                                 (self.input_low, self.input_high), self.meta)  # fmt: skip
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkStiffness:
@@ -235,70 +182,21 @@ class NetworkStiffness(StiffnessModel):
         DataError
             Not a network file, a missing key, or inconsistent shapes (named).
         """
-        path = Path(path)
-        z = read_npz(path, "stiffness network")
-        try:
-            return cls._read(path, z)
-        except DataError:
-            raise
-        except (ValueError, TypeError) as exc:  # e.g. an object array (never unpickled)
-            raise DataError(f"{path}: not a readable stiffness network ({exc})") from None
+        return mlp.read_network(path, "stiffness network", cls._read)
 
     @classmethod
     def _read(cls, path: Path, z: dict[str, np.ndarray]) -> NetworkStiffness:
         """The network in an open file (:meth:`load`)."""
         need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
                 "floor_beta")  # fmt: skip
-        missing = [k for k in need if k not in z]
-        if missing:
-            raise DataError(f"{path}: missing key(s) {', '.join(missing)}")
-        if str(z["format"]) != FORMAT:
-            raise DataError(f"{path}: format {str(z['format'])!r}, expected {FORMAT!r}")
-        if str(z["activation"]) != "tanh":
-            raise DataError(f"{path}: activation {str(z['activation'])!r} is not supported")
-        n = int(z["n_layers"])
-        keys = [f"{p}{i}" for i in range(n) for p in ("W", "b")]
-        missing = [k for k in keys if k not in z]
-        if missing:
-            raise DataError(f"{path}: missing layer key(s) {', '.join(missing)}")
-        extra = [k for k in z if k[:1] in "Wb" and k[1:].isdigit() and k not in keys]
-        if extra:
-            raise DataError(f"{path}: layer key(s) {', '.join(extra)} beyond n_layers = {n}")
-        lo = z.get("input_low")
-        hi = z.get("input_high")
+        mlp.check_header(path, z, need, FORMAT)
+        weights, biases = mlp.read_layers(path, z)
         try:
-            meta = json.loads(str(z["meta"])) if "meta" in z else {}
-        except json.JSONDecodeError as exc:
-            raise DataError(f"{path}: key 'meta' is not valid JSON ({exc})") from None
-        try:
-            return cls(
-                [z[f"W{i}"] for i in range(n)],
-                [z[f"b{i}"] for i in range(n)],
-                z["x_mean"],
-                z["x_scale"],
-                z["k_mean"],
-                z["k_scale"],
-                z["floor_beta"],
-                lo,
-                hi,
-                meta,
-            )
+            return cls(weights, biases, z["x_mean"], z["x_scale"], z["k_mean"], z["k_scale"],
+                       z["floor_beta"], z.get("input_low"), z.get("input_high"),
+                       mlp.read_meta(path, z))  # fmt: skip
         except DimensionError as exc:
             raise DataError(f"{path}: {exc}") from None
-
-
-def _vector3(value: object, name: str) -> np.ndarray:
-    a = np.array(value, dtype=float)
-    if a.shape != (3,):
-        raise DimensionError(f"NetworkStiffness: {name} must have shape (3,), got {a.shape}")
-    return a
-
-
-def _number(value: object, name: str) -> float:
-    a = np.asarray(value, dtype=float)
-    if a.size != 1:
-        raise DimensionError(f"NetworkStiffness: {name} must be a number, got shape {a.shape}")
-    return float(a.reshape(()))
 
 
 def stiffness_path(robot: object | str) -> Path:

@@ -1,14 +1,23 @@
 """The paper's motion principle: arm angle, arm energy, stiffness models, human data.
 
-Numpy only at import: the training (``training``, PyTorch), the SVR baseline (``svr``,
-scikit-learn), the pipeline, the report and the command line are imported on demand.
+Numpy only at import: the training (``training`` and ``arm_angle_fit``, PyTorch), the SVR
+baseline (``svr``, scikit-learn), the pipeline, the reports and the command line are imported
+on demand.
 """
 
 from __future__ import annotations
 
 from wholebody.arm.angle import ArmAngle, arm_angle, arm_angle_with_gradient
+from wholebody.arm.human_arm_angle import (
+    ConstantArmAngle,
+    HumanArmAngleModel,
+    NetworkArmAngle,
+    default_arm_angle_model,
+    normalised_wrist,
+)
 from wholebody.arm.network import NetworkStiffness, default_stiffness
 from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
+from wholebody.humanlike.arm_angle_data import ArmAngleRecords, arm_angle_records
 from wholebody.humanlike.arm_angle_model import (
     CALIBRATED,
     ArmAngleModel,
@@ -53,8 +62,12 @@ __all__ = [
     "DEFAULT_TEST_PARTICIPANTS",
     "ArmAngle",
     "ArmAngleModel",
+    "ArmAngleRecords",
     "ArmParameters",
+    "ConstantArmAngle",
     "ConstantStiffness",
+    "HumanArmAngleModel",
+    "NetworkArmAngle",
     "NetworkStiffness",
     "Recording",
     "StiffnessDataset",
@@ -62,10 +75,12 @@ __all__ = [
     "StiffnessModel",
     "VirtualParticipant",
     "arm_angle",
+    "arm_angle_records",
     "arm_angle_with_gradient",
     "build_dataset",
     "calibrate",
     "canonical_to_lab",
+    "default_arm_angle_model",
     "default_stiffness",
     "elbow_on_circle",
     "frame_rules",
@@ -77,6 +92,7 @@ __all__ = [
     "load_recording",
     "load_recordings",
     "map_to_robot",
+    "normalised_wrist",
     "regression_scores",
     "save_npz_recording",
     "stiffness_labels",

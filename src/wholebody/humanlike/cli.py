@@ -1,4 +1,4 @@
-"""``wholebody stiffness dataset | fit | report``: the stiffness pipeline from the shell.
+"""``wholebody stiffness dataset | fit | report | armangle``: the pipeline from the shell.
 
 Wire it into the main parser with :func:`add_stiffness_parser`::
 
@@ -7,6 +7,8 @@ Wire it into the main parser with :func:`add_stiffness_parser`::
         --out robots/mobile_humanoid/stiffness.npz --card robots/mobile_humanoid/stiffness_card.md
     wholebody stiffness report --model robots/mobile_humanoid/stiffness.npz \\
         --dataset data/stiffness/mobile_humanoid.npz --out stiffness_report
+    wholebody stiffness armangle score | fit ...   (the arm angle people choose:
+                                                    wholebody.humanlike.arm_angle_cli)
 
 Each subcommand returns 0 on success; errors are :class:`~wholebody.errors.WholebodyError`
 subclasses, which the main command line prints.
@@ -100,6 +102,7 @@ def _dataset(args: argparse.Namespace) -> int:
         params,
         recordings_dir=args.recordings,
         real=not args.no_real,
+        tasks=args.tasks,
         synthetic=DEFAULT_PARTICIPANTS[:n_syn],
         seed=args.seed,
         n_records=args.records,
@@ -115,6 +118,7 @@ def _dataset(args: argparse.Namespace) -> int:
         "calibrate": bool(args.calibrate),
         "held_out": list(args.held_out) if args.held_out else None,
         "recordings": None if args.recordings is None else str(args.recordings),
+        "tasks": list(args.tasks) if args.tasks else None,
     }  # fmt: skip
     out = ds.save(args.out)
     print(report.summary())
@@ -143,6 +147,7 @@ def _fit(args: argparse.Namespace) -> int:
     config = TrainingConfig(
         tuple(args.hidden), args.epochs, args.lr, args.batch_size, args.seed, args.weight_decay
     )
+    refs = _references(args)
     outcome = fit_and_evaluate(
         ds,
         test_participants=args.test_participants or DEFAULT_TEST_PARTICIPANTS,
@@ -150,6 +155,8 @@ def _fit(args: argparse.Namespace) -> int:
         svr=not args.no_svr,
         paper_protocol=args.paper_protocol,
         candidates=_candidates(args),
+        references=refs,
+        n_boot=args.bootstrap,
         progress=not args.quiet,
     )
     net = outcome.network
@@ -158,7 +165,7 @@ def _fit(args: argparse.Namespace) -> int:
     out = net.save(args.out)
     s = outcome.scores
     print(f"held-out participants: {', '.join(outcome.test_participants)}")
-    for name in ("network", "svr", "mean"):
+    for name in ("network", "svr", "mean", *refs):
         if name in s:
             paper = PAPER_SCORES.get(name)
             ref = f"   (paper: R^2 {paper['r2']}, MSE {paper['mse']})" if paper else ""
@@ -167,15 +174,48 @@ def _fit(args: argparse.Namespace) -> int:
         for name, v in outcome.paper_protocol.items():
             print(f"paper protocol (300 random records): {name} R^2 {v['r2']:.4f} MSE "
                   f"{v['mse']:.5f}")  # fmt: skip
+    _print_per_participant(net.meta.get("scores_real_held_out", {}))
     print(f"training time {outcome.seconds:.0f} s; network written to {out}")
     if args.card:
         tr = net.meta["training"]
         final = replace(config, hidden=tuple(tr["hidden"]), weight_decay=tr["weight_decay"])
         cmds = card_commands(args, ds.meta, path, final)
-        text = data_card(net, ds, date=args.date, commands=cmds, paper_scores=PAPER_SCORES)
+        text = data_card(net, ds, date=args.date, commands=cmds, paper_scores=PAPER_SCORES,
+                         arm_angle_spread=_arm_angle_spread())  # fmt: skip
         write_text(args.card, text)
         print(f"data card written to {args.card}")
     return 0
+
+
+def _print_per_participant(details: dict) -> None:
+    """R^2 per real held-out participant with its interval, one line per model."""
+    for name, rows in details.get("per_participant", {}).items():
+        cells = "  ".join(f"{g} {v['r2']:.3f} [{v['low']:.3f}, {v['high']:.3f}]"
+                          for g, v in rows.items())  # fmt: skip
+        print(f"R^2 per real held-out participant, {name}: {cells}")
+
+
+def _arm_angle_spread() -> dict | None:
+    """The shipped arm-angle network's scatter of people (deg), for the card; None without."""
+    import math
+
+    from wholebody.arm.human_arm_angle import default_arm_angle_model
+
+    try:
+        model = default_arm_angle_model()
+    except DataError:
+        return None
+    return {"between": math.degrees(model.spread_between),
+            "within": math.degrees(model.spread_within)}  # fmt: skip
+
+
+def _references(args: argparse.Namespace) -> dict:
+    """The networks ``--compare-with`` names, by their ``--compare-label``."""
+    from wholebody.arm.network import NetworkStiffness
+
+    if not args.compare_with:
+        return {}
+    return {args.compare_label: NetworkStiffness.load(args.compare_with)}
 
 
 def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: object) -> list[str]:
@@ -191,6 +231,13 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
             else ""
         )
         + (" --no-svr" if args.no_svr else "")
+        + (
+            f" --compare-with {quote(str(args.compare_with))} --compare-label "
+            f"{quote(args.compare_label)}"
+            if args.compare_with
+            else ""
+        )
+        + (f" --bootstrap {args.bootstrap}" if args.bootstrap != 2000 else "")
         + f" --threads {args.threads}"
         + f" --out {quote(str(args.out))} --card {quote(str(args.card))}"
     )
@@ -207,6 +254,7 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
             + (" --calibrate" if opts["calibrate"] else "")
             + (f" --held-out {quote(','.join(opts['held_out']))}" if opts["held_out"] else "")
             + (f" --recordings {quote(opts['recordings'])}" if opts["recordings"] else "")
+            + (f" --tasks {','.join(opts['tasks'])}" if opts.get("tasks") else "")
         )
     else:  # an older dataset file: the options it records
         robot = quote(str(meta.get("robot", "mobile_humanoid")))
@@ -215,6 +263,10 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
             f"--records {meta.get('n_records', 5000)} --seed {meta.get('seed', 0)}"
         )
     cmds = [f"{make} --out {data}"]
+    if args.compare_with:
+        where = "git show <commit>:robots/<robot>/stiffness.npz > FILE"
+        cmds.insert(0, f"# {args.compare_with}: the network compared with, "
+                    f"{args.compare_label!r} (a shipped one: {where})")  # fmt: skip
     wd = config.weight_decay  # type: ignore[attr-defined]
     if args.select_hidden or args.select_weight_decay:
         sel = ""
@@ -284,13 +336,18 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     sub = st.add_subparsers(dest="stiffness_command", required=True, metavar="STEP")
 
-    d = sub.add_parser("dataset", help="label human (real + synthetic) reaches for a robot")
+    d = sub.add_parser("dataset", help="label recorded arm motions (real; synthetic on "
+                       "request) for a robot")  # fmt: skip
     d.add_argument("--robot", default="mobile_humanoid", help="bundled name, directory or toml")
     d.add_argument("--arm", default="right", help="arm whose lengths and masses label the data")
     d.add_argument("--records", type=_count(1), default=5000, help="about this many records")
     d.add_argument("--seed", type=int, default=0, help="seed of the synthetic data")
-    d.add_argument("--synthetic-participants", type=_count(0), default=6, metavar="N",
-                   help="virtual participants SYN01..SYN0N (0 for none)")  # fmt: skip
+    d.add_argument("--synthetic-participants", type=_count(0), default=0, metavar="N",
+                   help="add the SYNTHETIC reaches of virtual participants SYN01..SYN0N "
+                   "(default 0: real recordings only; at most 6)")  # fmt: skip
+    d.add_argument("--tasks", type=_names, default=None, metavar="NAMES",
+                   help="only these tasks of the real recordings (default: all: "
+                   "forward,across,drinking,combing)")  # fmt: skip
     d.add_argument("--recordings", default=None, help="directory of real recordings "
                    "(default: the bundled data/human_reaching/joint_centres)")  # fmt: skip
     d.add_argument("--no-real", action="store_true", help="synthetic data only")
@@ -310,7 +367,7 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument("--dataset", default=None, help="dataset file (default: the bundled one)")
     f.add_argument("--test-participants", type=_names, default=None, metavar="IDS",
                    help="comma-separated held-out participants (default: "
-                   "ADL003,ADL008,ADL011,SYN05,SYN06)")  # fmt: skip
+                   "ADL003,ADL008,ADL011)")  # fmt: skip
     f.add_argument("--hidden", type=_ints, default=DEFAULT_HIDDEN, metavar="SIZES",
                    help="hidden layer sizes (default: %(default)s)")  # fmt: skip
     f.add_argument(
@@ -346,6 +403,22 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also score the paper's split (300 random records), for comparison",
     )
+    f.add_argument("--compare-with", default=None, metavar="FILE",
+                   help="also score this network (e.g. the one shipped before) on the same "
+                   "held-out records, for the card; it must have held them out too")  # fmt: skip
+    f.add_argument(
+        "--compare-label",
+        default="previous network",
+        metavar="TEXT",
+        help="its name in the card (default: %(default)s)",
+    )
+    f.add_argument(
+        "--bootstrap",
+        type=_count(10),
+        default=2000,
+        metavar="N",
+        help="bootstrap resamples of the per-participant intervals",
+    )
     f.add_argument("--card", default=None, help="also write a markdown data card here")
     f.add_argument("--date", default=today, help="date for the card (YYYY-MM-DD)")
     f.add_argument("--out", default="stiffness.npz", help="network file to write")
@@ -358,3 +431,7 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     r.add_argument("--out", default="stiffness_report", help="directory for the report")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.set_defaults(func=_report)
+
+    from wholebody.humanlike.arm_angle_cli import add_arm_angle_parser  # it imports this module
+
+    add_arm_angle_parser(sub)

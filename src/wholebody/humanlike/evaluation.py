@@ -1,12 +1,14 @@
-"""Scores of a stiffness regressor on held-out records (numpy only)."""
+"""Scores of a regressor on held-out records, and their bootstrap intervals (numpy only)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
 from wholebody.errors import DataError
 
-__all__ = ["regression_scores"]
+__all__ = ["cluster_bootstrap", "r2_with_intervals", "regression_scores"]
 
 
 def regression_scores(y: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
@@ -22,3 +24,77 @@ def regression_scores(y: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
     mse = res / len(y)
     return {"r2": 1.0 - res / tot if tot > 0 else float("nan"), "mse": mse,
             "rmse": float(np.sqrt(mse)), "n": len(y)}  # fmt: skip
+
+
+def cluster_bootstrap(
+    statistic: Callable[[np.ndarray], float],
+    clusters: np.ndarray,
+    *,
+    n_boot: int = 2000,
+    seed: int = 0,
+    level: float = 0.95,
+) -> tuple[float, float, float]:
+    """``statistic`` of all records and its percentile interval over resamples of whole
+    clusters (for example the trials of one participant), drawn with replacement.
+
+    ``statistic(idx)`` takes an index array into the records; each resample draws as many
+    clusters as there are, with replacement, and concatenates their records. Returns
+    ``(value, low, high)``, the interval's bounds the ``(1 -+ level) / 2`` percentiles of the
+    ``n_boot`` resampled values. Why clusters: frames of one trial are strongly correlated,
+    so resampling frames would make the interval far too narrow.
+    """
+    names, inverse = np.unique(np.asarray(clusters), return_inverse=True)
+    if len(names) < 2 or n_boot < 1:
+        raise DataError(f"cluster_bootstrap: need >= 2 clusters and n_boot >= 1, got "
+                        f"{len(names)} and {n_boot}")  # fmt: skip
+    order = np.argsort(inverse, kind="stable")
+    members = np.split(order, np.cumsum(np.bincount(inverse))[:-1])
+    rng = np.random.default_rng(seed)
+    values = np.empty(n_boot)
+    for b in range(n_boot):
+        pick = rng.integers(0, len(names), len(names))
+        values[b] = statistic(np.concatenate([members[i] for i in pick]))
+    low, high = np.percentile(values, [50.0 * (1.0 - level), 50.0 * (1.0 + level)])
+    return float(statistic(np.arange(len(inverse)))), float(low), float(high)
+
+
+def r2_with_intervals(
+    y: np.ndarray,
+    predictions: dict[str, np.ndarray],
+    groups: np.ndarray,
+    clusters: np.ndarray,
+    *,
+    n_boot: int = 2000,
+    seed: int = 0,
+) -> dict[str, dict[str, dict[str, float]]]:
+    """R^2 of each prediction per group and over all records, with bootstrap intervals.
+
+    For each model (key of ``predictions``) and each group (for example a held-out
+    participant), ``r2 = 1 - SS_res / SS_tot`` on the group's records, ``SS_tot`` about the
+    group's own mean, and its 95 % interval over resamples of the group's ``clusters`` (its
+    trials: :func:`cluster_bootstrap`); the key ``"all"`` is the same on every record
+    (clusters resampled across groups). Also ``mse`` and ``n``. Why per group: the pooled
+    R^2 credits a model for the differences between groups, which says nothing of how it
+    predicts one new person.
+    """
+    y = np.asarray(y, dtype=float)
+    groups, clusters = np.asarray(groups), np.asarray(clusters)
+
+    def r2(t: np.ndarray, p: np.ndarray) -> float:
+        tot = float(np.sum((t - t.mean()) ** 2))
+        return 1.0 - float(np.sum((t - p) ** 2)) / tot if tot > 0 else float("nan")
+
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    parts = [(str(g), np.flatnonzero(groups == g)) for g in sorted(set(groups.tolist()))]
+    parts.append(("all", np.arange(len(y))))
+    for name, pred in predictions.items():
+        pred = np.asarray(pred, dtype=float)
+        out[name] = {}
+        for g, idx in parts:
+            t, p = y[idx], pred[idx]
+            value, low, high = cluster_bootstrap(
+                lambda i, t=t, p=p: r2(t[i], p[i]), clusters[idx], n_boot=n_boot, seed=seed
+            )
+            out[name][g] = {"r2": value, "low": low, "high": high,
+                            "mse": float(np.mean((t - p) ** 2)), "n": len(idx)}  # fmt: skip
+    return out

@@ -52,7 +52,9 @@ __all__ = [
     "MAX_FOREARM_DEVIATION",
     "MIN_ELBOW_OFFSET",
     "MIN_TILT",
+    "ArmGeometry",
     "StiffnessLabels",
+    "arm_geometry",
     "frame_rules",
     "gravity_energy",
     "rotate_elbow",
@@ -62,6 +64,36 @@ __all__ = [
 MIN_ELBOW_OFFSET = 0.04  # m, robot elbow distance from the S-W line
 MIN_TILT = np.radians(20.0)  # rad, angle of S-W from the vertical (either way)
 MAX_FOREARM_DEVIATION = 0.02  # m, |forearm length - trial median| of the person
+
+
+@dataclass(frozen=True)
+class ArmGeometry:
+    """What the frame rules and the labels need of a posture (arrays of the input's leading
+    shape): ``alpha`` the signed arm angle (rad), ``elbow_offset`` ``rho`` the elbow's
+    distance from the S-W line (m), ``tilt`` ``theta`` the angle of S-W from the vertical
+    (rad in [0, pi]) and ``sin_tilt`` its sine."""
+
+    alpha: np.ndarray
+    elbow_offset: np.ndarray
+    tilt: np.ndarray
+    sin_tilt: np.ndarray
+
+
+def arm_geometry(
+    S: np.ndarray, E: np.ndarray, W: np.ndarray, side: float = CANONICAL_SIDE
+) -> ArmGeometry:
+    """Arm angle, elbow offset and tilt of postures (..., 3), z up, m (``side`` as in
+    :func:`stiffness_labels`). Why: one computation for the labels and the frame rules of
+    robot and human postures alike."""
+    S, E, W = (np.asarray(v, dtype=float) for v in (S, E, W))
+    alpha = arm_angle(S, E, W, side)
+    c = W - S
+    u = c / np.linalg.norm(c, axis=-1, keepdims=True)
+    a = E - S
+    d = a - np.sum(a * u, axis=-1, keepdims=True) * u
+    sin_t = np.sqrt(np.clip(1.0 - u[..., 2] ** 2, 0.0, 1.0))
+    tilt = np.arccos(np.clip(-u[..., 2], -1.0, 1.0))
+    return ArmGeometry(alpha, np.linalg.norm(d, axis=-1), tilt, sin_t)
 
 
 @dataclass(frozen=True)
@@ -124,23 +156,15 @@ def stiffness_labels(
     ``side`` is the arm-angle side convention of the positions' frame (-1 for the canonical
     axes and right arms, +1 for a left arm in a frame with y to the left).
     """
-    S, E, W = (np.asarray(v, dtype=float) for v in (S, E, W))
-    alpha = arm_angle(S, E, W, side)
-    c = W - S
-    u = c / np.linalg.norm(c, axis=-1, keepdims=True)
-    a = E - S
-    d = a - np.sum(a * u, axis=-1, keepdims=True) * u
-    rho = np.linalg.norm(d, axis=-1)
-    sin_t = np.sqrt(np.clip(1.0 - u[..., 2] ** 2, 0.0, 1.0))
-    tilt = np.arccos(np.clip(-u[..., 2], -1.0, 1.0))
-    A = params.lever * rho * sin_t
-    mag = np.abs(alpha)
+    geo = arm_geometry(S, E, W, side)
+    A = params.lever * geo.elbow_offset * geo.sin_tilt
+    mag = np.abs(geo.alpha)
     k = A * np.sin(mag) / (np.pi - mag)
-    return StiffnessLabels(k, alpha, A, rho, tilt)
+    return StiffnessLabels(k, geo.alpha, A, geo.elbow_offset, geo.tilt)
 
 
 def frame_rules(
-    labels: StiffnessLabels,
+    labels: StiffnessLabels | ArmGeometry,
     forearm_deviation: np.ndarray | None = None,
     *,
     min_elbow_offset: float = MIN_ELBOW_OFFSET,
@@ -149,7 +173,8 @@ def frame_rules(
 ) -> dict[str, np.ndarray]:
     """Boolean masks of the frames each rule drops (module docstring): ``straight``,
     ``vertical`` and, given the person's ``|forearm length - trial median|`` (m),
-    ``forearm``. A frame is kept when no mask is set."""
+    ``forearm``. A frame is kept when no mask is set. ``labels``: the labels of robot
+    postures, or the :func:`arm_geometry` of any posture (the human arm-angle model's)."""
     sin_t = np.sin(labels.tilt)
     rules = {
         "straight": labels.elbow_offset < min_elbow_offset,

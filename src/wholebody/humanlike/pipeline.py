@@ -1,17 +1,19 @@
 """End to end: recordings -> dataset, and dataset -> trained, evaluated models.
 
-:func:`make_dataset` gathers the real recordings and the synthetic ones, labels them for a
-robot and writes the dataset; :func:`fit_and_evaluate` splits the dataset by participant,
-trains the network and the SVR baseline on the training participants and scores both (and a
-mean predictor) on the held-out participants. Optionally it also scores the paper's own
-protocol (300 random records held out, participants shared), for comparison only.
+:func:`make_dataset` gathers the real recordings (and, as an option, synthetic ones),
+labels them for a robot and writes the dataset; :func:`fit_and_evaluate` splits the dataset
+by participant, trains the network and the SVR baseline on the training participants and
+scores both (and a mean predictor, and any reference network such as the one shipped
+before) on the held-out participants: pooled, and per real participant with bootstrap
+intervals. Optionally it also scores the paper's own protocol (300 random records held out,
+participants shared), for comparison only.
 Torch and scikit-learn are imported only when a model is fitted.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -33,7 +35,7 @@ from wholebody.humanlike.dataset import (
     StiffnessDataset,
     build_dataset,
 )
-from wholebody.humanlike.evaluation import regression_scores
+from wholebody.humanlike.evaluation import r2_with_intervals, regression_scores
 from wholebody.humanlike.mapping import ArmParameters
 from wholebody.humanlike.recordings import (
     Recording,
@@ -42,7 +44,6 @@ from wholebody.humanlike.recordings import (
     save_npz_recording,
 )
 from wholebody.humanlike.synthetic import (
-    DEFAULT_PARTICIPANTS,
     SyntheticSummary,
     VirtualParticipant,
     generate_synthetic,
@@ -50,10 +51,12 @@ from wholebody.humanlike.synthetic import (
 
 __all__ = [
     "PAPER_SCORES",
+    "TASK_GROUPS",
     "FitOutcome",
     "fit_and_evaluate",
     "gradient_norms",
     "group_folds",
+    "held_out_details",
     "make_dataset",
     "select_model",
 ]
@@ -66,7 +69,8 @@ def make_dataset(
     *,
     recordings_dir: str | Path | None = None,
     real: bool = True,
-    synthetic: Sequence[VirtualParticipant] = DEFAULT_PARTICIPANTS,
+    tasks: Sequence[str] | None = None,
+    synthetic: Sequence[VirtualParticipant] = (),
     seed: int = 0,
     n_records: int = 5000,
     recalibrate: bool = False,
@@ -74,9 +78,14 @@ def make_dataset(
     progress: bool = False,
     synthetic_out: str | Path | None = None,
 ) -> tuple[StiffnessDataset, BuildReport, dict]:
-    """Build the dataset of real and synthetic reaches for one robot arm; the synthetic
-    recordings it labels are also written to ``synthetic_out`` (a directory, ``.npz``) if
-    given.
+    """Build the dataset of recorded (and optionally synthetic) arm motions for one robot
+    arm.
+
+    ``tasks`` selects the real recordings' tasks (default: all, the bundled data's four:
+    seated forward and across reaches, drinking, combing). ``synthetic``: virtual
+    participants (for example :data:`~wholebody.humanlike.synthetic.DEFAULT_PARTICIPANTS`)
+    whose synthetic reaches are added; none by default. The synthetic recordings it labels
+    are also written to ``synthetic_out`` (a directory, ``.npz``) if given.
 
     The synthetic elbows come from an arm-angle model calibrated on real reaches: the shipped
     :data:`~wholebody.humanlike.arm_angle_model.CALIBRATED`, or with ``recalibrate`` a new fit
@@ -92,21 +101,24 @@ def make_dataset(
     info: dict = {"seed": seed}
     real_recs: list[Recording] = []
     if real:
-        real_recs = load_recordings(recordings_dir, progress=progress)
+        real_recs = load_recordings(recordings_dir, progress=progress, tasks=tasks)
         recs += real_recs
         turned = [r.name for r in real_recs if "turned 180" in r.note]
+        kinds = sorted({r.task for r in real_recs})
         info["real"] = {
             "source": "UE_ADLdatabase (M. Huang, SFSU, 2021; MIT), subset in "
-            "data/human_reaching: seated forward/across reaches, both arms, 100 Hz",
+            f"data/human_reaching: seated participants, tasks {', '.join(kinds)}, both arms, "
+            "100 Hz",
             "participants": sorted({r.participant for r in real_recs}),
             "trials": len(real_recs),
+            "tasks": {t: sum(r.task == t for r in real_recs) for t in kinds},
             "turned_180": turned,
         }
     model: ArmAngleModel = CALIBRATED
     calibrated_on: list[str] = list(CALIBRATED_ON)
     if recalibrate:
         if not real_recs:
-            real_recs = load_recordings(recordings_dir, progress=progress)
+            real_recs = load_recordings(recordings_dir, progress=progress, tasks=tasks)
         used = [r for r in real_recs if r.participant not in set(held_out)]
         if not used:
             raise DataError("recalibrate: every real participant is held out")
@@ -114,6 +126,24 @@ def make_dataset(
         model = cal.model
         calibrated_on = sorted({r.participant for r in used})
         info["calibration"] = cal.summary()
+    if synthetic:
+        recs += _synthetic(info, synthetic, seed, model, calibrated_on, real_recs, synthetic_out)
+    ds, report = build_dataset(recs, params, n_records=n_records, progress=progress, meta=info)
+    return ds, report, info
+
+
+def _synthetic(
+    info: dict,
+    synthetic: Sequence[VirtualParticipant],
+    seed: int,
+    model: ArmAngleModel,
+    calibrated_on: list[str],
+    real_recs: Sequence[Recording],
+    synthetic_out: str | Path | None,
+) -> list[Recording]:
+    """The synthetic recordings of :func:`make_dataset`, their provenance added to ``info``
+    (the arm-angle model, the generator's counts, and the arm angles of the synthetic
+    tabletop block next to the real seated reaches)."""
     info["arm_angle_model"] = {
         "calibrated_on": calibrated_on,
         "criterion": "Kim et al. 2012 (IEEE TBME 59(6):1770): maximise the projection of the "
@@ -128,30 +158,28 @@ def make_dataset(
         },
         "tau_within_s": model.tau_within,
     }
-    if synthetic:
-        summary = SyntheticSummary()
-        syn = generate_synthetic(synthetic, seed=seed, model=model, summary=summary)
-        recs += syn
-        if synthetic_out is not None:
-            for rec in syn:
-                save_npz_recording(rec, Path(synthetic_out) / f"{rec.name}.npz")
-        info["synthetic"] = {
-            "participants": [{"id": p.id, "sex": p.sex, "stature_m": p.stature} for p in synthetic],
-            "trials": summary.trials,
-            "frames": summary.frames,
-            "clamped_targets": summary.clamped_targets,
-            "note": "SYNTHETIC: paper's protocol (27 standing + 9 tabletop targets), "
-            "minimum-jerk wrist paths, elbow from the calibrated arm-angle model",
-        }
-        tab = [r for r in syn if r.task == "tabletop"]
-        comparison = {"synthetic_tabletop": summarise_arm_angles(tab),
-                      "synthetic_standing": summarise_arm_angles(
-                          [r for r in syn if r.task == "standing"])}  # fmt: skip
-        if real_recs:
-            comparison["real"] = summarise_arm_angles(real_recs)
-        info["arm_angle_comparison_deg"] = comparison
-    ds, report = build_dataset(recs, params, n_records=n_records, progress=progress, meta=info)
-    return ds, report, info
+    summary = SyntheticSummary()
+    syn = generate_synthetic(synthetic, seed=seed, model=model, summary=summary)
+    if synthetic_out is not None:
+        for rec in syn:
+            save_npz_recording(rec, Path(synthetic_out) / f"{rec.name}.npz")
+    info["synthetic"] = {
+        "participants": [{"id": p.id, "sex": p.sex, "stature_m": p.stature} for p in synthetic],
+        "trials": summary.trials,
+        "frames": summary.frames,
+        "clamped_targets": summary.clamped_targets,
+        "note": "SYNTHETIC: paper's protocol (27 standing + 9 tabletop targets), "
+        "minimum-jerk wrist paths, elbow from the calibrated arm-angle model",
+    }
+    comparison = {
+        f"synthetic_{task}": summarise_arm_angles([r for r in syn if r.task == task])
+        for task in ("tabletop", "standing")
+    }
+    seated = [r for r in real_recs if r.task in ("forward", "across")]
+    if seated:
+        comparison["real"] = summarise_arm_angles(seated)
+    info["arm_angle_comparison_deg"] = comparison
+    return syn
 
 
 def gradient_norms(net: NetworkStiffness, n: int = 21) -> dict[str, float]:
@@ -236,6 +264,63 @@ def select_model(
     return {"hidden": tuple(pick["hidden"]), "weight_decay": pick["weight_decay"]}, table
 
 
+def _check_reference(name: str, ref: NetworkStiffness, test: Sequence[str]) -> None:
+    """A reference network must not have trained on a test participant."""
+    held = ref.meta.get("split", {}).get("test_participants")
+    if held is None:
+        raise DataError(f"reference network {name!r}: its file does not say which participants "
+                        "it held out, so it may have trained on the test participants")  # fmt: skip
+    seen = sorted(set(test) - set(held))
+    if seen:
+        raise DataError(f"reference network {name!r} trained on test participant(s) "
+                        f"{', '.join(seen)}: they cannot score it")  # fmt: skip
+
+
+def _provenance(ref: NetworkStiffness) -> dict:
+    """What the card says of a reference network: date, data, split, training settings."""
+    keys = ("date", "dataset", "dataset_counts", "split", "training")
+    return {k: ref.meta.get(k) for k in keys}
+
+
+TASK_GROUPS = {"forward+across": ("forward", "across"), "drinking+combing": ("drinking", "combing")}
+"""Tasks scored together too: the seated reaches at table height and the tasks that raise the
+hand to the face."""
+
+
+def held_out_details(
+    test: StiffnessDataset,
+    predictions: Mapping[str, np.ndarray],
+    *,
+    n_boot: int = 2000,
+    seed: int = 0,
+) -> dict:
+    """Scores of ``predictions`` (name: k per test record) on the **real** test records, from
+    :func:`~wholebody.humanlike.evaluation.r2_with_intervals` (R^2 with trial-bootstrap
+    intervals, per model): ``per_participant`` (each about its own mean, and ``all``
+    pooled), ``by_task`` (per task, from the trial ids, and ``all``) and ``by_task_group``
+    (the :data:`TASK_GROUPS` present). Empty without two real records. Why real only:
+    synthetic test participants measure the generator, not people."""
+    real = test.source == "real"
+    if real.sum() < 2:
+        return {}
+    sub = test.subset(real)
+    preds = {name: np.asarray(p)[real] for name, p in predictions.items()}
+    tasks = np.array([t.split("_")[1] for t in sub.trial])
+    groups = np.full(len(tasks), "", dtype=object)
+    for name, members in TASK_GROUPS.items():
+        groups[np.isin(tasks, members)] = name
+    out = {"bootstrap": {"resamples": n_boot, "seed": seed, "level": 0.95}}
+    for key, labels in (("per_participant", sub.participant), ("by_task", tasks),
+                        ("by_task_group", groups)):  # fmt: skip
+        keep = labels != ""  # records of no task group
+        if keep.sum() < 2:
+            continue
+        kept = {name: p[keep] for name, p in preds.items()}
+        out[key] = r2_with_intervals(sub.k[keep], kept, labels[keep].astype(str), sub.trial[keep],
+                                     n_boot=n_boot, seed=seed)  # fmt: skip
+    return out
+
+
 @dataclass
 class FitOutcome:
     """Trained network, held-out scores and what was held out."""
@@ -259,11 +344,20 @@ def fit_and_evaluate(
     svr_grid: dict | None = None,
     paper_protocol: bool = False,
     candidates: Sequence[dict] | None = None,
+    references: Mapping[str, NetworkStiffness] | None = None,
+    n_boot: int = 2000,
     progress: bool = False,
 ) -> FitOutcome:
     """Split by participant, train the network (``config``: a
     :class:`~wholebody.humanlike.training.TrainingConfig`) and the SVR on the training
-    participants, and score both and the training mean on the held-out participants.
+    participants, and score both and the training mean on the held-out participants: pooled
+    over every held-out record (``scores``), and on the real held-out participants, each
+    alone and together, with 95 % bootstrap intervals over their trials
+    (:func:`held_out_details`: ``meta["scores_real_held_out"]``).
+
+    ``references`` (name: network, e.g. the network shipped before) are scored on the same
+    records in the same way; each must have held out every test participant (its
+    ``meta["split"]``), else :class:`DataError`.
 
     With ``candidates`` the training settings are first chosen by :func:`select_model` on
     the training participants. With ``paper_protocol`` the two models are also trained and
@@ -282,6 +376,8 @@ def fit_and_evaluate(
             "with `wholebody stiffness dataset --calibrate --held-out ...`"
         )
     train, test = dataset.split(test_participants)
+    for name, ref in (references or {}).items():
+        _check_reference(name, ref, test_participants)
     selection = None
     if candidates:
         chosen, selection = select_model(train, candidates, config, progress=progress)
@@ -297,9 +393,10 @@ def fit_and_evaluate(
     result = train_network(train.wrist, train.k, config, progress=progress, meta=meta)  # type: ignore[arg-type]
     net = result.network
     net.meta["gradient_norm"] = gradient_norms(net)
+    predictions = {"network": net.predict(test.wrist), "mean": np.full(len(test), train.k.mean())}
     scores = {
-        "network": regression_scores(test.k, net.predict(test.wrist)),
-        "mean": regression_scores(test.k, np.full(len(test), train.k.mean())),
+        "network": regression_scores(test.k, predictions["network"]),
+        "mean": regression_scores(test.k, predictions["mean"]),
         "network_train": regression_scores(train.k, net.predict(train.wrist)),
     }
     svr_params = None
@@ -310,6 +407,10 @@ def fit_and_evaluate(
                                    progress=progress)  # fmt: skip
         model = fit_svr(train.wrist, train.k, **svr_params)
         scores["svr"] = regression_scores(test.k, model.predict(test.wrist))
+        predictions["svr"] = model.predict(test.wrist)
+    for name, ref in (references or {}).items():
+        predictions[name] = ref.predict(test.wrist)
+        scores[name] = regression_scores(test.k, predictions[name])
     paper = None
     if paper_protocol:
         rng = np.random.default_rng(config.seed)  # type: ignore[attr-defined]
@@ -321,6 +422,10 @@ def fit_and_evaluate(
             m2 = fit_svr(dataset.wrist[tr], dataset.k[tr], **(svr_params or {}))
             paper["svr"] = regression_scores(dataset.k[te], m2.predict(dataset.wrist[te]))
     net.meta["scores_held_out_participants"] = scores
+    net.meta["scores_real_held_out"] = held_out_details(test, predictions, n_boot=n_boot,
+                                                        seed=config.seed)  # type: ignore[attr-defined]  # fmt: skip
+    if references:
+        net.meta["references"] = {name: _provenance(ref) for name, ref in references.items()}
     if selection is not None:
         net.meta["model_selection"] = selection
     if svr_params is not None:

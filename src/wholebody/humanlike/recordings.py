@@ -1,17 +1,22 @@
-"""Human arm recordings: shoulder, elbow and wrist centres per frame of one reaching trial.
+"""Human arm recordings: shoulder, elbow and wrist centres per frame of one trial.
 
 A :class:`Recording` holds one trial of one arm in the **lab frame** of the recordings:
 ``+x`` to the participant's right, ``+y`` forward (away from the participant), ``+z`` up,
 positions in **metres**, time in seconds from the trial's first frame. This is the frame of
 the bundled data set (``data/human_reaching``, see its README) and of the synthetic
-generator (:mod:`wholebody.humanlike.synthetic`).
+generator (:mod:`wholebody.humanlike.synthetic`). The bundled data hold four tasks
+(:data:`TASKS`): seated reaches ``forward`` and ``across`` at table height, ``drinking`` (the
+cup to the mouth) and ``combing`` (the hand over the head); :func:`load_recordings` reads
+them all or, with ``tasks=``, some.
 
 File layouts
 ------------
 CSV (the layout of ``data/human_reaching/joint_centres/*.csv``)
     Header row, then one row per frame. Required columns ``time_s``, ``shoulder_x``,
-    ``shoulder_y``, ``shoulder_z``, ``elbow_x`` ... ``wrist_z``; other columns (for example
-    ``fingertip_*``, ``sternum_*``) are ignored. The file name
+    ``shoulder_y``, ``shoulder_z``, ``elbow_x`` ... ``wrist_z``; the optional markers
+    ``sternum_*`` (the facing check below) and ``fingertip_*`` (the index fingertip of the
+    moving arm: a hand direction) are read when all three columns are there; other columns
+    are ignored. The file name
     ``{participant}_{task}_{side}{trial}.csv`` (for example ``ADL001_forward_R1.csv``) gives the
     participant, the task, the moving arm (``R``/``L``) and the trial number; a file with
     another name needs them passed explicitly.
@@ -19,8 +24,8 @@ NPZ (``numpy.savez``, no pickled objects)
     ``time_s`` (T,) s; ``shoulder``, ``elbow``, ``wrist`` (T, 3) in the lab frame above;
     ``units`` (0-d string, ``"m"`` or ``"mm"``); ``side`` (``"L"``/``"R"``); optional
     ``participant``, ``task``, ``trial`` (int), ``source`` (``"real"``/``"synthetic"``),
-    ``sternum`` (T, 3) and ``note`` (free text). :func:`save_npz_recording` writes it (always
-    in metres).
+    ``sternum`` (T, 3), ``fingertip`` (T, 3) and ``note`` (free text).
+    :func:`save_npz_recording` writes it (always in metres).
 
 Units
 -----
@@ -39,7 +44,9 @@ recording is turned by 180 deg about z (x and y negated; the arm angle does not 
 says so in its ``note``. Samples where the sternum marker is missing (empty values) are left
 out of that mean, and the recording then keeps no sternum (its ``note`` says how many
 samples had it); with no complete sample the check is impossible, and the ``note`` says
-so. ``facing="as-is"`` skips the check.
+so. ``facing="as-is"`` skips the check. A fingertip marker is turned with the rest; like the
+sternum, a recording keeps it only when it was seen in every sample (its ``note`` says when
+it was not).
 
 Validation
 ----------
@@ -57,7 +64,7 @@ from __future__ import annotations
 import csv
 import json
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -73,6 +80,7 @@ __all__ = [
     "JOINTS",
     "MIN_FRAMES",
     "MM_DETECTION_THRESHOLD",
+    "TASKS",
     "UPPER_ARM_RANGE",
     "Participant",
     "Recording",
@@ -92,6 +100,8 @@ FOREARM_RANGE = (0.15, 0.40)  # m, elbow-wrist distance in every frame
 FOREARM_VARIATION_MAX = 0.06  # m, max - min of the forearm length within one trial
 MIN_FRAMES = 10
 MM_DETECTION_THRESHOLD = 5.0  # median upper-arm length above this (in file units) -> mm
+TASKS = ("forward", "across", "drinking", "combing")  # the bundled data's tasks (file names)
+_MARKERS = ("sternum", "fingertip")  # optional markers, kept when seen in every sample
 _COLUMNS = ("time_s", *(f"{j}_{a}" for j in JOINTS for a in "xyz"))
 _NAME = re.compile(
     r"^(?P<participant>[A-Za-z0-9]+)_(?P<task>[A-Za-z0-9-]+)_(?P<side>[RL])(?P<trial>\d+)$"
@@ -118,6 +128,9 @@ class Recording:
         Free text (how the trial was made or corrected).
     sternum
         (T, 3) sternum marker, m, if the file has one (used to check the facing).
+    fingertip
+        (T, 3) index fingertip of the moving arm, m, if the file has it: ``fingertip - wrist``
+        is a hand direction.
     """
 
     time_s: np.ndarray
@@ -132,6 +145,7 @@ class Recording:
     path: str | None = None
     note: str = ""
     sternum: np.ndarray | None = None
+    fingertip: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -293,9 +307,11 @@ def _recording(
     ident: dict[str, object],
     source: str,
     note: str = "",
-    sternum: np.ndarray | None = None,
+    markers: Mapping[str, np.ndarray | None] | None = None,
     facing: str = "auto",
 ) -> Recording:
+    """A validated :class:`Recording` in metres from positions in file units; ``markers``:
+    the optional ``sternum`` and ``fingertip`` (rows x 3, NaN where a sample is missing)."""
     rows = np.arange(1, len(t) + 1)
     s = _scale(path, P["shoulder"], P["elbow"], units)
     P = {k: v * s for k, v in P.items()}
@@ -304,27 +320,26 @@ def _recording(
         raise DataError(f"{path}: source must be 'real' or 'synthetic', got {source!r}")
     if facing not in ("auto", "as-is"):
         raise DataError(f"{path}: facing must be 'auto' or 'as-is', got {facing!r}")
-    if sternum is not None:
-        sternum = sternum * s
-        medial = -1.0 if ident["side"] == "R" else 1.0
-        whole = np.isfinite(sternum).all(axis=1)  # samples with the marker seen
-        notes = [note] if note else []
-        if facing == "auto" and not whole.any():
-            notes.append("sternum never seen: facing not checked")
-        elif facing == "auto":
-            lateral = sternum[whole, 0] - P["shoulder"][whole, 0]
-            if float(np.mean(lateral)) * medial < 0:
-                turn = np.array([-1.0, -1.0, 1.0])
-                P = {k: v * turn for k, v in P.items()}
-                sternum = sternum * turn
-                notes.append("turned 180 deg about z: the sternum lay lateral of the shoulder, "
-                             "so the participant faced -y")  # fmt: skip
-            if not whole.all():
-                notes.append(f"sternum seen in {int(whole.sum())} of {len(t)} samples: used "
-                             "for the facing check only")  # fmt: skip
-        note = "; ".join(notes)
-        if not whole.all():  # a Recording's sternum is complete or absent
-            sternum = None
+    M = {k: v * s for k, v in (markers or {}).items() if v is not None}
+    notes = [note] if note else []
+    side = str(ident["side"])
+    if "sternum" in M and facing == "auto" and _faces_minus_y(M["sternum"], P["shoulder"], side,
+                                                              notes):  # fmt: skip
+        turn = np.array([-1.0, -1.0, 1.0])
+        P = {k: v * turn for k, v in P.items()}
+        M = {k: v * turn for k, v in M.items()}
+        notes.append("turned 180 deg about z: the sternum lay lateral of the shoulder, "
+                     "so the participant faced -y")  # fmt: skip
+    for name, v in list(M.items()):  # a Recording's marker is complete or absent
+        whole = np.isfinite(v).all(axis=1)
+        if whole.all():
+            continue
+        del M[name]
+        if name == "sternum" and facing == "auto" and whole.any():
+            notes.append(f"sternum seen in {int(whole.sum())} of {len(t)} samples: used "
+                         "for the facing check only")  # fmt: skip
+        elif name != "sternum":
+            notes.append(f"{name} seen in {int(whole.sum())} of {len(t)} samples: left out")
     return Recording(
         t.copy(),
         P["shoulder"],
@@ -336,9 +351,21 @@ def _recording(
         int(ident["trial"]),  # type: ignore[arg-type]
         source,
         str(path),
-        note,
-        sternum,
+        "; ".join(notes),
+        M.get("sternum"),
+        M.get("fingertip"),
     )
+
+
+def _faces_minus_y(sternum: np.ndarray, shoulder: np.ndarray, side: str, notes: list[str]) -> bool:
+    """Whether the participant faced -y: the sternum lies lateral of the moving arm's shoulder
+    on average over the samples where it was seen (a note if it never was)."""
+    whole = np.isfinite(sternum).all(axis=1)
+    if not whole.any():
+        notes.append("sternum never seen: facing not checked")
+        return False
+    medial = -1.0 if side == "R" else 1.0
+    return float(np.mean(sternum[whole, 0] - shoulder[whole, 0])) * medial < 0
 
 
 def load_csv_recording(
@@ -367,8 +394,8 @@ def load_csv_recording(
     A = _csv_numbers(path, header, body)
     t = A[:, 0]
     P = {j: A[:, 1 + 3 * k : 4 + 3 * k] for k, j in enumerate(JOINTS)}
-    sternum = _csv_sternum(path, header, body)
-    return _recording(path, t, P, units, ident, source, "", sternum, facing)
+    markers = {m: _csv_marker(path, header, body, m) for m in _MARKERS}
+    return _recording(path, t, P, units, ident, source, "", markers, facing)
 
 
 def _csv_rows(path: Path) -> tuple[list[str], list[list[str]]]:
@@ -433,19 +460,22 @@ def _csv_number(path: Path, row: int, column: str, v: str, empty: str) -> float:
         raise DataError(f"{path}: row {row}, column {column!r}: {v!r} is not a number") from None
 
 
-def _csv_sternum(path: Path, header: list[str], body: list[list[str]]) -> np.ndarray | None:
-    """The optional sternum marker (rows x 3): an empty value is a missing sample (NaN)."""
-    st_cols = [f"sternum_{a}" for a in "xyz"]
-    if not all(c in header for c in st_cols):
+def _csv_marker(
+    path: Path, header: list[str], body: list[list[str]], marker: str
+) -> np.ndarray | None:
+    """An optional marker (rows x 3), None without its three columns: an empty value is a
+    missing sample (NaN)."""
+    cols = [f"{marker}_{a}" for a in "xyz"]
+    if not all(c in header for c in cols):
         return None
-    cols = [header.index(c) for c in st_cols]
-    sternum = np.full((len(body), 3), np.nan)
+    idx = [header.index(c) for c in cols]
+    out = np.full((len(body), 3), np.nan)
     for r, line in enumerate(body):
-        for k, c in enumerate(cols):
+        for k, c in enumerate(idx):
             v = line[c].strip() if c < len(line) else ""
             if v:
-                sternum[r, k] = _csv_number(path, r + 1, st_cols[k], v, empty="")
-    return sternum
+                out[r, k] = _csv_number(path, r + 1, cols[k], v, empty="")
+    return out
 
 
 def _npz_str(path: Path, z: dict[str, np.ndarray], key: str, default: str | None) -> str | None:
@@ -517,13 +547,17 @@ def load_npz_recording(
         raise DataError(f"{path}: key 'side': expected 'R' or 'L', got {ident['side']!r}")
     src = source or _npz_str(path, z, "source", "real")
     note = _npz_str(path, z, "note", "") or ""
-    sternum = None
-    if "sternum" in z:
-        sternum = np.asarray(z["sternum"], dtype=float)
-        if sternum.shape != (len(t), 3) or not np.isfinite(sternum).all():
-            raise DataError(f"{path}: key 'sternum': expected finite values of shape "
-                            f"({len(t)}, 3), got {sternum.shape}")  # fmt: skip
-    return _recording(path, t, P, str(file_units), ident, str(src), note, sternum, facing)
+    markers = {m: _npz_marker(path, z, m, len(t)) for m in _MARKERS if m in z}
+    return _recording(path, t, P, str(file_units), ident, str(src), note, markers, facing)
+
+
+def _npz_marker(path: Path, z: dict[str, np.ndarray], key: str, n: int) -> np.ndarray:
+    """An optional marker of an NPZ recording: finite, (n, 3)."""
+    v = np.asarray(z[key], dtype=float)
+    if v.shape != (n, 3) or not np.isfinite(v).all():
+        raise DataError(f"{path}: key {key!r}: expected finite values of shape ({n}, 3), got "
+                        f"{v.shape}")  # fmt: skip
+    return v
 
 
 def load_recording(path: str | Path, *, units: str = "auto", **identity: object) -> Recording:
@@ -543,9 +577,20 @@ def load_recordings(
     *,
     units: str = "auto",
     progress: bool = False,
+    tasks: Iterable[str] | None = None,
 ) -> list[Recording]:
     """Read many recordings: a directory (every ``*.csv`` and ``*.npz`` in it, sorted), or an
-    iterable of files. ``None`` reads the bundled real recordings."""
+    iterable of files. ``None`` reads the bundled real recordings (all four :data:`TASKS`).
+
+    ``tasks`` keeps only the recordings of those tasks (for example ``("forward",
+    "across")``, the seated reaches); a file whose name gives its task (``{participant}_
+    {task}_{side}{trial}``) and is not wanted is not read.
+
+    Raises
+    ------
+    DataError
+        No recording there, or none of the tasks asked for.
+    """
     if paths is None:
         paths = real_recordings_dir()
     if isinstance(paths, (str, Path)):
@@ -557,11 +602,20 @@ def load_recordings(
             raise DataError(f"{root}: no .csv or .npz recordings in this directory")
     else:
         files = [Path(p) for p in paths]
+    wanted = None if tasks is None else set(tasks)
+    if wanted is not None:  # skip the files whose names say they are of another task
+        files = [f for f in files if (m := _NAME.match(f.stem)) is None or m["task"] in wanted]
     if progress:
         from tqdm.auto import tqdm
 
         files = tqdm(files, desc="reading recordings", unit="file")
-    return [load_recording(f, units=units) for f in files]
+    recs = [load_recording(f, units=units) for f in files]
+    if wanted is not None:
+        recs = [r for r in recs if r.task in wanted]
+        if not recs:
+            raise DataError(f"no recording of task(s) {', '.join(sorted(wanted))} in {paths} "
+                            f"(the bundled data have {', '.join(TASKS)})")  # fmt: skip
+    return recs
 
 
 def save_npz_recording(rec: Recording, path: str | Path) -> Path:
@@ -579,7 +633,7 @@ def save_npz_recording(rec: Recording, path: str | Path) -> Path:
         trial=np.array(rec.trial, dtype=np.int64),
         source=np.array(rec.source),
         note=np.array(rec.note),
-        **({} if rec.sternum is None else {"sternum": rec.sternum}),
+        **{m: getattr(rec, m) for m in _MARKERS if getattr(rec, m) is not None},
         frame=np.array(json.dumps({"x": "participant's right", "y": "forward", "z": "up"})),
     )
     return write_npz(npz_path(path), arrays)

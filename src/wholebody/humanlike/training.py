@@ -24,9 +24,17 @@ import numpy as np
 from wholebody.arm.network import NetworkStiffness
 from wholebody.errors import DataError, SolverError
 
-__all__ = ["DEFAULT_HIDDEN", "TrainingConfig", "TrainingResult", "torch_module", "train_network"]
+__all__ = [
+    "DEFAULT_HIDDEN",
+    "TrainingConfig",
+    "TrainingResult",
+    "torch_module",
+    "train_epoch",
+    "train_network",
+]
 
-DEFAULT_HIDDEN = (8,)  # chosen by grouped CV for the shipped network (its data card)
+DEFAULT_HIDDEN = (8,)  # fit's default; the shipped network's, chosen by grouped CV
+# (fit --select-hidden), is in its card
 FLOOR_FRACTION = 0.01  # 1 / floor_beta as a fraction of k_scale
 
 
@@ -106,6 +114,25 @@ def torch_module(net: NetworkStiffness, dtype: object = None):
     return m
 
 
+def train_epoch(model, opt, X, y, scale: float, batch_size: int, generator) -> float:
+    """One epoch of mini-batch steps of ``opt`` on ``mean(((model(X) - y) / scale)^2)``, the
+    batches in a random order drawn from ``generator``; returns the epoch's mean loss. Why
+    shared: the stiffness and arm-angle networks train alike."""
+    torch = _torch()
+    n = len(y)
+    perm = torch.randperm(n, generator=generator)
+    total = 0.0
+    for i in range(0, n, batch_size):
+        idx = perm[i : i + batch_size]
+        opt.zero_grad(set_to_none=True)
+        err = (model(X[idx]) - y[idx]) / scale
+        loss = torch.mean(err * err)
+        loss.backward()
+        opt.step()
+        total += float(loss.detach()) * len(idx)
+    return total / n
+
+
 def train_network(
     X: np.ndarray,
     y: np.ndarray,
@@ -137,7 +164,7 @@ def train_network(
         opt = torch.optim.Adam(model.parameters(), lr=config.lr)
     Xt = torch.as_tensor(X, dtype=torch.float32)
     yt = torch.as_tensor(y, dtype=torch.float32)
-    n, bs = len(y), config.batch_size
+    n = len(y)
     losses: list[float] = []
     epochs = range(config.epochs)
     bar = None
@@ -148,17 +175,7 @@ def train_network(
         epochs = bar
     t0 = time.perf_counter()
     for epoch in epochs:
-        perm = torch.randperm(n, generator=gen)
-        total = 0.0
-        for i in range(0, n, bs):
-            idx = perm[i : i + bs]
-            opt.zero_grad(set_to_none=True)
-            err = (model(Xt[idx]) - yt[idx]) / k_scale
-            loss = torch.mean(err * err)
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(idx)
-        losses.append(total / n)
+        losses.append(train_epoch(model, opt, Xt, yt, k_scale, config.batch_size, gen))
         if bar is not None:
             bar.set_postfix(loss=f"{losses[-1]:.4f}")
         if on_epoch is not None:

@@ -27,6 +27,10 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     wheel_metric = 0.01                # velocity metric of the wheels
     stiffness = "learned"              # "learned" (the robot's model) or a number (N m/rad)
     acceleration = true                # the robot's acceleration limits as a hard box
+    spring = "paper"                   # the arm energy's spring: "paper" (1/2 k (pi - |alpha|)^2),
+                                       # "signed" (1/2 k (pi - alpha)^2) or "none"
+    human_arm_angle = 0.0              # weight of the pull towards the human arm angle in H
+    human_arm_angle_kp = 0.0           # rate (1/s) of the human arm angle as a task level
 
     [hands.right]                      # any number of hands
     frame = "right_tool"
@@ -80,7 +84,7 @@ from pathlib import Path
 from typing import Any
 
 from wholebody.errors import ConfigError
-from wholebody.presets import PaperWeights
+from wholebody.presets import SPRINGS, PaperWeights
 from wholebody.tomlreader import TomlReader, config_error, load_toml
 
 __all__ = [
@@ -266,7 +270,14 @@ def _stack(r: TomlReader, st: dict) -> StackSpec:
         wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
         stiffness=stiffness,
         acceleration=r.boolean(st, "acceleration", "stack", default=True),
+        spring=r.string(st, "spring", "stack", default="paper", choices=SPRINGS),
+        human_arm_angle=r.number(st, "human_arm_angle", "stack", default=0.0),
+        human_arm_angle_kp=r.number(st, "human_arm_angle_kp", "stack", default=0.0),
     )
+    if stack.human_arm_angle < 0:
+        raise r.fail("stack.human_arm_angle", "expected a weight >= 0")
+    if stack.human_arm_angle_kp < 0:
+        raise r.fail("stack.human_arm_angle_kp", "expected a rate >= 0 (1/s)")
     if stack.gain < 0:
         raise r.fail("stack.gain", f"expected a number >= 0, got {stack.gain}")
     return stack

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from wholebody.tasks.arm_angle import ArmAngleSpring, HumanArmAngle, HumanArmAngleTask
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
 from wholebody.tasks.base import (
     Bounds,
@@ -19,16 +20,19 @@ from wholebody.tasks.inequality import FrameHalfSpace
 from wholebody.tasks.limits import AccelerationLimits, JointPositionLimits, VelocityLimits
 from wholebody.tasks.objectives import JointLimitAvoidance, Manipulability
 from wholebody.tasks.posture import PostureTask
-from wholebody.tasks.relative import RelativeFrameTask
+from wholebody.tasks.relative import RelativeFrameTask, RelativePositionTask
 
 __all__ = [
     "AccelerationLimits",
+    "ArmAngleSpring",
     "ArmEnergyValue",
     "ArmPotentialEnergy",
     "Bounds",
     "Constraint",
     "FrameHalfSpace",
     "FrameTask",
+    "HumanArmAngle",
+    "HumanArmAngleTask",
     "InequalityRows",
     "InequalityTask",
     "JointLimitAvoidance",
@@ -39,6 +43,7 @@ __all__ = [
     "ObjectiveValue",
     "PostureTask",
     "RelativeFrameTask",
+    "RelativePositionTask",
     "Task",
     "TaskRows",
     "VelocityLimits",

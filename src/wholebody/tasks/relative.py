@@ -1,4 +1,5 @@
-"""Relative pose of two frames: the dual-arm closed chain.
+"""Relative pose of two frames (the dual-arm closed chain), and relative position in the
+axes of a third frame.
 
 The pose of frame b in frame a, ``T_ab = T_a^-1 T_b``, tracks a target (for a carried object,
 the constant ``T_ab = T_a,obj T_b,obj^-1`` of the two grasps). In a's axes, with
@@ -9,6 +10,12 @@ the constant ``T_ab = T_a,obj T_b,obj^-1`` of the two grasps). In a's axes, with
 so the relative Jacobian is ``R_a^T [J_b,lin - J_a,lin + [r]x J_a,ang ; J_b,ang - J_a,ang]``
 (:func:`wholebody.kernels.rows.relative_pose`). The rows and the PI law are those of
 :class:`~wholebody.tasks.frame.FrameTask`, in a's axes.
+
+:class:`RelativePositionTask` tracks only ``r = p_b - p_a`` in the axes of a frame c (e.g. the
+wrist relative to the shoulder in the base's axes, as a person's wrist is recorded relative to
+their shoulder). With ``d/dt R_c^T = -R_c^T [w_c]x``::
+
+    d (R_c^T r) / dt = R_c^T (v_b - v_a + [r]x w_c)
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ from wholebody.kernels.rows import relative_pose
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.frame import PoseTask
 
-__all__ = ["RelativeFrameTask"]
+__all__ = ["RelativeFrameTask", "RelativePositionTask"]
 
 
 class RelativeFrameTask(PoseTask):
@@ -83,3 +90,58 @@ class RelativeFrameTask(PoseTask):
 
     def __repr__(self) -> str:
         return f"RelativeFrameTask({self.name!r}, rows={self.dim})"
+
+
+class RelativePositionTask(PoseTask):
+    """Keep ``R_c^T (p_b - p_a)``, frame b's position relative to frame a in the axes of frame
+    ``axes`` (c; default a), at a target (3 rows, m).
+
+    The target is a 4x4 pose whose translation is that vector (its rotation is ignored) and
+    the target twist's linear part is its rate (m/s) in c's axes, so that a position
+    trajectory drives it as it drives a :class:`~wholebody.tasks.frame.FrameTask`. Gains and
+    the PI law are those of :class:`~wholebody.tasks.frame.FrameTask`.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        frame_a: str | Frame,
+        frame_b: str | Frame,
+        *,
+        axes: str | Frame | None = None,
+        name: str | None = None,
+        kp: float | Sequence[float] = 10.0,
+        ki: float | Sequence[float] = 0.0,
+        integral_limit: float = 0.05,
+        weight: float | Sequence[float] = 1.0,
+    ) -> None:
+        self.frame_a = robot.frame(frame_a)
+        self.frame_b = robot.frame(frame_b)
+        self.axes = self.frame_a if axes is None else robot.frame(axes)
+        super().__init__(robot, name or f"{self.frame_a.name}->{self.frame_b.name}",
+                         position=True, orientation=False, kp=kp, ki=ki,
+                         integral_limit=integral_limit, weight=weight)  # fmt: skip
+
+    def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        Rc = state.rotation(self.axes)
+        r = state.position(self.frame_b) - state.position(self.frame_a)
+        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        J = np.zeros((6, self.robot.nu))
+        J[:3] = Rc.T @ (state.jacobian(self.frame_b)[:3] - state.jacobian(self.frame_a)[:3]
+                        + skew @ state.jacobian(self.axes)[3:])  # fmt: skip
+        return J, Rc.T @ r, np.eye(3)
+
+    def _hold(self, state: RobotState) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, 3] = self.relative_position(state)
+        return T
+
+    def relative_position(self, state: RobotState) -> np.ndarray:
+        """``R_c^T (p_b - p_a)`` (m) at ``state``."""
+        return self._measured(state)[1]
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        return (self.frame_a, self.frame_b, self.axes)
+
+    def __repr__(self) -> str:
+        return f"RelativePositionTask({self.name!r}, rows={self.dim})"

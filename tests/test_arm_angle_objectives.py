@@ -29,6 +29,16 @@ class Linear:
         return float(self.a @ p + self.b), self.a.copy()
 
 
+class Answer:
+    """A model that answers the same, whatever ``p``."""
+
+    def __init__(self, alpha, gradient):
+        self.alpha, self.gradient = alpha, gradient
+
+    def evaluate(self, p):
+        return self.alpha, self.gradient
+
+
 class Constant(Linear):
     def __init__(self, alpha):
         super().__init__((0.0, 0.0, 0.0), alpha)
@@ -128,10 +138,31 @@ def test_paper_weights_choose_the_spring_and_the_pull(humanoid):
     assert all(isinstance(o.model, NetworkArmAngle) for o in pulls)  # the shipped model
     with pytest.raises(DimensionError, match="spring must be one of"):
         paper_objectives(humanoid, PaperWeights(spring="curly"), 0.1)
+    with pytest.raises(DimensionError, match="human_arm_angle must be a weight >= 0"):
+        paper_objectives(humanoid, PaperWeights(human_arm_angle=-1.0), 0.1)
     with pytest.raises(DimensionError, match="model must have evaluate"):
         HumanArmAngle(humanoid, "left", 0.4)
     with pytest.raises(DimensionError, match="stiffness must be a number"):
         ArmAngleSpring(humanoid, "left", "learned")
+    assert ArmAngleSpring(humanoid, "left", np.int64(1)).stiffness.k == 1.0
+
+
+def test_bad_models_and_arms_are_named(humanoid):
+    """A stiffness model is not an arm-angle model; a model answering NaN or a gradient of
+    the wrong shape is named at its first evaluation; arm_only needs the arm's group."""
+    import dataclasses
+
+    with pytest.raises(DimensionError, match="model must have evaluate"):
+        HumanArmAngle(humanoid, "left", Sloped())
+    state = humanoid.update(humanoid.home())
+    for alpha, gradient in ((float("nan"), np.zeros(3)), (0.3, 0.0)):
+        bad = HumanArmAngle(humanoid, "left", Answer(alpha, gradient))
+        with pytest.raises(DimensionError, match="left_human_arm_angle: the arm-angle model"):
+            bad.evaluate(state)
+    groupless = dataclasses.replace(humanoid.arm("left"), group=None)
+    with pytest.raises(DimensionError, match="arm_only needs the arm's joint group"):
+        HumanArmAngleTask(humanoid, groupless, Constant(0.4))
+    assert HumanArmAngleTask(humanoid, groupless, Constant(0.4), arm_only=False).columns is None
 
 
 @pytest.mark.parametrize("arm", ["left", "right"])

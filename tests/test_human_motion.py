@@ -16,6 +16,7 @@ from wholebody.scenarios.human_motion import (
     PathTrajectory,
     TrialResult,
     compare_arm_angles,
+    held_out_arm_angle_models,
     robot_wrist_path,
     run_trial,
 )
@@ -132,7 +133,24 @@ def test_held_out_models_never_saw_the_participant_they_drive(tmp_path):
     for p in ("ADL001", "ADL002", "ADL003"):
         for f in sorted(real_recordings_dir().glob(f"{p}_*.csv"))[::8]:
             (rec / f.name).write_bytes(f.read_bytes())
+    models = held_out_arm_angle_models(load_recordings(rec), only=["ADL002"])
+    assert list(models) == ["ADL002"] and models["ADL002"].meta["participants"] == [
+        "ADL001", "ADL003"]  # fmt: skip
     out = _evaluate(tmp_path / "out", "--recordings", str(rec), "--held-out")
     assert out["arm_angle_model"].startswith("held out")
     c = out["controllers"]
     assert c["human_arm_angle"]["alpha_rms_deg"] < c["pseudo_inverse"]["alpha_rms_deg"]
+
+
+def test_a_one_armed_robot_is_refused_by_name(trials):
+    from wholebody.errors import DataError
+    from wholebody.robot import load_robot
+    from wholebody.robot.urdf import example_robot_data_share
+
+    if example_robot_data_share() is None:
+        pytest.skip("example-robot-data is not installed (pip install '.[robots]')")
+    panda = load_robot("panda")  # one right arm
+    for rec in trials:
+        expected = "has one arm" if rec.side == "R" else "no left arm"
+        with pytest.raises(DataError, match=expected):
+            run_trial(panda, rec, None)

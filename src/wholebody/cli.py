@@ -338,15 +338,21 @@ def _humanlike_evaluate(args: argparse.Namespace) -> int:
 
     if args.every < 1:
         raise ConfigError(f"--every must be >= 1, got {args.every}")
-    recs = load_recordings(args.recordings)
-    models = held_out_arm_angle_models(recs) if args.held_out else None
+    every = load_recordings(args.recordings)
+    recs = every
     if args.participants:
         keep = {p.strip() for p in args.participants.split(",") if p.strip()}
-        recs = [r for r in recs if r.participant in keep]
+        recs = [r for r in every if r.participant in keep]
         missing = keep - {r.participant for r in recs}
         if missing:
             raise ConfigError(f"--participants: no recordings of {', '.join(sorted(missing))}")
     recs = recs[:: args.every]
+    models = None
+    if args.held_out:  # trained on every recording but the participant's own
+        models = held_out_arm_angle_models(every, only=sorted({r.participant for r in recs}))
+    else:
+        print("arm-angle model: the shipped one, trained on the bundled participants "
+              "(in-sample for them; --held-out for a test on people it never saw)")  # fmt: skip
     robot = load_robot(args.robot)
     scores = evaluate(robot, recs, CONTROLLERS, arm_angle_model=models)
     meta = {"robot": robot.name, "trials": [r.name for r in recs],

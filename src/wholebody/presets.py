@@ -125,6 +125,9 @@ def paper_objectives(
                                              weight=weights.energy))  # fmt: skip
         if weights.spring == "signed":
             objectives.append(ArmAngleSpring(robot, arm, k, signed=True, weight=weights.energy))
+    if not (math.isfinite(weights.human_arm_angle) and weights.human_arm_angle >= 0):
+        raise DimensionError(f"PaperWeights.human_arm_angle must be a weight >= 0, got "
+                             f"{weights.human_arm_angle}")  # fmt: skip
     if weights.human_arm_angle:
         model = _arm_angle_model(arm_angle_model)
         objectives += [HumanArmAngle(robot, arm, model, weight=weights.human_arm_angle)
@@ -183,7 +186,7 @@ def paper_stack(
     the plain pseudo-inverse baseline), joint position and velocity limits (and with
     ``acceleration`` the robot's acceleration limits), the metric.
 
-    With ``weights.human_arm_angle_kp > 0`` a level of
+    With ``weights.human_arm_angle_kp > 0`` (and ``objectives``) a level of
     :class:`~wholebody.tasks.HumanArmAngleTask` (one per arm, ``arm_angle_model`` or the
     shipped model) sits between ``tasks`` and ``H``: the arm angles follow the human one
     wherever the tasks leave the arms' self-motion free.
@@ -197,7 +200,7 @@ def paper_stack(
     kp = weights.human_arm_angle_kp
     if not (math.isfinite(kp) and kp >= 0):
         raise DimensionError(f"PaperWeights.human_arm_angle_kp must be >= 0 (1/s), got {kp}")
-    if kp > 0:
+    if kp > 0 and objectives:
         model = _arm_angle_model(arm_angle_model)
         pulls = [HumanArmAngleTask(robot, arm, model, kp=kp) for arm in robot.arms]
         levels.append(Level(tuple(pulls), name="arm angle"))

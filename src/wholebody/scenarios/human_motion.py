@@ -160,7 +160,10 @@ def run_trial(robot: Robot, rec: Recording, weights: PaperWeights | None, *,
     """Drive the robot's wrist along one trial with the paper's stack of ``weights`` (None:
     the plain pseudo-inverse) and collect the arm angles on the scored frames."""
     arm = _robot_arm(robot, "right" if rec.side == "R" else "left")
-    other = next(a for a in robot.arms.values() if a is not arm)
+    other = next((a for a in robot.arms.values() if a is not arm), None)
+    if other is None:
+        raise DataError(f"the motion test drives one arm and holds the other: robot "
+                        f"{robot.name!r} has one arm")  # fmt: skip
     q0 = robot.home()
     path = robot_wrist_path(arm, rec)
     wrist = RelativePositionTask(robot, arm.shoulder, arm.wrist, axes=robot.base_frame,
@@ -204,12 +207,12 @@ def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
     per participant; waist travel summed (rad)."""
     if not trials:
         raise DataError("compare_arm_angles: no trials")
-    diffs = {t.trial: np.degrees(np.remainder(t.robot - t.human + math.pi, 2 * math.pi)
-                                 - math.pi) for t in trials}  # fmt: skip
-    every = np.concatenate(list(diffs.values()))
+    diffs = [np.degrees(np.remainder(t.robot - t.human + math.pi, 2 * math.pi) - math.pi)
+             for t in trials]  # fmt: skip
+    every = np.concatenate(diffs)
     by: dict[str, list[np.ndarray]] = {}
-    for t in trials:
-        by.setdefault(t.participant, []).append(diffs[t.trial])
+    for t, d in zip(trials, diffs, strict=True):
+        by.setdefault(t.participant, []).append(d)
     per = {p: float(np.sqrt(np.mean(np.concatenate(d) ** 2))) for p, d in sorted(by.items())}
     return MotionScores(
         alpha_rms_deg_interval=_participant_interval([np.concatenate(d) for d in by.values()]),
@@ -258,12 +261,13 @@ def evaluate(robot: Robot, recordings: Sequence[Recording],
             for name, w in controllers.items()}  # fmt: skip
 
 
-def held_out_arm_angle_models(recordings: Sequence[Recording], *,
-                              n_records: int = 20000) -> dict[str, object]:  # fmt: skip
-    """Per participant of ``recordings``, the arm-angle network trained as the shipped one
-    (:func:`wholebody.humanlike.arm_angle_fit.train_arm_angle`, its default settings, on
-    ``n_records`` records of every recording) without that participant's records: the
-    models of a held-out motion test. Requires the ``learn`` extra (PyTorch)."""
+def held_out_arm_angle_models(recordings: Sequence[Recording], *, n_records: int = 20000,
+                              only: Sequence[str] | None = None) -> dict[str, object]:  # fmt: skip
+    """Per participant of ``recordings`` (or of ``only``), the arm-angle network trained as
+    the shipped one (:func:`wholebody.humanlike.arm_angle_fit.train_arm_angle`, its default
+    settings, on ``n_records`` records of every recording) without that participant's
+    records: the models of a held-out motion test. Each network's ``meta["participants"]``
+    lists those it was trained on. Requires the ``learn`` extra (PyTorch)."""
     from wholebody.humanlike.arm_angle_data import arm_angle_records
     from wholebody.humanlike.arm_angle_fit import train_arm_angle
 
@@ -271,10 +275,15 @@ def held_out_arm_angle_models(recordings: Sequence[Recording], *,
     people = sorted({r.participant for r in recordings})
     if len(people) < 2:
         raise DataError(f"held-out models need >= 2 participants, got {people}")
+    unknown = sorted(set(only or ()) - set(people))
+    if unknown:
+        raise DataError(f"held-out models: no recordings of {', '.join(unknown)}")
     models: dict[str, object] = {}
-    for person in people:
+    for person in people if only is None else sorted(set(only)):
         train = records.subset(records.participant != person)
-        models[person] = train_arm_angle(train.p, train.alpha).network
+        net = train_arm_angle(train.p, train.alpha).network
+        net.meta["participants"] = sorted(set(train.participant.tolist()))
+        models[person] = net
     return models
 
 

@@ -41,6 +41,7 @@ They are evaluated in Python (the compiled plan copies their gradients in).
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Protocol
 
 import numpy as np
@@ -136,7 +137,7 @@ class HumanArmAngle(_ArmAngleObjective):
                  name: str | None = None) -> None:  # fmt: skip
         chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(robot, chain, name or f"{chain.name}_human_arm_angle", weight, fade)
-        if not callable(getattr(model, "evaluate", None)):
+        if isinstance(model, StiffnessModel) or not callable(getattr(model, "evaluate", None)):
             raise DimensionError(f"{self.name}: model must have evaluate(p) -> (alpha, "
                                  f"gradient), got {model!r}")  # fmt: skip
         self.model = model
@@ -144,8 +145,8 @@ class HumanArmAngle(_ArmAngleObjective):
     def target(self, state: RobotState) -> float:
         """``alpha_h`` (rad) at ``state``'s wrist."""
         S, W = state.position(self._frames[0]), state.position(self._frames[2])
-        return float(self.model.evaluate(self.mirror * (state.rotation(self._frames[3]).T
-                                                        @ (W - S)) / self.reach)[0])  # fmt: skip
+        return self._model_at(self.mirror * (state.rotation(self._frames[3]).T @ (W - S))
+                              / self.reach)[0]  # fmt: skip
 
     def residual(self, state: RobotState) -> tuple[float, float, np.ndarray, np.ndarray]:
         """``(e, w, w de, dw)``: the wrapped residual ``e = alpha - alpha_h`` (rad), the fade
@@ -153,10 +154,22 @@ class HumanArmAngle(_ArmAngleObjective):
         and ``d w``."""
         arm, w, eps2, (S, _, W) = self._angle(state)
         p, dp = self._wrist(state, S, W)
-        alpha_h, g_h = self.model.evaluate(p)
-        e = math.remainder(arm.alpha - float(alpha_h), 2.0 * math.pi)
+        alpha_h, g_h = self._model_at(p)
+        e = math.remainder(arm.alpha - alpha_h, 2.0 * math.pi)
         w_dalpha, dw = self._d_alpha(state, arm, eps2)
-        return e, w, w_dalpha - w * (np.asarray(g_h, dtype=float) @ dp), dw
+        return e, w, w_dalpha - w * (g_h @ dp), dw
+
+    def _model_at(self, p: np.ndarray) -> tuple[float, np.ndarray]:
+        """``alpha_h`` (rad) and its gradient (3,) at ``p``, checked: a model that answers a
+        non-finite angle or a gradient of another shape is named, not passed to a solver."""
+        alpha_h, g_h = self.model.evaluate(p)
+        g = np.asarray(g_h, dtype=float)
+        alpha = float(alpha_h)
+        if g.shape != (3,) or not (math.isfinite(alpha) and np.all(np.isfinite(g))):
+            raise DimensionError(f"{self.name}: the arm-angle model must return a finite "
+                                 f"angle (rad) and gradient of shape (3,) at p = {p}, got "
+                                 f"{alpha_h!r} and shape {g.shape}")  # fmt: skip
+        return alpha, g
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
         e, w, w_de, dw = self.residual(state)
@@ -180,7 +193,8 @@ class HumanArmAngleTask(Task):
     joints for several rad/s at once and saturate their velocity and acceleration limits; and
     near a straight arm, where the arm angle turns fast for a small elbow motion and the
     hands' rows are nearly singular, the requested rate fades with ``w`` (``fade`` 3 cm:
-    ``w = 0.5`` with the elbow 3 cm from the shoulder-wrist line).
+    ``w = 0.5`` at ``rho`` = 3 cm, the elbow 3 cm off a horizontal shoulder-wrist line;
+    ``rho`` shrinks as that line tilts towards the vertical, :mod:`wholebody.arm.angle`).
 
     ``arm_only`` (default): the row acts on the arm's joints only (its group in
     ``robot.toml``), the waist and base are left to the tasks and ``H``; else on every
@@ -192,9 +206,13 @@ class HumanArmAngleTask(Task):
                  weight: float = 1.0, fade: float = 0.03,
                  name: str | None = None) -> None:  # fmt: skip
         self.pull = HumanArmAngle(robot, arm, model, fade=fade)
-        group = self.pull.arm.group
-        self.columns = group.indices if arm_only and group is not None else None
         super().__init__(name or f"{self.pull.arm.name}_human_arm_angle", weight)
+        group = self.pull.arm.group
+        if arm_only and group is None:
+            raise DimensionError(f"{self.name}: arm_only needs the arm's joint group (arms."
+                                 f"{self.pull.arm.name}.group in robot.toml); or pass "
+                                 "arm_only=False")  # fmt: skip
+        self.columns = group.indices if arm_only else None
         for what, value in (("kp", kp), ("max_rate", max_rate)):
             if not (math.isfinite(value) and value >= 0):
                 raise DimensionError(f"{self.name}: {what} must be a finite number >= 0, got "
@@ -233,7 +251,7 @@ class ArmAngleSpring(_ArmAngleObjective):
         chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(robot, chain, name or f"{chain.name}_arm_angle_spring", weight, fade)
         if not isinstance(stiffness, StiffnessModel):
-            if isinstance(stiffness, (str, bool)) or not isinstance(stiffness, (int, float)):
+            if isinstance(stiffness, (str, bool)) or not isinstance(stiffness, numbers.Real):
                 raise DimensionError(f"{self.name}: stiffness must be a number (N m/rad) or a "
                                      f"StiffnessModel, got {stiffness!r}")  # fmt: skip
             stiffness = ConstantStiffness(float(stiffness))

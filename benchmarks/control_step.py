@@ -63,6 +63,7 @@ from wholebody.solvers import Level, ProjectionSolver, Solver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import (
     ArmPotentialEnergy,
+    CollisionAvoidance,
     FrameTask,
     JointLimitAvoidance,
     JointPositionLimits,
@@ -89,6 +90,19 @@ def projection(robot, hands):
 
 def hqp_paper(robot, hands):
     return paper_stack(robot, hands, weights=PAPER, stiffness=0.1), HierarchicalQPSolver("daqp")
+
+
+def collision(backend: str) -> Factory:
+    """The paper's stack under a level of :class:`CollisionAvoidance` (the robot's own pairs:
+    self-collision, 5 cm influence)."""
+
+    def factory(robot, hands):
+        stack = paper_stack(robot, hands, weights=PAPER, stiffness=0.1,
+                            collision=CollisionAvoidance(robot))  # fmt: skip
+        return stack, (ProjectionSolver() if backend == "projection"
+                       else HierarchicalQPSolver(backend))  # fmt: skip
+
+    return factory
 
 
 def closed_chain(robot, hands):
@@ -148,6 +162,8 @@ CASES: list[tuple[str, Factory]] = [
     ("pinv (plain pseudo-inverse)", pinv),
     ("projection (paper's stack)", projection),
     ("hqp daqp (paper's stack)", hqp_paper),
+    ("projection (paper's stack + collision)", collision("projection")),
+    ("hqp daqp (paper's stack + collision)", collision("daqp")),
     (
         "projection (3 levels)",
         lambda robot, hands: (three_levels(robot, hands), ProjectionSolver()),

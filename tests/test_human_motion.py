@@ -99,6 +99,7 @@ def _evaluate(tmp_path, *argv):
     return json.loads((tmp_path / "humanlike.json").read_text())
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_table_and_the_plot(tmp_path, capsys):
     """Two trials of one participant: humanlike.json has, per controller, the rms over all
     frames (the only participant's too), the waist travel and the frames."""

@@ -35,7 +35,7 @@ def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
 def test_the_examples_do_what_they_say(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
     found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False,
-             "arm angle": False}  # fmt: skip
+             "arm angle": False, "collision": False}  # fmt: skip
     for i, code in enumerate(BLOCKS):
         ns, _ = run_block(code, f"README.md python block {i + 1}")
         if "hand.set_target(goal)" in code:  # the quickstart reaches its goal
@@ -59,4 +59,7 @@ def test_the_examples_do_what_they_say(monkeypatch):
             hand = ns["log"].frame_positions["right_tool"][-1]
             assert np.linalg.norm(hand - ns["goal"][:3, 3]) < 1e-3
             found["arm angle"] = True
+        if "wb.CollisionAvoidance" in code:  # the hand passes the ball 1 cm off, not through
+            assert ns["collision"].safety <= ns["closest"] < 0.02
+            found["collision"] = True
     assert all(found.values()), found

@@ -139,6 +139,7 @@ def _robot_data_installed() -> bool:
     return example_robot_data_share() is not None
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not _robot_data_installed(), reason="needs pip install '.[robots]'")
 def test_a_shipped_robot_is_drawn_with_its_meshes(tmp_path, capsys):
     """TIAGo++'s meshes live in example-robot-data (package:// paths): found, reduced with
@@ -261,6 +262,7 @@ def test_frame_moves_the_scene_under_the_camera(scene, monkeypatch):
     np.testing.assert_allclose(camera["value"], [offset[0], offset[2], -offset[1]])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed (.ci/run "
                     "installs it)")  # fmt: skip
 def test_the_replay_page_opens_without_a_server_and_frames_the_run(tmp_path):

@@ -53,6 +53,9 @@ _LAZY: dict[str, str] = {
     "FrameHalfSpace": "wholebody.tasks",
     "ArmPotentialEnergy": "wholebody.tasks",
     "HumanArmAngle": "wholebody.tasks",
+    "CollisionAvoidance": "wholebody.tasks",
+    "CollisionModel": "wholebody.collision",
+    "Obstacle": "wholebody.collision",
     "HumanArmAngleTask": "wholebody.tasks",
     "ArmAngleSpring": "wholebody.tasks",
     "JointLimitAvoidance": "wholebody.tasks",
@@ -87,6 +90,8 @@ __all__ = [
     "ArmAngleSpring",
     "ArmPotentialEnergy",
     "Bounds",
+    "CollisionAvoidance",
+    "CollisionModel",
     "ConfigError",
     "Constraint",
     "Controller",
@@ -110,6 +115,7 @@ __all__ = [
     "ModelError",
     "Objective",
     "ObjectiveValue",
+    "Obstacle",
     "PaperWeights",
     "PostureTask",
     "ProjectionSolver",
@@ -150,6 +156,7 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # the names as a type checker and an IDE see them
+    from wholebody.collision import CollisionModel, Obstacle
     from wholebody.control import Controller, RunLog, StallRecovery
     from wholebody.planning import DMP, HoldTrajectory, MinimumJerkTrajectory, Trajectory
     from wholebody.presets import PaperWeights, paper_stack
@@ -167,6 +174,7 @@ if TYPE_CHECKING:  # the names as a type checker and an IDE see them
         ArmAngleSpring,
         ArmPotentialEnergy,
         Bounds,
+        CollisionAvoidance,
         Constraint,
         FrameHalfSpace,
         FrameTask,

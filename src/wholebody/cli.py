@@ -183,6 +183,11 @@ def _report_run(run, files: dict[str, Path]) -> None:
         chain = entry.get("closed_chain_error_max_m")
         extra = f", closed chain <= {chain * 1e3:.3f} mm" if chain is not None else ""
         print(f"  {phase:16s} worst hand MAE {worst * 1e3:.3f} mm{extra}")
+    if m.get("min_collision_distance_m") is not None:
+        print(f"  closest pair {m['min_collision_pair']}: {m['min_collision_distance_m'] * 1e3:.2f}"
+              f" mm at {m['min_collision_time_s']:.2f} s")  # fmt: skip
+        for entry in m["collision_limited"]:
+            print(f"  {entry['pair']} held {entry['task']} back for {entry['steps']} steps")
     for name, f in files.items():
         print(f"  {name:17s} {f}")
 

@@ -41,6 +41,7 @@ from wholebody.tasks import (
     AccelerationLimits,
     ArmAngleSpring,
     ArmPotentialEnergy,
+    CollisionAvoidance,
     HumanArmAngle,
     HumanArmAngleTask,
     JointLimitAvoidance,
@@ -181,6 +182,7 @@ def paper_stack(
     first: Sequence[Task] = (),
     acceleration: bool = False,
     arm_angle_model: ArmAngleModel | None = None,
+    collision: CollisionAvoidance | None = None,
 ) -> Stack:
     """The paper's stack: ``tasks`` on top, then ``H`` (omitted with ``objectives=False``:
     the plain pseudo-inverse baseline), joint position and velocity limits (and with
@@ -191,11 +193,16 @@ def paper_stack(
     shipped model) sits between ``tasks`` and ``H``: the arm angles follow the human one
     wherever the tasks leave the arms' self-motion free.
 
+    ``collision`` (:class:`~wholebody.tasks.CollisionAvoidance`) goes in a level above
+    all: every task is met inside its rows.
+
     ``first`` puts tasks in a level above ``tasks``: for a carried object, the closed chain
     (the hands' relative pose) above the hands' absolute poses, the usual cooperative
     task-space priority. The relative rows are then met exactly and the hands'
     rows, redundant with them, in the least-squares sense below."""
-    levels: list[Level] = [Level(tuple(first), name="closed chain")] if first else []
+    levels: list[Level] = [Level((collision,), name="collision")] if collision else []
+    if first:
+        levels.append(Level(tuple(first), name="closed chain"))
     levels.append(Level(tuple(tasks), name="tasks"))
     kp = weights.human_arm_angle_kp
     if not (math.isfinite(kp) and kp >= 0):

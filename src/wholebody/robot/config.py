@@ -131,6 +131,16 @@ class FrameConfig:
 
 
 @dataclass(frozen=True)
+class CollisionConfig:
+    """``[collision]``: links whose collision shapes are replaced by one bounding
+    ``"capsule"`` or ``"sphere"`` (``shapes``), and pairs of links or shapes never checked
+    (``exclude``); see :mod:`wholebody.collision`."""
+
+    shapes: Mapping[str, str] = field(default_factory=dict)
+    exclude: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
 class RobotConfig:
     """The parsed, schema-checked content of a ``robot.toml`` (not yet checked against
     the URDF; :class:`wholebody.Robot` does that)."""
@@ -152,6 +162,8 @@ class RobotConfig:
     """``[locked]`` as written: joint name, glob pattern or group -> position (rad, m)."""
     frames: Mapping[str, FrameConfig] = field(default_factory=dict)
     """``[frames]``."""
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
+    """``[collision]``."""
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
@@ -172,7 +184,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     data = load_toml(path, "robot configuration")
 
     r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration", "locked",
-                      "frames"))  # fmt: skip
+                      "frames", "collision"))  # fmt: skip
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")
@@ -227,7 +239,9 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     frames = {fname: _frame(r, fname, table)
               for fname, table in r.table(data, "frames", "", required=False).items()}  # fmt: skip
 
+    collision = _read_collision(r, r.table(data, "collision", "", required=False))
     return RobotConfig(
+        collision=collision,
         path=path,
         name=name,
         urdf=urdf,
@@ -241,6 +255,21 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         locked=locked,
         frames=frames,
     )
+
+
+def _read_collision(r: _Reader, table: Mapping[str, Any]) -> CollisionConfig:
+    r.only(table, "collision", ("shapes", "exclude"))
+    shapes = {link: r.string(table["shapes"], link, "collision.shapes",
+                             choices=("capsule", "sphere"))
+              for link in r.table(table, "shapes", "collision", required=False)}  # fmt: skip
+    pairs = table.get("exclude", [])
+    ok = isinstance(pairs, list) and all(
+        isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in pairs
+    )
+    if not ok:
+        raise r.fail("collision.exclude", "expected a list of pairs of link or shape names, "
+                     'e.g. [["torso", "left_forearm"]]')  # fmt: skip
+    return CollisionConfig(shapes, tuple((a, b) for a, b in pairs))
 
 
 def _urdf_path(r: _Reader, path: Path, value: str, package_dirs: tuple[Path, ...]) -> Path:

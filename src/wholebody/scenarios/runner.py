@@ -25,6 +25,7 @@ where it was left otherwise.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody.arm.stiffness import StiffnessModel
+from wholebody.collision import CollisionModel, Obstacle
 from wholebody.control import Controller, RunLog, summary
 from wholebody.control.controller import _progress
 from wholebody.control.log import concatenate
@@ -54,7 +56,7 @@ from wholebody.robot import Robot, load_robot
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativeFrameTask
+from wholebody.tasks import ArmPotentialEnergy, CollisionAvoidance, FrameTask, RelativeFrameTask
 
 __all__ = ["ScenarioRun", "make_solver", "run_scenario", "scenario_robot", "start_configuration"]
 
@@ -229,6 +231,7 @@ def run_scenario(
         robot.frame(hand.frame)  # fail early on a bad frame name
     tasks = {h: FrameTask(robot, s.frame, name=h, kp=s.kp, ki=s.ki) for h, s in spec.hands.items()}
     monitors = [ArmPotentialEnergy(robot, arm, stiffness) for arm in robot.arms]
+    collision, collision_model = _collision(spec, robot)
     solver = make_solver(backend)
     planners = _Planners(spec)
     q = start_configuration(spec, robot)
@@ -264,6 +267,7 @@ def run_scenario(
             stiffness=stiffness,
             first=first,
             acceleration=weights.acceleration,
+            collision=collision,
         )
         controller = Controller(
             robot,
@@ -301,7 +305,68 @@ def run_scenario(
                              "start": spec.start})  # fmt: skip
     poses = _object_poses(robot, log, spec.objects, carries, {h: tasks[h].frame for h in tasks})
     metrics = _metrics(log, spec, duration_scale)
+    if collision_model is not None:
+        metrics.update(closest_approach(collision_model, log, spec.collision.safety))
     return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
+
+
+def _collision(
+    spec: ScenarioSpec, robot: Robot
+) -> tuple[CollisionAvoidance | None, CollisionModel | None]:
+    """The scenario's ``[collision]``: the constraint (None unless enforced) and the model
+    whose closest approach the metrics report (None without the section)."""
+    cs = spec.collision
+    if cs is None:
+        return None, None
+    obstacles = [obstacle_of(spec.objects[name]) for name in cs.obstacles]
+    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision)
+    if not cs.enforce:
+        return None, model
+    task = CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
+                              speed=cs.speed)  # fmt: skip
+    return task, model
+
+
+def obstacle_of(obj: ObjectSpec) -> Obstacle:
+    """A scenario object as a fixed collision shape (centre at its position, axes the
+    world's; a cylinder along z)."""
+    pose = np.eye(4)
+    pose[:3, 3] = obj.position
+    sizes = {"box": tuple(obj.size), "cylinder": (obj.radius, obj.height),
+             "sphere": (obj.radius,)}  # fmt: skip
+    return Obstacle(obj.name, obj.kind, sizes[obj.kind], pose)
+
+
+def closest_approach(model: CollisionModel, log: RunLog, safety: float,
+                     within: float = 0.1) -> dict:  # fmt: skip
+    """``min_collision_distance_m`` over every logged step and checked pair, with the pair
+    and the time (s), and ``collision_limited``: per pair held at the safety distance (within
+    1 mm of it), the tasks more than 1 mm off their target at those steps, and how many steps.
+    Pairs farther than ``within`` (m) are skipped by the bounding spheres; if none comes that
+    close, every pair is measured on every 10th step."""
+    best = (math.inf, "", 0.0)
+    limited: dict[tuple[str, str], int] = {}
+    for stride, limit in ((1, within), (10, math.inf)):
+        for k in range(0, len(log), stride):
+            for pair in model.distances(model.robot.update(log.q[k]), limit):
+                if pair.distance < best[0]:
+                    best = (pair.distance, pair.name, float(log.t[k]))
+                if pair.distance <= safety + 1e-3:
+                    for task in _unmet(log, k):
+                        limited[(pair.name, task)] = limited.get((pair.name, task), 0) + 1
+        if math.isfinite(best[0]):
+            break
+    return {"min_collision_distance_m": best[0] if math.isfinite(best[0]) else None,
+            "min_collision_pair": best[1],
+            "min_collision_time_s": best[2],
+            "collision_limited": [{"pair": p, "task": t, "steps": n}
+                                  for (p, t), n in sorted(limited.items())]}  # fmt: skip
+
+
+def _unmet(log: RunLog, k: int, tol: float = 1e-3) -> list[str]:
+    """The tasks more than ``tol`` off at step ``k``."""
+    return [name for name, e in log.task_errors.items()
+            if np.linalg.norm(e[k]) > tol]  # fmt: skip
 
 
 def _progress_bar(total: int, name: str):

@@ -53,6 +53,14 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     margin = 0.0                       # m added around it for avoidance
     note = "..."                       # optional provenance / decisions
 
+    [collision]                        # optional: wholebody.tasks.CollisionAvoidance
+    enforce = true                     # false: only measure the closest distance
+    obstacles = ["shelf"]              # fixed objects the links keep off (not carried ones)
+    self_collision = true              # links against links too
+    safety = 0.01                      # m, d_s
+    influence = 0.05                   # m, d_i
+    speed = 0.5                        # m/s allowed at d_i
+
     [[phases]]
     name = "reach"
     duration = 5.0                     # s
@@ -89,6 +97,7 @@ from wholebody.tomlreader import TomlReader, config_error, load_toml
 
 __all__ = [
     "BACKENDS",
+    "CollisionSpec",
     "HandPhase",
     "HandSpec",
     "ObjectSpec",
@@ -164,6 +173,21 @@ START_POSTURES = ("home", "neutral")
 
 
 @dataclass(frozen=True)
+class CollisionSpec:
+    """``[collision]``: keep the robot's links apart and off the listed objects
+    (:class:`~wholebody.tasks.CollisionAvoidance` in a level above every task when
+    ``enforce``; the closest distance is measured either way). Distances in m, ``speed`` in
+    m/s."""
+
+    enforce: bool = True
+    self_collision: bool = True
+    safety: float = 0.01
+    influence: float = 0.05
+    speed: float = 0.5
+    obstacles: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class ScenarioSpec:
     path: Path
     name: str
@@ -178,6 +202,8 @@ class ScenarioSpec:
     title: str = ""
     paper: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    collision: CollisionSpec | None = None
+    """``[collision]``, if the file has one."""
     start: str | dict[str, float] = "home"
     """The start posture: ``"home"``, ``"neutral"`` or joint positions by name (rad, m; the
     joints and their limits are checked against the robot when it is loaded)."""
@@ -216,7 +242,8 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     path = Path(path)
     r = TomlReader(path)
     data = load_toml(path, "scenario")
-    r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases"))
+    r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases",
+                      "collision"))  # fmt: skip
 
     head = r.table(data, "scenario", "", required=True)
     r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz", "start"))
@@ -237,7 +264,12 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     seen: set[str] = set()
     for i, table in enumerate(raw_phases):
         phases.append(_phase(r, table, f"phases[{i}]", hands, objects, planner, seen))
+    collision = None
+    if "collision" in data:
+        collision = _collision(r, r.table(data, "collision", "", required=True), objects,
+                               phases)  # fmt: skip
     return ScenarioSpec(
+        collision=collision,
         path=path,
         name=name,
         robot=robot,
@@ -252,6 +284,33 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         paper=r.string(head, "paper", "scenario", ""),
         start=_start(r, head),
     )
+
+
+def _collision(r: TomlReader, table: dict, objects: dict[str, ObjectSpec],
+               phases: list[PhaseSpec]) -> CollisionSpec:  # fmt: skip
+    """``[collision]``: the constraint's distances and speed, and the objects it keeps the
+    robot from (static ones: a carried object moves with the hands)."""
+    r.only(table, "collision", tuple(CollisionSpec.__dataclass_fields__))
+    spec = CollisionSpec(
+        enforce=r.boolean(table, "enforce", "collision", default=True),
+        self_collision=r.boolean(table, "self_collision", "collision", default=True),
+        safety=r.number(table, "safety", "collision", default=0.01),
+        influence=r.number(table, "influence", "collision", default=0.05, positive=True),
+        speed=r.number(table, "speed", "collision", default=0.5, positive=True),
+        obstacles=r.names(table, "obstacles", "collision") if "obstacles" in table else (),
+    )
+    if not 0 <= spec.safety < spec.influence:
+        raise r.fail("collision.safety", f"expected 0 <= safety < influence "
+                     f"({spec.influence} m), got {spec.safety}")  # fmt: skip
+    carried = {hp.carry for p in phases for hp in p.hands.values() if hp.carry}
+    for name in spec.obstacles:
+        if name not in objects:
+            raise r.fail("collision.obstacles", f"unknown object {name!r}; objects: "
+                         f"{', '.join(objects) or '(none)'}")  # fmt: skip
+        if name in carried:
+            raise r.fail("collision.obstacles", f"{name!r} is carried: it moves with the "
+                         "hands, so it cannot be a fixed obstacle")  # fmt: skip
+    return spec
 
 
 def _stack(r: TomlReader, st: dict) -> StackSpec:

@@ -71,6 +71,11 @@ Cost: every factorisation of an SNS iteration is also its rank test (the rank th
 is that of the first iteration), a snapshot of the free directions is a reference (they are
 never modified in place) and the scaling factor is one pass over the stacked bounds.
 
+Inequality rows (e.g. :class:`~wholebody.tasks.CollisionAvoidance`) are held above every
+level by an active set (:mod:`~wholebody.solvers.active_rows`: the rows the solution
+violates become equality rows of a new first level, and the stack is solved again), on the
+reference path.
+
 Reporting: ``infeasible`` lists every equality task whose weighted residual exceeds
 ``tolerance * (1 + ||v||)``, as the HQP's. The status has the HQP's meaning
 (:class:`~wholebody.solvers.SolverStatus`): INFEASIBLE when a task of the first level is
@@ -95,6 +100,7 @@ from wholebody.kernels import layout as lay
 from wholebody.kernels import projection as kernel
 from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
+from wholebody.solvers.active_rows import solve_with_inequalities
 from wholebody.solvers.base import Solver
 from wholebody.solvers.linalg import (
     Gram,
@@ -364,8 +370,9 @@ class ProjectionSolver(Solver):
         or a synthetic one): with the kernels, or with ``compiled=False`` the reference."""
         if not self.compiled:
             return self._solve_reference(problem)
+        if any(lp.C.shape[0] for lp in problem.levels):
+            return self._solve_reference(problem)
         start = time.perf_counter()
-        _refuse_inequalities(problem)
         arena = ProblemArena(problem)
         self._set_par()
         first_call("projection problem", "the projection kernels", kernel.project, arena.f,
@@ -378,10 +385,18 @@ class ProjectionSolver(Solver):
                         self.tolerance, bool(self.saturate))  # fmt: skip
 
     def _solve_reference(self, problem: StackProblem) -> SolverResult:
-        """The Python implementation, the reference of the kernels."""
+        """The Python implementation, the reference of the kernels; inequality rows by the
+        active set of :mod:`~wholebody.solvers.active_rows`."""
+        if any(lp.C.shape[0] for lp in problem.levels):
+            start = time.perf_counter()
+            result = solve_with_inequalities(problem, self._solve_equalities, self.tolerance)
+            result.solve_time = time.perf_counter() - start
+            return result
+        return self._solve_equalities(problem)
+
+    def _solve_equalities(self, problem: StackProblem) -> SolverResult:
         start = time.perf_counter()
         lo, hi = problem.lower, problem.upper
-        _refuse_inequalities(problem)
         nu = lo.size
         if _count(lo <= hi) != nu:  # NaN compares false; Stack.evaluate never crosses the box
             message = _EMPTY_BOX
@@ -431,8 +446,10 @@ class ProjectionSolver(Solver):
         if not dt > 0:
             raise DimensionError(f"control step dt must be > 0 s, got {dt}")
         plan = stack.plan()
-        if plan.P:
-            _refuse_inequalities(plan.problem())
+        if plan.P:  # inequality rows: the reference path (module docstring, "Inequality rows")
+            result = self._solve_reference(stack.evaluate(state, dt, compiled=False))
+            result.solve_time = time.perf_counter() - start
+            return result
         plan.sync(state, dt)
         if plan.stale:  # an arm energy's stiffness was replaced: lay the stack out anew
             plan = stack.plan()
@@ -515,15 +532,6 @@ def _box_limited(problem: StackProblem, u: np.ndarray, u_free: np.ndarray, tol: 
 def _anchor(anchor: np.ndarray | None, like: np.ndarray) -> np.ndarray:
     """The kernel's anchor: the given one, or zeros."""
     return np.zeros(like.shape[0]) if anchor is None else anchor
-
-
-def _refuse_inequalities(problem: StackProblem) -> None:
-    for lp in problem.levels:
-        if lp.C.shape[0]:
-            raise SolverError(
-                f"ProjectionSolver: {lp.name} has inequality tasks "
-                f"({', '.join(lp.inequality_rows)}); use HierarchicalQPSolver for those"
-            )
 
 
 class _Free:

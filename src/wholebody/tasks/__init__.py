@@ -15,6 +15,7 @@ from wholebody.tasks.base import (
     Task,
     TaskRows,
 )
+from wholebody.tasks.collision import CollisionAvoidance
 from wholebody.tasks.frame import FrameTask
 from wholebody.tasks.inequality import FrameHalfSpace
 from wholebody.tasks.limits import AccelerationLimits, JointPositionLimits, VelocityLimits
@@ -28,6 +29,7 @@ __all__ = [
     "ArmEnergyValue",
     "ArmPotentialEnergy",
     "Bounds",
+    "CollisionAvoidance",
     "Constraint",
     "FrameHalfSpace",
     "FrameTask",

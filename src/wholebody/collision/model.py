@@ -1,0 +1,377 @@
+"""Collision geometry: the robot's links and the environment's obstacles, the pairs checked, and
+each pair's distance with its witness points and their Jacobians.
+
+**Geometry.** The robot's collision shapes come from its URDF through Pinocchio
+(``buildGeomFromUrdf`` with coal; locked joints welded as in the model). ``robot.toml``'s
+``[collision]`` may replace a link's shapes by one bounding capsule or sphere (in the link's
+frame, from the shapes' bounding boxes), which is cheaper and smoother to distance. Obstacles
+(:class:`Obstacle`: box, cylinder, sphere or capsule) are fixed in the world.
+
+**Pairs** (:class:`CollisionModel` builds them once): every two robot shapes on different
+joints, except shapes on *adjacent* links (one joint is the other's nearest ancestor that
+carries a shape), pairs closer than ``safety`` at the home posture (in contact by design, a
+shoulder cap in its socket: they are listed in :attr:`CollisionModel.excluded` with the
+reason), and pairs ``[collision] exclude`` names; and every robot shape against every
+obstacle. Names in ``exclude`` may be links or shapes.
+
+**Distance and its rate.** For a pair at distance ``d`` with witness points ``p_a`` on shape
+a and ``p_b`` on shape b, and ``n = (p_b - p_a) / d`` (coal's normal where the shapes touch or
+overlap), moving the robot at ``u`` changes the distance at::
+
+    d' = n^T (J_b(p_b) - J_a(p_a)) u,    J(p) = J_lin,j - [p - o_j]x J_ang,j
+
+with ``J_lin,j, J_ang,j`` the world-aligned Jacobian of the joint ``j`` that carries the shape
+(origin ``o_j``), in actuated columns; an obstacle's is zero. Units: m, m/s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from wholebody.errors import DimensionError
+from wholebody.robot import Robot, RobotState
+
+__all__ = ["SHAPES", "CollisionModel", "Obstacle", "PairDistance"]
+
+SHAPES = ("box", "cylinder", "sphere", "capsule")
+"""Obstacle shapes: box ``size`` (x, y, z extents, m), cylinder and capsule ``radius`` and
+``length`` along their z axis, sphere ``radius``."""
+
+
+GJK_TOLERANCE = 1e-9
+"""coal's GJK tolerance (m): at its default 1e-6 the witness points of two cylinders are off
+by enough to make the distance's derivative wrong by 1e-4."""
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A shape fixed in the world: ``pose`` (4x4, world) of its centre; ``size`` (m) the box's
+    extents, or ``(radius, length)`` of a cylinder or capsule (along the pose's z), or
+    ``(radius,)`` of a sphere."""
+
+    name: str
+    shape: str
+    size: tuple[float, ...]
+    pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+    def geometry(self) -> coal.CollisionGeometry:
+        """The coal shape, checked."""
+        counts = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1}
+        if self.shape not in counts:
+            raise DimensionError(f"obstacle {self.name!r}: shape must be one of "
+                                 f"{', '.join(SHAPES)}, got {self.shape!r}")  # fmt: skip
+        size = tuple(float(s) for s in self.size)
+        if len(size) != counts[self.shape] or not all(math.isfinite(s) and s > 0 for s in size):
+            raise DimensionError(f"obstacle {self.name!r}: a {self.shape} needs "
+                                 f"{counts[self.shape]} sizes > 0 (m), got "
+                                 f"{self.size!r}")  # fmt: skip
+        pose = np.asarray(self.pose, dtype=float)
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            raise DimensionError(f"obstacle {self.name!r}: pose must be a finite 4x4 matrix")
+        if self.shape == "box":
+            return coal.Box(*size)
+        if self.shape == "sphere":
+            return coal.Sphere(size[0])
+        return (coal.Cylinder if self.shape == "cylinder" else coal.Capsule)(size[0], size[1])
+
+
+@dataclass(frozen=True)
+class PairDistance:
+    """One pair at one state: ``d`` (m, negative when the shapes overlap), the witness
+    points (world, m), the unit normal from a to b, and ``row = n^T (J_b - J_a)`` (nu,):
+    ``d' = row . u``."""
+
+    name: str
+    a: str
+    b: str
+    distance: float
+    point_a: np.ndarray
+    point_b: np.ndarray
+    normal: np.ndarray
+    row: np.ndarray
+
+
+class CollisionModel:
+    """The robot's collision shapes, the obstacles and the pairs to check (module docstring).
+
+    Parameters
+    ----------
+    robot
+        The robot; its ``robot.toml`` ``[collision]`` (simplified links, excluded pairs)
+        applies.
+    obstacles
+        Shapes fixed in the world.
+    safety
+        ``d_s`` (m): pairs closer than this at the home posture are excluded (reported).
+    self_collision
+        Check pairs of robot shapes (else only robot against obstacles).
+    exclude
+        More pairs to leave out, each two names of links, shapes or obstacles.
+    shapes
+        More links to simplify (link -> ``"capsule"`` or ``"sphere"``), as ``[collision]
+        shapes``.
+    """
+
+    def __init__(self, robot: Robot, obstacles: Sequence[Obstacle] = (), *,
+                 safety: float = 0.01, self_collision: bool = True,
+                 exclude: Iterable[Sequence[str]] = (),
+                 shapes: Mapping[str, str] | None = None) -> None:  # fmt: skip
+        if not (math.isfinite(safety) and safety >= 0):
+            raise DimensionError(f"collision safety distance must be >= 0 m, got {safety}")
+        self.robot = robot
+        settings = robot.config.collision
+        geom, _ = robot.geometry("collision")
+        self.geometry = _simplified(geom, robot, {**settings.shapes, **(shapes or {})})
+        self.n_robot = len(self.geometry.geometryObjects)
+        names = [o.name for o in obstacles]
+        if len(set(names)) != len(names):
+            raise DimensionError(f"obstacle names must be unique, got {names}")
+        for obstacle in obstacles:
+            shape = obstacle.geometry()
+            placement = pin.SE3(np.asarray(obstacle.pose, dtype=float))
+            self.geometry.addGeometryObject(pin.GeometryObject(obstacle.name, 0, 0, placement,
+                                                               shape))  # fmt: skip
+        self.obstacles = tuple(obstacles)
+        self.excluded: dict[tuple[str, str], str] = {}
+        base = [robot.model.getJointId(w) for w in robot.config.base.wheels]
+        self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
+        skip = _named_pairs(self, [*settings.exclude, *exclude])
+        self.pairs = self._pairs(self_collision, skip)
+        self._home(safety)
+        self.data = pin.GeometryData(self.geometry)
+        self._radius, self._centre = _bounding_spheres(self.geometry)
+        self._pair_index = np.array(self.pairs, dtype=np.intp).reshape(-1, 2)
+
+    # ------------------------------------------------------------------ pairs
+    def link(self, index: int) -> str:
+        """The link (or obstacle) name of shape ``index``."""
+        obj = self.geometry.geometryObjects[index]
+        if index >= self.n_robot:
+            return obj.name
+        return self.robot.model.frames[obj.parentFrame].name
+
+    def _pairs(self, self_collision: bool, skip: set[frozenset[str]]) -> list[tuple[int, int]]:
+        objs = self.geometry.geometryObjects
+        joints = [o.parentJoint for o in objs]
+        carried = {j for j in joints[: self.n_robot]}
+        pairs = []
+        for i in range(len(objs)):
+            for k in range(i + 1, len(objs)):
+                if i >= self.n_robot:  # obstacle against obstacle
+                    continue
+                reason = self._skip_reason(i, k, joints, carried, skip, self_collision)
+                if reason:
+                    self.excluded[(objs[i].name, objs[k].name)] = reason
+                else:
+                    pairs.append((i, k))
+        return pairs
+
+    def _skip_reason(self, i: int, k: int, joints: list[int], carried: set[int],
+                     skip: set[frozenset[str]], self_collision: bool) -> str:  # fmt: skip
+        names = {self.geometry.geometryObjects[i].name, self.link(i)}
+        other = {self.geometry.geometryObjects[k].name, self.link(k)}
+        if any(frozenset((a, b)) in skip for a in names for b in other):
+            return "excluded in [collision] or by the caller"
+        if k >= self.n_robot:
+            return ""
+        if not self_collision:
+            return "self-collision off"
+        ji, jk = joints[i], joints[k]
+        if ji == jk:
+            return "same joint"
+        if ji in self._base_joints and jk in self._base_joints:
+            return "base and wheels"
+        parents = self.robot.model.parents
+        if (
+            _carrier_parent(ji, parents, carried) == jk
+            or _carrier_parent(jk, parents, carried) == ji
+        ):
+            return "adjacent links"
+        return ""
+
+    def _home(self, safety: float) -> None:
+        """Leave out the pairs closer than ``safety`` at the home posture."""
+        data = pin.GeometryData(self.geometry)
+        model = self.robot.model  # its own data: the robot's current state stays valid
+        pin.updateGeometryPlacements(model, model.createData(), self.geometry, data,
+                                     self.robot.home())  # fmt: skip
+        objs = self.geometry.geometryObjects
+        keep = []
+        for i, k in self.pairs:
+            d = _distance(objs[i].geometry, data.oMg[i], objs[k].geometry, data.oMg[k])[0]
+            if d < safety:
+                self.excluded[(objs[i].name, objs[k].name)] = (
+                    f"{d * 1e3:.1f} mm apart at the home posture (< safety {safety * 1e3:.0f} mm)"
+                )
+            else:
+                keep.append((i, k))
+        self.pairs = keep
+
+    def pair_name(self, i: int, k: int) -> str:
+        """``"shape_a|shape_b"``."""
+        objs = self.geometry.geometryObjects
+        return f"{objs[i].name}|{objs[k].name}"
+
+    # ------------------------------------------------------------------ distances
+    def distances(self, state: RobotState, within: float = math.inf) -> list[PairDistance]:
+        """Every checked pair closer than ``within`` (m) at ``state``, with its row. A
+        bounding-sphere test skips the pairs that cannot be that close."""
+        model = self.robot.model
+        pin.updateGeometryPlacements(model, state._data(), self.geometry, self.data)
+        objs, oMg = self.geometry.geometryObjects, self.data.oMg
+        centres = np.array([oMg[i].act(self._centre[i]) for i in range(len(objs))])
+        ia, ib = self._pair_index[:, 0], self._pair_index[:, 1]
+        gaps = (np.linalg.norm(centres[ib] - centres[ia], axis=1) - self._radius[ia]
+                - self._radius[ib])  # fmt: skip
+        out, jacobians = [], {}
+        for p in np.flatnonzero(gaps < within):
+            i, k = self.pairs[p]
+            d, pa, pb, n = _distance(objs[i].geometry, oMg[i], objs[k].geometry, oMg[k])
+            if d < within:
+                jb = self._point_jacobian(state, objs[k].parentJoint, pb, jacobians)
+                ja = self._point_jacobian(state, objs[i].parentJoint, pa, jacobians)
+                row = n @ (jb - ja)
+                out.append(PairDistance(self.pair_name(i, k), self.link(i), self.link(k), d,
+                                        pa, pb, n, row))  # fmt: skip
+        return out
+
+    def _point_jacobian(self, state: RobotState, joint: int, point: np.ndarray,
+                        cache: dict[int, np.ndarray]) -> np.ndarray:  # fmt: skip
+        """3 x nu: the world velocity of ``point`` fixed to ``joint`` (zero for the world);
+        ``cache`` keeps each joint's Jacobian (actuated columns) for the step."""
+        robot = self.robot
+        if joint == 0:
+            return np.zeros((3, robot.nu))
+        data = state._data()
+        J = cache.get(joint)
+        if J is None:
+            J = pin.getJointJacobian(robot.model, data, joint, pin.LOCAL_WORLD_ALIGNED)
+            J = cache[joint] = J @ robot.actuation
+        r = point - data.oMi[joint].translation
+        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        return J[:3] - skew @ J[3:]
+
+    def summary(self) -> str:
+        """How many pairs are checked and why the others are not."""
+        reasons: dict[str, int] = {}
+        for reason in self.excluded.values():
+            key = reason.split(" at the home")[0] if "home" in reason else reason
+            key = "closer than safety at home" if "home" in reason else key
+            reasons[key] = reasons.get(key, 0) + 1
+        skipped = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items()))
+        return (f"{len(self.pairs)} pairs checked ({self.n_robot} robot shapes, "
+                f"{len(self.obstacles)} obstacles); not checked: {skipped or 'none'}")  # fmt: skip
+
+
+def _distance(ga, Ma: pin.SE3, gb, Mb: pin.SE3):
+    """Distance, witness points and unit normal from a to b (coal's where they touch)."""
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    req.gjk_tolerance = GJK_TOLERANCE
+    coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
+                  coal.Transform3s(Mb.rotation, Mb.translation), req, res)  # fmt: skip
+    pa, pb = res.getNearestPoint1().copy(), res.getNearestPoint2().copy()
+    d = float(res.min_distance)
+    gap = pb - pa
+    length = float(np.linalg.norm(gap))
+    n = gap / length if d > 1e-9 and length > 0 else np.asarray(res.normal, dtype=float).copy()
+    return d, pa, pb, n
+
+
+def _carrier_parent(joint: int, parents: Sequence[int], carried: set[int]) -> int:
+    """The nearest ancestor joint of ``joint`` that carries a shape (0: the world)."""
+    j = parents[joint]
+    while j > 0 and j not in carried:
+        j = parents[j]
+    return j
+
+
+def _named_pairs(model: CollisionModel, pairs: Iterable[Sequence[str]]) -> set[frozenset[str]]:
+    """The excluded pairs as name sets, each name checked against the shapes and links."""
+    known = {o.name for o in model.geometry.geometryObjects}
+    known |= {model.link(i) for i in range(len(model.geometry.geometryObjects))}
+    out = set()
+    for pair in pairs:
+        if len(pair) != 2:
+            raise DimensionError(f"collision exclude: each entry must name two links or "
+                                 f"shapes, got {pair!r}")  # fmt: skip
+        unknown = [n for n in pair if n not in known]
+        if unknown:
+            raise DimensionError(f"collision exclude: unknown link or shape {unknown[0]!r}; "
+                                 f"known: {', '.join(sorted(known))}")  # fmt: skip
+        out.add(frozenset(pair))
+    return out
+
+
+def _bounding_spheres(geom: pin.GeometryModel) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Each shape's bounding-sphere radius and centre in the shape's frame (from its AABB)."""
+    radius, centre = [], []
+    for obj in geom.geometryObjects:
+        g = obj.geometry
+        g.computeLocalAABB()
+        radius.append(float(g.aabb_radius))
+        centre.append(np.asarray(g.aabb_center, dtype=float).copy())
+    return np.array(radius), centre
+
+
+def _simplified(geom: pin.GeometryModel, robot: Robot,
+                shapes: Mapping[str, str]) -> pin.GeometryModel:  # fmt: skip
+    """``geom`` with the shapes of each link of ``shapes`` replaced by one bounding capsule or
+    sphere of them (``[collision] shapes``; link -> ``"capsule"`` or ``"sphere"``)."""
+    if not shapes:
+        return geom
+    out = pin.GeometryModel()
+    by_link: dict[str, list[pin.GeometryObject]] = {}
+    for obj in geom.geometryObjects:
+        link = robot.model.frames[obj.parentFrame].name
+        if link in shapes:
+            by_link.setdefault(link, []).append(obj)
+        else:
+            out.addGeometryObject(obj)
+    missing = sorted(set(shapes) - set(by_link))
+    if missing:
+        raise DimensionError(f"[collision] shapes: link {missing[0]!r} has no collision shape "
+                             "in the URDF")  # fmt: skip
+    for link, objs in by_link.items():
+        out.addGeometryObject(_bounding(link, objs, shapes[link]))
+    return out
+
+
+def _bounding(link: str, objs: list[pin.GeometryObject], kind: str) -> pin.GeometryObject:
+    """One capsule (along the longest extent) or sphere holding the corners of the shapes'
+    boxes, placed in the link's frame."""
+    corners = []
+    for obj in objs:
+        g = obj.geometry
+        g.computeLocalAABB()
+        lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])  # fmt: skip
+        corners.append(box @ obj.placement.rotation.T + obj.placement.translation)
+    pts = np.vstack(corners)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centre = (lo + hi) / 2.0
+    first = objs[0]
+    placement = pin.SE3(np.eye(3), centre)
+    if kind == "sphere":
+        shape = coal.Sphere(float(np.max(np.linalg.norm(pts - centre, axis=1))))
+    elif kind == "capsule":
+        axis = int(np.argmax(hi - lo))
+        others = [a for a in range(3) if a != axis]
+        radius = float(np.max(np.linalg.norm((pts - centre)[:, others], axis=1)))
+        length = max(float(hi[axis] - lo[axis]) - 2.0 * radius, 0.0)
+        R = np.eye(3)[:, [others[0], others[1], axis]]  # the capsule's z along the axis
+        if np.linalg.det(R) < 0:
+            R[:, 0] *= -1.0
+        placement = pin.SE3(R, centre)
+        shape = coal.Capsule(radius, length)
+    else:
+        raise DimensionError(f"[collision] shapes.{link}: expected \"capsule\" or \"sphere\", "
+                             f"got {kind!r}")  # fmt: skip
+    return pin.GeometryObject(f"{link}_{kind}", first.parentJoint, first.parentFrame, placement,
+                              shape)  # fmt: skip

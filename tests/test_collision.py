@@ -46,9 +46,9 @@ def test_pairs_leave_out_adjacent_links_and_contacts_at_home_and_say_why(humanoi
     assert "adjacent links" in reasons and "same joint" in reasons
     assert any("at the home posture" in r for r in reasons)
     names = {scene.pair_name(i, k) for i, k in scene.pairs}
-    assert "right_wrist_0|right_hand_capsule" not in names  # adjacent
+    assert "right_wrist_0|right_hand_0_capsule" not in names  # adjacent
     assert "right_elbow_0|right_forearm_0" not in names
-    assert "right_hand_capsule|ball" in names and "chest_0|left_hand_capsule" in names
+    assert "right_hand_0_capsule|ball" in names and "chest_0|left_hand_0_capsule" in names
     state = humanoid.update(humanoid.home())
     assert min(p.distance for p in scene.distances(state)) >= 0.01  # none in contact at home
     assert "pairs checked" in scene.summary()
@@ -96,12 +96,12 @@ def test_the_row_appears_at_the_influence_distance_with_the_full_approach_speed(
     q = humanoid.home()
     state = humanoid.update(q)
     probe = CollisionModel(humanoid, [Obstacle("ball", "sphere", (0.05,), _pose((3, 0, 0)))])
-    hand = next(p for p in probe.distances(state) if p.name == "right_hand_capsule|ball")
+    hand = next(p for p in probe.distances(state) if p.name == "right_hand_0_capsule|ball")
     centre = hand.point_a + (0.05 - 1e-6 + 0.05) * hand.normal  # the hand just inside d_i
     model = CollisionModel(humanoid, [Obstacle("ball", "sphere", (0.05,), _pose(centre))])
     task = wb.CollisionAvoidance(humanoid, model, safety=0.01, influence=0.05, speed=0.5)
     rows = task.compute(humanoid.update(q), DT)
-    r = task.row_names().index("right_hand_capsule|ball")
+    r = task.row_names().index("right_hand_0_capsule|ball")
     assert task.pairs[r].distance == pytest.approx(0.05 - 1e-6, abs=1e-7)
     assert rows.lower[r] == pytest.approx(-0.5, abs=1e-4)
     assert np.isinf(rows.lower[len(task.pairs) :]).all()  # the unused rows are inactive
@@ -154,6 +154,31 @@ def test_a_reach_past_an_obstacle_keeps_the_safety_distance_on_every_step(humano
                    for m in messages)  # fmt: skip
 
 
+def test_every_link_can_be_one_capsule_or_keep_its_own_shapes(humanoid):
+    """``"*"`` simplifies every link not named; ``"urdf"`` keeps a link's own shapes."""
+    model = CollisionModel(humanoid, shapes={"*": "capsule", "chest": "urdf"})
+    names = [o.name for o in model.geometry.geometryObjects]
+    assert {"chest_0", "chest_1"} <= set(names)
+    others = [n for n in names if not n.startswith("chest_")]
+    assert others and all(n.endswith("_capsule") for n in others)
+    # a bounding capsule holds its link's shapes: no closer to anything than they were
+    state = humanoid.update(humanoid.home())
+
+    def against_chest(m):  # (chest shape, other link) -> distance: the chest keeps its shapes
+        out: dict[tuple[str, str], float] = {}
+        for p in m.distances(state):
+            a, b = p.name.split("|")
+            if a.startswith("chest_") != b.startswith("chest_"):
+                key = (a, p.b) if a.startswith("chest_") else (b, p.a)
+                out[key] = min(p.distance, out.get(key, np.inf))
+        return out
+
+    plain, capsules = against_chest(CollisionModel(humanoid)), against_chest(model)
+    common = set(plain) & set(capsules)
+    assert len(common) > 10
+    assert all(capsules[k] <= plain[k] + 1e-9 for k in common)
+
+
 def test_bad_settings_are_named(humanoid, tmp_path):
     with pytest.raises(DimensionError, match="safety < influence"):
         wb.CollisionAvoidance(humanoid, safety=0.05, influence=0.05)
@@ -192,10 +217,10 @@ def test_the_shelf_scenario_stops_the_hand_at_the_safety_distance(backend):
     off = dataclasses.replace(spec, collision=dataclasses.replace(spec.collision, enforce=False))
     free = run_scenario(off, backend=backend).metrics
     assert free["min_collision_distance_m"] < 0.0
-    assert free["min_collision_pair"] == "right_hand_capsule|shelf_board"
+    assert free["min_collision_pair"] == "right_hand_0_capsule|shelf_board"
     m = run_scenario(spec, backend=backend).metrics
     assert m["min_collision_distance_m"] >= 0.01 - 1e-6
     assert m["limit_violations"] == 0
     assert [(e["pair"], e["task"]) for e in m["collision_limited"]] == [
-        ("right_hand_capsule|shelf_board", "right")
+        ("right_hand_0_capsule|shelf_board", "right")
     ]

@@ -291,3 +291,27 @@ def test_the_replay_page_opens_without_a_server_and_frames_the_run(tmp_path):
     assert len(np.unique((middle * 255).astype(int), axis=0)) > 300, "robot not drawn"
     assert red(framed) > 50, "the far marker is out of view"
     assert red(_screenshot(unframed.as_uri(), tmp_path)) == 0
+
+
+def test_the_closest_pairs_are_drawn_live_and_in_the_replay(scene, monkeypatch, tmp_path):
+    """A run with [collision]: the live view draws lines between the closest witness points
+    (red at the safety distance) and the replay page holds the closest approach's line."""
+    from wholebody.resources import tasks_dir
+    from wholebody.scenarios import load_scenario, run_scenario
+    from wholebody.scenarios.runner import collision_model
+    from wholebody.scenarios.visual import LiveView, show_run
+
+    drawn = []
+    monkeypatch.setattr(type(scene), "closest_pairs",
+                        lambda self, pairs, **kw: drawn.append((list(pairs), kw)))  # fmt: skip
+    spec = load_scenario(tasks_dir() / "reach_under_shelf.toml")
+    live = LiveView(scene, spec.dt, realtime=False, collision=collision_model(spec, scene.robot))
+    run = run_scenario(spec, on_step=live, duration_scale=1.0)
+    names = {p.name for pairs, _ in drawn for p in pairs}
+    assert "right_hand_0_capsule|shelf_board" in names
+    drawn.clear()
+    show_run(scene, run)  # the replay: the closest approach's pair, at its time
+    ((pairs, kw),) = drawn
+    assert [p.name for p in pairs] == [run.metrics["min_collision_pair"]]
+    assert kw["safety"] == 0.01 and pairs[0].distance == pytest.approx(
+        run.metrics["min_collision_distance_m"])  # fmt: skip

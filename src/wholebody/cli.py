@@ -128,7 +128,13 @@ def _start_viewer(spec):
     goals = [h.goal for p in spec.phases for h in p.hands.values() if h.goal is not None]
     scene.frame(np.array(goals, dtype=float).reshape(-1, 3), q=q0)
     print(f"MeshCat (localhost only): {scene.url} (the run is drawn live, at its real pace)")
-    return scene, LiveView(scene, spec.dt)
+    from wholebody.scenarios.runner import collision_model
+
+    cs = spec.collision
+    if cs is None:
+        return scene, LiveView(scene, spec.dt)
+    return scene, LiveView(scene, spec.dt, collision=collision_model(spec, scene.robot),
+                           influence=cs.influence, safety=cs.safety)  # fmt: skip
 
 
 def _replay(scene, run, out: Path, hold: bool) -> None:

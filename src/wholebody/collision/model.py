@@ -3,8 +3,8 @@ each pair's distance with its witness points and their Jacobians.
 
 **Geometry.** The robot's collision shapes come from its URDF through Pinocchio
 (``buildGeomFromUrdf`` with coal; locked joints welded as in the model). ``robot.toml``'s
-``[collision]`` may replace a link's shapes by one bounding capsule or sphere (in the link's
-frame, from the shapes' bounding boxes), which is cheaper and smoother to distance. Obstacles
+``[collision]`` may replace a link's shapes by bounding capsules or a sphere (in the link's
+frame: a capsule per shape, a sphere per link), cheaper and smoother to distance. Obstacles
 (:class:`Obstacle`: box, cylinder, sphere or capsule) are fixed in the world.
 
 **Pairs** (:class:`CollisionModel` builds them once): every two robot shapes on different
@@ -322,37 +322,66 @@ def _bounding_spheres(geom: pin.GeometryModel) -> tuple[np.ndarray, list[np.ndar
 def _simplified(geom: pin.GeometryModel, robot: Robot,
                 shapes: Mapping[str, str]) -> pin.GeometryModel:  # fmt: skip
     """``geom`` with the shapes of each link of ``shapes`` replaced by one bounding capsule or
-    sphere of them (``[collision] shapes``; link -> ``"capsule"`` or ``"sphere"``)."""
+    sphere of them (``[collision] shapes``; link -> ``"capsule"`` or ``"sphere"``; the key
+    ``"*"`` for every link not named, ``"urdf"`` to keep a link's own)."""
     if not shapes:
         return geom
     out = pin.GeometryModel()
     by_link: dict[str, list[pin.GeometryObject]] = {}
+    default = shapes.get("*", "urdf")
     for obj in geom.geometryObjects:
         link = robot.model.frames[obj.parentFrame].name
-        if link in shapes:
+        if shapes.get(link, default) != "urdf":
             by_link.setdefault(link, []).append(obj)
         else:
             out.addGeometryObject(obj)
-    missing = sorted(set(shapes) - set(by_link))
+    missing = sorted(set(shapes) - set(by_link) - {"*"} - {k for k, v in shapes.items()
+                                                           if v == "urdf"})  # fmt: skip
     if missing:
         raise DimensionError(f"[collision] shapes: link {missing[0]!r} has no collision shape "
                              "in the URDF")  # fmt: skip
     for link, objs in by_link.items():
-        out.addGeometryObject(_bounding(link, objs, shapes[link]))
+        kind = shapes.get(link, default)
+        if kind == "capsule":  # one per shape: a capsule around a box and a cylinder is long
+            for obj in objs:
+                out.addGeometryObject(_bounding(obj.name, [obj], kind))
+        else:
+            out.addGeometryObject(_bounding(link, objs, kind))
     return out
 
 
-def _bounding(link: str, objs: list[pin.GeometryObject], kind: str) -> pin.GeometryObject:
-    """One capsule (along the longest extent) or sphere holding the corners of the shapes'
-    boxes, placed in the link's frame."""
-    corners = []
-    for obj in objs:
-        g = obj.geometry
-        g.computeLocalAABB()
-        lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
-        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])  # fmt: skip
-        corners.append(box @ obj.placement.rotation.T + obj.placement.translation)
+def _capsule_of_cylinder(obj: pin.GeometryObject) -> pin.GeometryObject:
+    """The capsule of a cylinder's radius and length: it holds the cylinder."""
+    g = obj.geometry
+    capsule = coal.Capsule(g.radius, 2.0 * g.halfLength)
+    return pin.GeometryObject(f"{obj.name}_capsule", obj.parentJoint, obj.parentFrame,
+                              obj.placement, capsule)  # fmt: skip
+
+
+def _hull_points(g: coal.CollisionGeometry, sides: int = 16) -> np.ndarray:
+    """Points (shape frame) whose convex hull holds the shape: a box's corners, a cylinder's
+    two rims as polygons of ``sides`` around the circle (the radius widened by
+    ``1 / cos(pi / sides)``), else the corners of the shape's bounding box."""
+    if isinstance(g, coal.Cylinder):
+        r = g.radius / math.cos(math.pi / sides)
+        a = np.linspace(0.0, 2.0 * math.pi, sides, endpoint=False)
+        ring = np.column_stack([r * np.cos(a), r * np.sin(a)])
+        return np.vstack([np.column_stack([ring, np.full(sides, z)])
+                          for z in (-g.halfLength, g.halfLength)])  # fmt: skip
+    g.computeLocalAABB()
+    lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                     for z in (lo[2], hi[2])])  # fmt: skip
+
+
+def _bounding(name: str, objs: list[pin.GeometryObject], kind: str) -> pin.GeometryObject:
+    """One capsule (along the longest extent) or sphere holding the shapes (a box's corners,
+    a cylinder's rims), placed in the frame of the joint that carries them; named
+    ``{name}_{kind}``."""
+    if kind == "capsule" and len(objs) == 1 and isinstance(objs[0].geometry, coal.Cylinder):
+        return _capsule_of_cylinder(objs[0])
+    corners = [_hull_points(obj.geometry) @ obj.placement.rotation.T + obj.placement.translation
+               for obj in objs]  # fmt: skip
     pts = np.vstack(corners)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     centre = (lo + hi) / 2.0
@@ -363,15 +392,19 @@ def _bounding(link: str, objs: list[pin.GeometryObject], kind: str) -> pin.Geome
     elif kind == "capsule":
         axis = int(np.argmax(hi - lo))
         others = [a for a in range(3) if a != axis]
-        radius = float(np.max(np.linalg.norm((pts - centre)[:, others], axis=1)))
-        length = max(float(hi[axis] - lo[axis]) - 2.0 * radius, 0.0)
+        radial = np.linalg.norm((pts - centre)[:, others], axis=1)
+        radius = float(np.max(radial))
+        # the segment reaches every corner within the radius: |z| - sqrt(r^2 - radial^2)
+        reach = np.abs(pts[:, axis] - centre[axis]) - np.sqrt(np.maximum(radius**2 - radial**2,
+                                                                          0.0))  # fmt: skip
+        length = 2.0 * max(float(np.max(reach)), 0.0)
         R = np.eye(3)[:, [others[0], others[1], axis]]  # the capsule's z along the axis
         if np.linalg.det(R) < 0:
             R[:, 0] *= -1.0
         placement = pin.SE3(R, centre)
         shape = coal.Capsule(radius, length)
     else:
-        raise DimensionError(f"[collision] shapes.{link}: expected \"capsule\" or \"sphere\", "
+        raise DimensionError(f"[collision] shapes.{name}: expected \"capsule\" or \"sphere\", "
                              f"got {kind!r}")  # fmt: skip
-    return pin.GeometryObject(f"{link}_{kind}", first.parentJoint, first.parentFrame, placement,
+    return pin.GeometryObject(f"{name}_{kind}", first.parentJoint, first.parentFrame, placement,
                               shape)  # fmt: skip

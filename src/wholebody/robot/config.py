@@ -133,7 +133,8 @@ class FrameConfig:
 @dataclass(frozen=True)
 class CollisionConfig:
     """``[collision]``: links whose collision shapes are replaced by one bounding
-    ``"capsule"`` or ``"sphere"`` (``shapes``), and pairs of links or shapes never checked
+    ``"capsule"`` or ``"sphere"`` (``shapes``; the key ``"*"`` for every other link,
+    ``"urdf"`` to keep a link's own), and pairs of links or shapes never checked
     (``exclude``); see :mod:`wholebody.collision`."""
 
     shapes: Mapping[str, str] = field(default_factory=dict)
@@ -260,7 +261,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
 def _read_collision(r: _Reader, table: Mapping[str, Any]) -> CollisionConfig:
     r.only(table, "collision", ("shapes", "exclude"))
     shapes = {link: r.string(table["shapes"], link, "collision.shapes",
-                             choices=("capsule", "sphere"))
+                             choices=("capsule", "sphere", "urdf"))
               for link in r.table(table, "shapes", "collision", required=False)}  # fmt: skip
     pairs = table.get("exclude", [])
     ok = isinstance(pairs, list) and all(

@@ -58,7 +58,16 @@ from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, CollisionAvoidance, FrameTask, RelativeFrameTask
 
-__all__ = ["ScenarioRun", "make_solver", "run_scenario", "scenario_robot", "start_configuration"]
+__all__ = [
+    "ScenarioRun",
+    "closest_approach",
+    "collision_model",
+    "make_solver",
+    "obstacle_of",
+    "run_scenario",
+    "scenario_robot",
+    "start_configuration",
+]
 
 
 @dataclass
@@ -325,6 +334,11 @@ def _collision(
     task = CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
                               speed=cs.speed)  # fmt: skip
     return task, model
+
+
+def collision_model(spec: ScenarioSpec, robot: Robot) -> CollisionModel | None:
+    """The scenario's collision shapes and pairs (None without ``[collision]``)."""
+    return _collision(spec, robot)[1]
 
 
 def obstacle_of(obj: ObjectSpec) -> Obstacle:

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from wholebody.collision import CollisionModel
 from wholebody.scenarios.runner import ScenarioRun
 from wholebody.scenarios.spec import ObjectSpec, ScenarioSpec
 from wholebody.viz.scene import Scene
@@ -37,14 +38,33 @@ def draw_objects(scene: Scene, spec: ScenarioSpec) -> None:
             scene.ellipsoid(obj.name, [obj.radius] * 3, _pose(obj), color=color)
 
 
+def _draw_closest(scene: Scene, run: ScenarioRun, t: float) -> None:
+    """The run's closest approach (its pair at its time) as a line, and a marker at it."""
+    from wholebody.scenarios.runner import collision_model
+
+    model = collision_model(run.spec, scene.robot)
+    k = int(np.argmin(np.abs(run.log.t - t)))
+    pairs = [p for p in model.distances(scene.robot.update(run.log.q[k]), 0.1)
+             if p.name == run.metrics["min_collision_pair"]]  # fmt: skip
+    if pairs:
+        scene.closest_pairs(pairs, most=1, safety=run.spec.collision.safety)
+        scene.marker("closest_approach", (pairs[0].point_a + pairs[0].point_b) / 2,
+                     color="#d62728", radius=0.01)  # fmt: skip
+
+
 class LiveView:
     """A control-loop callback drawing the robot at most ``fps`` times a second and pacing
     the loop to real time (the control computation itself is much faster)."""
 
-    def __init__(self, scene: Scene, dt: float, fps: float = 30.0, realtime: bool = True):
+    def __init__(self, scene: Scene, dt: float, fps: float = 30.0, realtime: bool = True,
+                 collision: CollisionModel | None = None, influence: float = 0.05,
+                 safety: float = 0.01) -> None:  # fmt: skip
         self.scene, self.dt, self.realtime = scene, dt, realtime
         self.every = max(1, round(1.0 / (fps * dt)))
         self._start: float | None = None
+        self.collision, self.influence, self.safety = collision, influence, safety
+        """With a collision model, each drawn frame also shows the closest pairs within
+        ``influence`` (m): :meth:`Scene.closest_pairs`."""
 
     def __call__(self, k: int, t: float, q: np.ndarray) -> None:
         if self._start is None:
@@ -52,6 +72,10 @@ class LiveView:
         if k % self.every:
             return
         self.scene.show(q)
+        if self.collision is not None:
+            state = self.collision.robot.update(q)
+            self.scene.closest_pairs(self.collision.distances(state, self.influence),
+                                     safety=self.safety)  # fmt: skip
         if self.realtime:
             lag = (self._start + t) - time.perf_counter()
             if lag > 0:
@@ -69,6 +93,9 @@ def show_run(scene: Scene, run: ScenarioRun, fps: float = 30.0) -> None:
             scene.path(f"{name}_executed", pos, color=color)
             scene.path(f"{name}_reference", ref, color="#7f7f7f")
             scene.marker(f"{name}_goal", ref[-1], color=color)
+    closest = run.metrics.get("min_collision_time_s")
+    if closest is not None and run.metrics.get("min_collision_distance_m") is not None:
+        _draw_closest(scene, run, closest)
     carried = {
         f"scene/props/{k}": v for k, v in run.object_poses.items() if not np.allclose(v[0], v[-1])
     }

@@ -221,6 +221,23 @@ class Scene:
             mg.Line(mg.PointsGeometry(pts), mg.LineBasicMaterial(color=rgb(color), linewidth=3))
         )
 
+    def closest_pairs(self, pairs: Sequence, most: int = 3, safety: float = 0.01) -> None:
+        """Lines between the witness points of the ``most`` closest of ``pairs``
+        (:class:`~wholebody.collision.PairDistance`): red for a pair within 1 mm of
+        ``safety`` (m) or closer, orange otherwise; earlier lines beyond them are removed."""
+        near = sorted(pairs, key=lambda p: p.distance)[:most]
+        node = self.viewer["scene/collision"]
+        for i in range(most):
+            if i >= len(near):
+                node[f"pair_{i}"].delete()
+                continue
+            p = near[i]
+            points = np.array([p.point_a, p.point_b], dtype=np.float32).T
+            color = "#d62728" if p.distance <= safety + 1e-3 else "#ff7f0e"
+            node[f"pair_{i}"].set_object(mg.Line(mg.PointsGeometry(points),
+                                                 mg.LineBasicMaterial(color=rgb(color),
+                                                                      linewidth=4)))  # fmt: skip
+
     def box(
         self,
         name: str,

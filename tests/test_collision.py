@@ -224,3 +224,23 @@ def test_the_shelf_scenario_stops_the_hand_at_the_safety_distance(backend):
     assert [(e["pair"], e["task"]) for e in m["collision_limited"]] == [
         ("right_hand_0_capsule|shelf_board", "right")
     ]
+
+
+def test_the_projection_holds_the_same_rows_compiled_or_not(humanoid):
+    """A stack with inequality rows gives the same velocity and message whichever path the
+    solver was asked for (both take the Python path for them: the kernels' problem arena
+    costs more than the solve, measured)."""
+    q = humanoid.home()
+    start = humanoid.frame_pose(q, "right_tool")
+    ball = Obstacle("ball", "sphere", (0.05,), _pose(start[:3, 3] + (0.0, 0.11, 0.0)))
+    collision = wb.CollisionAvoidance(humanoid, obstacles=[ball])
+    hand = wb.FrameTask(humanoid, "right_tool", kp=10.0, orientation=False)
+    goal = start.copy()
+    goal[:3, 3] += (0.0, 0.3, 0.0)
+    hand.set_target(goal)
+    stack = wb.Stack(humanoid, [[collision], [hand]], [wb.VelocityLimits(humanoid)])
+    state = humanoid.update(q)
+    fast = wb.ProjectionSolver().solve(stack, state, DT)
+    slow = wb.ProjectionSolver(compiled=False).solve(stack, state, DT)
+    assert "held inequality rows" in fast.message and fast.message == slow.message
+    np.testing.assert_allclose(fast.u, slow.u, atol=1e-10)

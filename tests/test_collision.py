@@ -217,30 +217,70 @@ def test_the_shelf_scenario_stops_the_hand_at_the_safety_distance(backend):
     off = dataclasses.replace(spec, collision=dataclasses.replace(spec.collision, enforce=False))
     free = run_scenario(off, backend=backend).metrics
     assert free["min_collision_distance_m"] < 0.0
-    assert free["min_collision_pair"] == "right_hand_0_capsule|shelf_board"
+    assert free["min_collision_pair"] == "right_hand_1_capsule|shelf_board"
     m = run_scenario(spec, backend=backend).metrics
-    assert m["min_collision_distance_m"] >= 0.01 - 1e-6
+    assert m["min_collision_distance_m"] >= 0.01 - 1e-5  # to the first-order step's error
     assert m["limit_violations"] == 0
+    assert "pairs checked" in m["collision_pairs"] and "adjacent links" in m["collision_pairs"]
     assert [(e["pair"], e["task"]) for e in m["collision_limited"]] == [
-        ("right_hand_0_capsule|shelf_board", "right")
+        ("right_hand_1_capsule|shelf_board", "right")
     ]
 
 
-def test_the_projection_holds_the_same_rows_compiled_or_not(humanoid):
-    """A stack with inequality rows gives the same velocity and message whichever path the
-    solver was asked for (both take the Python path for them: the kernels' problem arena
-    costs more than the solve, measured)."""
+def test_obstacles_near_the_hand_at_home_are_checked_and_overlaps_measured(humanoid):
+    """An obstacle 9 mm from the hand at home keeps its pair (only self pairs are left out
+    for contact at home); a ball overlapping the hand's capsule by 1 cm: distance -1 cm,
+    the normal from the capsule's axis to the ball's centre, the row the derivative."""
     q = humanoid.home()
-    start = humanoid.frame_pose(q, "right_tool")
-    ball = Obstacle("ball", "sphere", (0.05,), _pose(start[:3, 3] + (0.0, 0.11, 0.0)))
-    collision = wb.CollisionAvoidance(humanoid, obstacles=[ball])
-    hand = wb.FrameTask(humanoid, "right_tool", kp=10.0, orientation=False)
-    goal = start.copy()
-    goal[:3, 3] += (0.0, 0.3, 0.0)
-    hand.set_target(goal)
-    stack = wb.Stack(humanoid, [[collision], [hand]], [wb.VelocityLimits(humanoid)])
     state = humanoid.update(q)
-    fast = wb.ProjectionSolver().solve(stack, state, DT)
-    slow = wb.ProjectionSolver(compiled=False).solve(stack, state, DT)
-    assert "held inequality rows" in fast.message and fast.message == slow.message
-    np.testing.assert_allclose(fast.u, slow.u, atol=1e-10)
+    probe = CollisionModel(humanoid, [Obstacle("ball", "sphere", (0.05,), _pose((3, 0, 0)))])
+    hand = next(p for p in probe.distances(state) if p.name == "right_hand_0_capsule|ball")
+    near = hand.point_a + (0.009 + 0.05) * hand.normal
+    model = CollisionModel(humanoid, [Obstacle("ball", "sphere", (0.05,), _pose(near))])
+    assert any(p.name == "right_hand_0_capsule|ball" for p in model.distances(state, 0.02))
+    inside = hand.point_a + (0.05 - 0.01) * hand.normal
+    model = CollisionModel(humanoid, [Obstacle("ball", "sphere", (0.05,), _pose(inside))])
+    pair = next(p for p in model.distances(state) if p.name == "right_hand_0_capsule|ball")
+    assert pair.distance == pytest.approx(-0.01, abs=1e-6)
+    np.testing.assert_allclose(pair.normal, hand.normal, atol=1e-6)
+    fd = jacobian_fd(
+        humanoid,
+        q,
+        lambda s: np.array(
+            [next(p.distance for p in model.distances(s, 0.1) if p.name == pair.name)]
+        ),
+        1e-5,
+    )
+    np.testing.assert_allclose(pair.row, fd[0], atol=1e-6)
+
+
+def test_poses_names_and_speeds_are_checked(humanoid, tmp_path):
+    scaled = np.diag([2.0, 1.0, 1.0, 1.0])
+    with pytest.raises(DimensionError, match="rigid 4x4 transform"):
+        CollisionModel(humanoid, [Obstacle("b", "sphere", (0.1,), scaled)])
+    with pytest.raises(DimensionError, match="not a link's or a shape's"):
+        CollisionModel(humanoid, [Obstacle("chest", "sphere", (0.1,))])
+    from wholebody.resources import tasks_dir
+    from wholebody.scenarios import load_scenario
+
+    text = (tasks_dir() / "reach_under_shelf.toml").read_text()
+    bad = tmp_path / "fast.toml"
+    bad.write_text(text.replace("influence = 0.05", "influence = 0.05\nspeed = 10.0"))
+    with pytest.raises(ConfigError, match="a step could cross the safety distance"):
+        load_scenario(bad)
+
+
+def test_a_real_robot_with_meshes_builds_and_gives_finite_rows():
+    """TALOS's URDF meshes: the model builds (meshes in contact at home are left out, not an
+    error) and every row within 5 cm at home is finite; with every shape a capsule too."""
+    from wholebody.robot.urdf import example_robot_data_share
+
+    if example_robot_data_share() is None:
+        pytest.skip("example-robot-data is not installed (pip install '.[robots]')")
+    talos = wb.load_robot("talos_upper")
+    state = talos.update(talos.home())
+    for shapes in (None, {"*": "capsule"}):
+        model = CollisionModel(talos, shapes=shapes)
+        near = model.distances(state, 0.05)
+        assert near and all(np.all(np.isfinite(p.row)) for p in near)
+        assert any("at the home posture" in r for r in model.excluded.values()) or shapes

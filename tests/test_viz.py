@@ -308,7 +308,7 @@ def test_the_closest_pairs_are_drawn_live_and_in_the_replay(scene, monkeypatch, 
     live = LiveView(scene, spec.dt, realtime=False, collision=collision_model(spec, scene.robot))
     run = run_scenario(spec, on_step=live, duration_scale=1.0)
     names = {p.name for pairs, _ in drawn for p in pairs}
-    assert "right_hand_0_capsule|shelf_board" in names
+    assert "right_hand_1_capsule|shelf_board" in names
     drawn.clear()
     show_run(scene, run)  # the replay: the closest approach's pair, at its time
     ((pairs, kw),) = drawn

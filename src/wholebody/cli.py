@@ -189,6 +189,8 @@ def _report_run(run, files: dict[str, Path]) -> None:
         chain = entry.get("closed_chain_error_max_m")
         extra = f", closed chain <= {chain * 1e3:.3f} mm" if chain is not None else ""
         print(f"  {phase:16s} worst hand MAE {worst * 1e3:.3f} mm{extra}")
+    if m.get("collision_pairs"):
+        print(f"  collision: {m['collision_pairs']}")
     if m.get("min_collision_distance_m") is not None:
         print(f"  closest pair {m['min_collision_pair']}: {m['min_collision_distance_m'] * 1e3:.2f}"
               f" mm at {m['min_collision_time_s']:.2f} s")  # fmt: skip

@@ -27,6 +27,7 @@ with ``J_lin,j, J_ang,j`` the world-aligned Jacobian of the joint ``j`` that car
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -72,8 +73,13 @@ class Obstacle:
                                  f"{counts[self.shape]} sizes > 0 (m), got "
                                  f"{self.size!r}")  # fmt: skip
         pose = np.asarray(self.pose, dtype=float)
-        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-            raise DimensionError(f"obstacle {self.name!r}: pose must be a finite 4x4 matrix")
+        rigid = (pose.shape == (4, 4) and np.all(np.isfinite(pose))
+                 and np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0))
+                 and np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-9)
+                 and np.linalg.det(pose[:3, :3]) > 0)  # fmt: skip
+        if not rigid:
+            raise DimensionError(f"obstacle {self.name!r}: pose must be a rigid 4x4 transform "
+                                 "(a rotation and a translation, last row 0 0 0 1)")  # fmt: skip
         if self.shape == "box":
             return coal.Box(*size)
         if self.shape == "sphere":
@@ -130,8 +136,14 @@ class CollisionModel:
         self.geometry = _simplified(geom, robot, {**settings.shapes, **(shapes or {})})
         self.n_robot = len(self.geometry.geometryObjects)
         names = [o.name for o in obstacles]
-        if len(set(names)) != len(names):
-            raise DimensionError(f"obstacle names must be unique, got {names}")
+        taken = {o.name for o in self.geometry.geometryObjects}
+        taken |= {f.name for f in robot.model.frames}
+        if len(set(names)) != len(names) or taken & set(names):
+            raise DimensionError(f"obstacle names must be unique and not a link's or a "
+                                 f"shape's, got {names}")  # fmt: skip
+        if self.n_robot == 0:
+            raise DimensionError(f"robot {robot.name!r} has no collision shapes in its URDF: "
+                                 "nothing to keep apart")  # fmt: skip
         for obstacle in obstacles:
             shape = obstacle.geometry()
             placement = pin.SE3(np.asarray(obstacle.pose, dtype=float))
@@ -144,9 +156,15 @@ class CollisionModel:
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)
         self._home(safety)
+        for i, k in self.pairs:  # Pinocchio's pair k is self.pairs[k]
+            self.geometry.addCollisionPair(pin.CollisionPair(i, k))
         self.data = pin.GeometryData(self.geometry)
+        for request in self.data.distanceRequests:
+            request.gjk_tolerance = GJK_TOLERANCE
         self._radius, self._centre = _bounding_spheres(self.geometry)
         self._pair_index = np.array(self.pairs, dtype=np.intp).reshape(-1, 2)
+        self._labels = [(self.pair_name(i, k), self.link(i), self.link(k)) for i, k in self.pairs]
+        self._warned_meshes = False
 
     # ------------------------------------------------------------------ pairs
     def link(self, index: int) -> str:
@@ -204,6 +222,9 @@ class CollisionModel:
         objs = self.geometry.geometryObjects
         keep = []
         for i, k in self.pairs:
+            if k >= self.n_robot:  # an obstacle: where the robot stands is the scenario's
+                keep.append((i, k))
+                continue
             d = _distance(objs[i].geometry, data.oMg[i], objs[k].geometry, data.oMg[k])[0]
             if d < safety:
                 self.excluded[(objs[i].name, objs[k].name)] = (
@@ -232,30 +253,46 @@ class CollisionModel:
         out, jacobians = [], {}
         for p in np.flatnonzero(gaps < within):
             i, k = self.pairs[p]
-            d, pa, pb, n = _distance(objs[i].geometry, oMg[i], objs[k].geometry, oMg[k])
+            d, pa, pb, n = _result(pin.computeDistance(self.geometry, self.data, int(p)))
+            if n is None:
+                n = self._apart(centres[i], centres[k], self._labels[p][0])
             if d < within:
-                jb = self._point_jacobian(state, objs[k].parentJoint, pb, jacobians)
-                ja = self._point_jacobian(state, objs[i].parentJoint, pa, jacobians)
-                row = n @ (jb - ja)
-                out.append(PairDistance(self.pair_name(i, k), self.link(i), self.link(k), d,
-                                        pa, pb, n, row))  # fmt: skip
+                row = (self._point_row(state, objs[k].parentJoint, pb, n, jacobians)
+                       - self._point_row(state, objs[i].parentJoint, pa, n, jacobians))  # fmt: skip
+                name, a, b = self._labels[p]
+                out.append(PairDistance(name, a, b, d, pa, pb, n, row))
         return out
 
-    def _point_jacobian(self, state: RobotState, joint: int, point: np.ndarray,
-                        cache: dict[int, np.ndarray]) -> np.ndarray:  # fmt: skip
-        """3 x nu: the world velocity of ``point`` fixed to ``joint`` (zero for the world);
-        ``cache`` keeps each joint's Jacobian (actuated columns) for the step."""
+    def _apart(self, a: np.ndarray, b: np.ndarray, name: str) -> np.ndarray:
+        """The direction from a's bounding-sphere centre to b's: the normal of two meshes in
+        contact, where coal gives none (a warning, once per model)."""
+        if not self._warned_meshes:
+            self._warned_meshes = True
+            warnings.warn(f"{name}: two meshes in contact have no separating direction; "
+                          "pushing their centres apart (simplify them to capsules in "
+                          "[collision] shapes for an exact one)", stacklevel=3)  # fmt: skip
+        gap = b - a
+        length = float(np.linalg.norm(gap))
+        return gap / length if length > 0 else np.array([0.0, 0.0, 1.0])
+
+    def _point_row(self, state: RobotState, joint: int, point: np.ndarray, n: np.ndarray,
+                   cache: dict[int, np.ndarray]) -> np.ndarray:  # fmt: skip
+        """``n^T J(p)`` (nu,): the rate along ``n`` of ``point`` fixed to ``joint`` (zero for
+        the world), ``J(p) = J_lin - [r]x J_ang`` so ``n^T J(p) = n^T J_lin - (n x r)^T
+        J_ang``; ``cache`` keeps each joint's Jacobian (actuated columns) for the call."""
         robot = self.robot
         if joint == 0:
-            return np.zeros((3, robot.nu))
+            return np.zeros(robot.nu)
         data = state._data()
         J = cache.get(joint)
         if J is None:
             J = pin.getJointJacobian(robot.model, data, joint, pin.LOCAL_WORLD_ALIGNED)
             J = cache[joint] = J @ robot.actuation
         r = point - data.oMi[joint].translation
-        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-        return J[:3] - skew @ J[3:]
+        # n x r written out: np.cross costs ten times this
+        n_x_r = np.array([n[1] * r[2] - n[2] * r[1], n[2] * r[0] - n[0] * r[2],
+                          n[0] * r[1] - n[1] * r[0]])  # fmt: skip
+        return n @ J[:3] - n_x_r @ J[3:]
 
     def summary(self) -> str:
         """How many pairs are checked and why the others are not."""
@@ -275,11 +312,20 @@ def _distance(ga, Ma: pin.SE3, gb, Mb: pin.SE3):
     req.gjk_tolerance = GJK_TOLERANCE
     coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
                   coal.Transform3s(Mb.rotation, Mb.translation), req, res)  # fmt: skip
+    return _result(res)
+
+
+def _result(res: coal.DistanceResult):
+    """``(d, p_a, p_b, n)`` of a coal distance result (copies)."""
     pa, pb = res.getNearestPoint1().copy(), res.getNearestPoint2().copy()
     d = float(res.min_distance)
     gap = pb - pa
     length = float(np.linalg.norm(gap))
-    n = gap / length if d > 1e-9 and length > 0 else np.asarray(res.normal, dtype=float).copy()
+    if d > 1e-9 and length > 0:
+        return d, pa, pb, gap / length
+    n = np.asarray(res.normal, dtype=float).copy()
+    if not (np.all(np.isfinite(n)) and abs(float(np.linalg.norm(n)) - 1.0) < 1e-6):
+        return d, pa, pb, None  # two meshes in contact: coal has no direction
     return d, pa, pb, n
 
 

@@ -316,6 +316,7 @@ def run_scenario(
     metrics = _metrics(log, spec, duration_scale)
     if collision_model is not None:
         metrics.update(closest_approach(collision_model, log, spec.collision.safety))
+        metrics["collision_pairs"] = collision_model.summary()
     return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
 
 

@@ -267,7 +267,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     collision = None
     if "collision" in data:
         collision = _collision(r, r.table(data, "collision", "", required=True), objects,
-                               phases)  # fmt: skip
+                               phases, rate)  # fmt: skip
     return ScenarioSpec(
         collision=collision,
         path=path,
@@ -287,7 +287,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
 
 
 def _collision(r: TomlReader, table: dict, objects: dict[str, ObjectSpec],
-               phases: list[PhaseSpec]) -> CollisionSpec:  # fmt: skip
+               phases: list[PhaseSpec], rate: float) -> CollisionSpec:  # fmt: skip
     """``[collision]``: the constraint's distances and speed, and the objects it keeps the
     robot from (static ones: a carried object moves with the hands)."""
     r.only(table, "collision", tuple(CollisionSpec.__dataclass_fields__))
@@ -302,6 +302,10 @@ def _collision(r: TomlReader, table: dict, objects: dict[str, ObjectSpec],
     if not 0 <= spec.safety < spec.influence:
         raise r.fail("collision.safety", f"expected 0 <= safety < influence "
                      f"({spec.influence} m), got {spec.safety}")  # fmt: skip
+    if spec.speed / rate > spec.influence - spec.safety:
+        raise r.fail("collision.speed", f"speed / rate_hz = {spec.speed / rate:.3g} m exceeds "
+                     f"influence - safety = {spec.influence - spec.safety:.3g} m: a step "
+                     "could cross the safety distance")  # fmt: skip
     carried = {hp.carry for p in phases for hp in p.hands.values() if hp.carry}
     for name in spec.obstacles:
         if name not in objects:

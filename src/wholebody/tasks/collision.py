@@ -20,6 +20,7 @@ pairs get the rows, the rest are ``-inf`` (inactive).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -48,12 +49,13 @@ class CollisionAvoidance(InequalityTask):
     speed
         ``xi`` (m/s): the approach speed allowed at ``d_i``.
     max_rows
-        Rows reserved: the closest pairs within ``d_i`` get them.
+        Rows reserved: the closest pairs within ``d_i`` get them (a warning, once, when
+        more pairs are that close).
     """
 
     def __init__(self, robot: Robot, model: CollisionModel | None = None, *,
                  obstacles: Sequence[Obstacle] = (), safety: float = 0.01,
-                 influence: float = 0.05, speed: float = 0.5, max_rows: int = 16,
+                 influence: float = 0.05, speed: float = 0.5, max_rows: int = 32,
                  name: str = "collision") -> None:  # fmt: skip
         if not (math.isfinite(safety) and math.isfinite(influence) and 0 <= safety < influence):
             raise DimensionError(f"{name}: need 0 <= safety < influence (m), got {safety} and "
@@ -66,6 +68,7 @@ class CollisionAvoidance(InequalityTask):
         self.model = model or CollisionModel(robot, obstacles, safety=safety)
         self.safety, self.influence, self.speed = float(safety), float(influence), float(speed)
         self.max_rows = int(max_rows)
+        self._warned = False
         self.pairs: list[PairDistance] = []
         """The pairs that got rows at the last :meth:`compute`, closest first."""
 
@@ -84,6 +87,11 @@ class CollisionAvoidance(InequalityTask):
                                  "a step could cross the safety distance")  # fmt: skip
         near = sorted(self.model.distances(state, self.influence), key=lambda p: p.distance)
         self.pairs = near[: self.max_rows]
+        if len(near) > self.max_rows and not self._warned:
+            self._warned = True
+            warnings.warn(f"{self.name}: {len(near)} pairs within {self.influence} m but "
+                          f"max_rows = {self.max_rows}: the farthest {len(near) - self.max_rows}"
+                          " have no row (raise max_rows)", stacklevel=2)  # fmt: skip
         C = np.zeros((self.max_rows, self.robot.nu))
         lower = np.full(self.max_rows, -np.inf)
         for r, pair in enumerate(self.pairs):

@@ -284,3 +284,51 @@ def test_a_real_robot_with_meshes_builds_and_gives_finite_rows():
         near = model.distances(state, 0.05)
         assert near and all(np.all(np.isfinite(p.row)) for p in near)
         assert any("at the home posture" in r for r in model.excluded.values()) or shapes
+
+
+def test_a_carried_object_moves_with_its_hand_and_its_grasp_is_not_a_collision(humanoid, rng):
+    """A box held at the right tool, in the hand: the pairs it touches at the grasp are left
+    out, it keeps a fixed pose relative to the hand, and its rows are the derivative of its
+    distances (it moves with the arm)."""
+    q0 = humanoid.home()
+    box = Obstacle("parcel", "box", (0.1, 0.2, 0.05), _pose((0.03, 0.0, 0.0)))  # in the hand
+    wall = Obstacle("wall", "box", (0.05, 2.0, 2.0), _pose((1.6, 0.0, 1.0)))
+    model = CollisionModel(humanoid, [wall], attached=[("right_tool", box)], start=q0)
+    assert model.excluded[("right_hand_0_capsule", "parcel")] == "same joint"  # the grasp
+    assert "right_forearm_0|parcel" in {model.pair_name(i, k) for i, k in model.pairs}
+    for _ in range(3):
+        q = humanoid.random_configuration(rng, margin=0.2, base_range=0.3)
+        state = humanoid.update(q)
+        tool = state.pose(humanoid.frame("right_tool"))
+        k = [o.name for o in model.geometry.geometryObjects].index("parcel")
+        pin.updateGeometryPlacements(humanoid.model, humanoid.data, model.geometry, model.data)
+        np.testing.assert_allclose(model.data.oMg[k].homogeneous, tool @ box.pose, atol=1e-12)
+        pair = next(p for p in model.distances(state) if p.name == "parcel|wall")
+        fd = jacobian_fd(
+            humanoid,
+            q,
+            lambda s: np.array(
+                [next(p.distance for p in model.distances(s) if p.name == "parcel|wall")]
+            ),
+            1e-5,
+        )
+        np.testing.assert_allclose(pair.row, fd[0], atol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_carry_keeps_the_carried_panel_as_a_collision_shape(tmp_path):
+    """coordinated_carry with [collision]: during the carry the panel is checked against
+    the shelf (its pair is in the metrics' closest approach) and the run holds its limits."""
+    import shutil
+
+    from wholebody.resources import tasks_dir
+    from wholebody.scenarios import load_scenario, run_scenario
+
+    shutil.copytree(tasks_dir(), tmp_path / "tasks")
+    path = tmp_path / "tasks" / "coordinated_carry.toml"
+    text = path.read_text().replace("[[phases]]", '[collision]\nobstacles = ["shelf_board"]\n\n'
+                                    "[[phases]]", 1)  # fmt: skip
+    path.write_text(text)
+    m = run_scenario(load_scenario(path), backend="hqp").metrics
+    assert m["min_collision_pair"] == "panel|shelf_board"  # it rests on the board at the grasp
+    assert m["min_collision_distance_m"] > -1e-6 and m["limit_violations"] == 0

@@ -122,21 +122,38 @@ class CollisionModel:
     shapes
         More links to simplify (link -> ``"capsule"`` or ``"sphere"``), as ``[collision]
         shapes``.
+    attached
+        Carried objects: ``(frame, obstacle)``, the obstacle's pose relative to the frame;
+        they move with it and count as robot shapes (a name of theirs must not be a link's).
+    start
+        The posture whose contacts are left out (default the home posture; where a carry
+        starts: the grasp's contacts).
     """
 
     def __init__(self, robot: Robot, obstacles: Sequence[Obstacle] = (), *,
                  safety: float = 0.01, self_collision: bool = True,
                  exclude: Iterable[Sequence[str]] = (),
-                 shapes: Mapping[str, str] | None = None) -> None:  # fmt: skip
+                 shapes: Mapping[str, str] | None = None,
+                 attached: Sequence[tuple[str, Obstacle]] = (),
+                 start: np.ndarray | None = None) -> None:  # fmt: skip
         if not (math.isfinite(safety) and safety >= 0):
             raise DimensionError(f"collision safety distance must be >= 0 m, got {safety}")
         self.robot = robot
         settings = robot.config.collision
         geom, _ = robot.geometry("collision")
         self.geometry = _simplified(geom, robot, {**settings.shapes, **(shapes or {})})
+        for frame, obj in attached:  # a carried object: a robot shape on the frame's joint
+            f = robot.frame(frame)
+            shape = obj.geometry()
+            placement = robot.model.frames[f.index].placement * pin.SE3(np.asarray(obj.pose))
+            self.geometry.addGeometryObject(
+                pin.GeometryObject(
+                    obj.name, robot.model.frames[f.index].parentJoint, f.index, placement, shape
+                )
+            )
         self.n_robot = len(self.geometry.geometryObjects)
         names = [o.name for o in obstacles]
-        taken = {o.name for o in self.geometry.geometryObjects}
+        taken = {o.name for o in self.geometry.geometryObjects}  # carried objects too
         taken |= {f.name for f in robot.model.frames}
         if len(set(names)) != len(names) or taken & set(names):
             raise DimensionError(f"obstacle names must be unique and not a link's or a "
@@ -155,7 +172,8 @@ class CollisionModel:
         self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)
-        self._home(safety)
+        self._contacts(safety, robot.home() if start is None else start,
+                       "home" if start is None else "start")  # fmt: skip
         for i, k in self.pairs:  # Pinocchio's pair k is self.pairs[k]
             self.geometry.addCollisionPair(pin.CollisionPair(i, k))
         self.data = pin.GeometryData(self.geometry)
@@ -213,12 +231,13 @@ class CollisionModel:
             return "adjacent links"
         return ""
 
-    def _home(self, safety: float) -> None:
-        """Leave out the pairs closer than ``safety`` at the home posture."""
+    def _contacts(self, safety: float, q: np.ndarray, where: str) -> None:
+        """Leave out the robot's own pairs (carried objects included) closer than ``safety``
+        at the posture ``q`` (home, or the start of a carry)."""
         data = pin.GeometryData(self.geometry)
         model = self.robot.model  # its own data: the robot's current state stays valid
         pin.updateGeometryPlacements(model, model.createData(), self.geometry, data,
-                                     self.robot.home())  # fmt: skip
+                                     np.asarray(q, dtype=float))  # fmt: skip
         objs = self.geometry.geometryObjects
         keep = []
         for i, k in self.pairs:
@@ -228,7 +247,8 @@ class CollisionModel:
             d = _distance(objs[i].geometry, data.oMg[i], objs[k].geometry, data.oMg[k])[0]
             if d < safety:
                 self.excluded[(objs[i].name, objs[k].name)] = (
-                    f"{d * 1e3:.1f} mm apart at the home posture (< safety {safety * 1e3:.0f} mm)"
+                    f"{d * 1e3:.1f} mm apart at the {where} posture (< safety "
+                    f"{safety * 1e3:.0f} mm)"
                 )
             else:
                 keep.append((i, k))
@@ -298,8 +318,11 @@ class CollisionModel:
         """How many pairs are checked and why the others are not."""
         reasons: dict[str, int] = {}
         for reason in self.excluded.values():
-            key = reason.split(" at the home")[0] if "home" in reason else reason
-            key = "closer than safety at home" if "home" in reason else key
+            key = (
+                f"closer than safety at {reason.split(' at the ')[1].split()[0]}"
+                if (" posture (< safety" in reason)
+                else reason
+            )
             reasons[key] = reasons.get(key, 0) + 1
         skipped = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items()))
         return (f"{len(self.pairs)} pairs checked ({self.n_robot} robot shapes, "

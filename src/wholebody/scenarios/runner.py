@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -241,6 +241,8 @@ def run_scenario(
     tasks = {h: FrameTask(robot, s.frame, name=h, kp=s.kp, ki=s.ki) for h, s in spec.hands.items()}
     monitors = [ArmPotentialEnergy(robot, arm, stiffness) for arm in robot.arms]
     collision, collision_model = _collision(spec, robot)
+    held: dict[str, tuple[str, np.ndarray]] = {}  # carried object -> (frame, pose there)
+    phase_models: list[tuple[str, CollisionModel]] = []
     solver = make_solver(backend)
     planners = _Planners(spec)
     q = start_configuration(spec, robot)
@@ -268,6 +270,10 @@ def run_scenario(
             )
             chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
             first.append(chain)  # a level above the hands: the grasp is never traded
+        phase_collision, phase_model = collision, collision_model
+        if spec.collision is not None:
+            phase_collision, phase_model = _carrying(spec, robot, phase, state, tasks, held,
+                                                     collision, collision_model)  # fmt: skip
         stack = paper_stack(
             robot,
             entries,
@@ -276,7 +282,7 @@ def run_scenario(
             stiffness=stiffness,
             first=first,
             acceleration=weights.acceleration,
-            collision=collision,
+            collision=phase_collision,
         )
         controller = Controller(
             robot,
@@ -300,6 +306,8 @@ def run_scenario(
                              u0=logs[-1].u[-1] if logs else None)  # fmt: skip
         logs.append(log)
         q = np.asarray(log.meta["final_q"])
+        if phase_model is not None:
+            phase_models.append((phase.name, phase_model))
         state = robot.update(q)
         starts = {
             h: refs[h].end_pose if h in refs else state.pose(t.frame) for h, t in tasks.items()
@@ -315,7 +323,8 @@ def run_scenario(
     poses = _object_poses(robot, log, spec.objects, carries, {h: tasks[h].frame for h in tasks})
     metrics = _metrics(log, spec, duration_scale)
     if collision_model is not None:
-        metrics.update(closest_approach(collision_model, log, spec.collision.safety))
+        masks = [(model, log.phase_mask(name)) for name, model in phase_models]
+        metrics.update(closest_approach(masks, log, spec.collision.safety))
         metrics["collision_pairs"] = collision_model.summary()
     return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
 
@@ -337,6 +346,34 @@ def _collision(
     return task, model
 
 
+def _carrying(spec: ScenarioSpec, robot: Robot, phase: PhaseSpec, state, tasks, held,
+              collision, model):  # fmt: skip
+    """The phase's collision task and model: the scenario's, or with the objects the phase
+    carries attached to their hands (their pose relative to the hand taken where the carry
+    starts, the grasp's contacts left out), so that the arms keep off a carried panel."""
+    carried = [(h, hp.carry) for h, hp in phase.hands.items() if hp.carry]
+    if not carried:
+        held.clear()
+        return collision, model
+    attached = []
+    for hand, name in carried:
+        frame = tasks[hand].frame
+        if name not in held:
+            pose = np.eye(4)
+            pose[:3, 3] = spec.objects[name].position
+            held[name] = (frame.name, np.linalg.solve(state.pose(frame), pose))
+        obj = obstacle_of(spec.objects[name])
+        attached.append((held[name][0], Obstacle(obj.name, obj.shape, obj.size, held[name][1])))
+    cs = spec.collision
+    obstacles = [obstacle_of(spec.objects[n]) for n in cs.obstacles]
+    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision,
+                           attached=attached, start=state.q)  # fmt: skip
+    if not cs.enforce:
+        return None, model
+    return CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
+                              speed=cs.speed), model  # fmt: skip
+
+
 def collision_model(spec: ScenarioSpec, robot: Robot) -> CollisionModel | None:
     """The scenario's collision shapes and pairs (None without ``[collision]``)."""
     return _collision(spec, robot)[1]
@@ -352,17 +389,23 @@ def obstacle_of(obj: ObjectSpec) -> Obstacle:
     return Obstacle(obj.name, obj.kind, sizes[obj.kind], pose)
 
 
-def closest_approach(model: CollisionModel, log: RunLog, safety: float,
-                     within: float = 0.1) -> dict:  # fmt: skip
+def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: RunLog,
+                     safety: float, within: float = 0.1) -> dict:  # fmt: skip
     """``min_collision_distance_m`` over every logged step and checked pair, with the pair
     and the time (s), and ``collision_limited``: per pair held at the safety distance (within
-    1 mm of it), the tasks more than 1 mm off their target at those steps, and how many steps.
-    Pairs farther than ``within`` (m) are skipped by the bounding spheres; if none comes that
-    close, every pair is measured on every 10th step."""
+    1 mm of it), the tasks more than 1 mm (or rad) off their target at those steps, and how
+    many steps (a correlation, not the solver's attribution). ``models``: each phase's model
+    (carried objects attached) with its steps' mask. Pairs farther than ``within`` (m) are
+    skipped by the bounding spheres; if none comes that close, every pair is measured on
+    every 10th step."""
     best = (math.inf, "", 0.0)
     limited: dict[tuple[str, str], int] = {}
+    owner = np.zeros(len(log), dtype=int)
+    for m, (_, mask) in enumerate(models):
+        owner[mask] = m
     for stride, limit in ((1, within), (10, math.inf)):
         for k in range(0, len(log), stride):
+            model = models[owner[k]][0]
             for pair in model.distances(model.robot.update(log.q[k]), limit):
                 if pair.distance < best[0]:
                     best = (pair.distance, pair.name, float(log.t[k]))

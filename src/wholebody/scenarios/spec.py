@@ -55,7 +55,8 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
 
     [collision]                        # optional: wholebody.tasks.CollisionAvoidance
     enforce = true                     # false: only measure the closest distance
-    obstacles = ["shelf"]              # fixed objects the links keep off (not carried ones)
+    obstacles = ["shelf"]              # fixed objects the links keep off (not carried ones:
+                                       # those are attached to their hand while carried)
     self_collision = true              # links against links too
     safety = 0.01                      # m, d_s
     influence = 0.05                   # m, d_i

@@ -52,7 +52,7 @@ from wholebody.planning.trajectory import (
     minimum_jerk_scaling,
 )
 from wholebody.presets import default_stiffness, paper_stack
-from wholebody.robot import Robot, load_robot
+from wholebody.robot import Robot, RobotState, load_robot
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
@@ -346,8 +346,16 @@ def _collision(
     return task, model
 
 
-def _carrying(spec: ScenarioSpec, robot: Robot, phase: PhaseSpec, state, tasks, held,
-              collision, model):  # fmt: skip
+def _carrying(
+    spec: ScenarioSpec,
+    robot: Robot,
+    phase: PhaseSpec,
+    state: RobotState,
+    tasks: dict[str, FrameTask],
+    held: dict[str, tuple[str, np.ndarray]],
+    collision: CollisionAvoidance | None,
+    model: CollisionModel,
+) -> tuple[CollisionAvoidance | None, CollisionModel]:
     """The phase's collision task and model: the scenario's, or with the objects the phase
     carries attached to their hands (their pose relative to the hand taken where the carry
     starts, the grasp's contacts left out), so that the arms keep off a carried panel."""

@@ -9,8 +9,9 @@ solved in the null space of the held rows, so the hands yield to a collision row
 reverse; rows the first solution respects cost nothing.
 
 What the rows limited is reported: the result's ``message`` names the held rows (task and
-row index, e.g. ``collision[2]``: :meth:`wholebody.tasks.CollisionAvoidance.row_names` gives
-the pair) and the tasks whose residual they raised above the tolerance; ``infeasible`` lists
+row index, e.g. ``collision[2]``, followed by the pair when the solver has the stack:
+:meth:`wholebody.tasks.CollisionAvoidance.row_names`) and the tasks whose residual they
+raised above the tolerance; ``infeasible`` lists
 those tasks, and held rows the box kept from their bound under the level ``HELD``.
 """
 

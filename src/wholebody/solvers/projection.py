@@ -359,10 +359,13 @@ class ProjectionSolver(Solver):
     # ------------------------------------------------------------------ solve
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
         if self.compiled:
-            return self._solve_compiled(stack, state, dt)
-        start = time.perf_counter()
-        result = self._solve_reference(stack.evaluate(state, dt, compiled=False))
-        result.solve_time = time.perf_counter() - start
+            result = self._solve_compiled(stack, state, dt)
+        else:
+            start = time.perf_counter()
+            result = self._solve_reference(stack.evaluate(state, dt, compiled=False))
+            result.solve_time = time.perf_counter() - start
+        if "held inequality rows" in result.message:
+            result.message = _row_names(result.message, stack)
         return result
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
@@ -527,6 +530,18 @@ def _box_limited(problem: StackProblem, u: np.ndarray, u_free: np.ndarray, tol: 
             if r - r0 > tol * (1.0 + b):
                 return True
     return False
+
+
+def _row_names(message: str, stack: Stack) -> str:
+    """``task[k]`` in a message followed by the row's own name where the inequality task
+    gives one (``row_names()``: a collision pair)."""
+    for level in stack.levels:
+        for task in level.inequalities:
+            names = task.row_names() if callable(getattr(task, "row_names", None)) else []
+            for k, name in enumerate(names):
+                if name:
+                    message = message.replace(f"{task.name}[{k}]", f"{task.name}[{k}] {name}")
+    return message
 
 
 def _anchor(anchor: np.ndarray | None, like: np.ndarray) -> np.ndarray:

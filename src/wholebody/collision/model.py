@@ -172,13 +172,10 @@ class CollisionModel:
         self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)
+        self._set_pairs()
         self._contacts(safety, robot.home() if start is None else start,
                        "home" if start is None else "start")  # fmt: skip
-        for i, k in self.pairs:  # Pinocchio's pair k is self.pairs[k]
-            self.geometry.addCollisionPair(pin.CollisionPair(i, k))
-        self.data = pin.GeometryData(self.geometry)
-        for request in self.data.distanceRequests:
-            request.gjk_tolerance = GJK_TOLERANCE
+        self._set_pairs()
         self._radius, self._centre = _bounding_spheres(self.geometry)
         self._pair_index = np.array(self.pairs, dtype=np.intp).reshape(-1, 2)
         self._labels = [(self.pair_name(i, k), self.link(i), self.link(k)) for i, k in self.pairs]
@@ -231,20 +228,29 @@ class CollisionModel:
             return "adjacent links"
         return ""
 
+    def _set_pairs(self) -> None:
+        """Pinocchio's collision pairs and data for :attr:`pairs` (its pair p is
+        ``self.pairs[p]``), with our GJK tolerance."""
+        self.geometry.removeAllCollisionPairs()
+        for i, k in self.pairs:
+            self.geometry.addCollisionPair(pin.CollisionPair(i, k))
+        self.data = pin.GeometryData(self.geometry)
+        for request in self.data.distanceRequests:
+            request.gjk_tolerance = GJK_TOLERANCE
+
     def _contacts(self, safety: float, q: np.ndarray, where: str) -> None:
         """Leave out the robot's own pairs (carried objects included) closer than ``safety``
         at the posture ``q`` (home, or the start of a carry)."""
-        data = pin.GeometryData(self.geometry)
         model = self.robot.model  # its own data: the robot's current state stays valid
-        pin.updateGeometryPlacements(model, model.createData(), self.geometry, data,
+        pin.updateGeometryPlacements(model, model.createData(), self.geometry, self.data,
                                      np.asarray(q, dtype=float))  # fmt: skip
         objs = self.geometry.geometryObjects
         keep = []
-        for i, k in self.pairs:
+        for p, (i, k) in enumerate(self.pairs):
             if k >= self.n_robot:  # an obstacle: where the robot stands is the scenario's
                 keep.append((i, k))
                 continue
-            d = _distance(objs[i].geometry, data.oMg[i], objs[k].geometry, data.oMg[k])[0]
+            d = float(pin.computeDistance(self.geometry, self.data, p).min_distance)
             if d < safety:
                 self.excluded[(objs[i].name, objs[k].name)] = (
                     f"{d * 1e3:.1f} mm apart at the {where} posture (< safety "
@@ -327,15 +333,6 @@ class CollisionModel:
         skipped = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items()))
         return (f"{len(self.pairs)} pairs checked ({self.n_robot} robot shapes, "
                 f"{len(self.obstacles)} obstacles); not checked: {skipped or 'none'}")  # fmt: skip
-
-
-def _distance(ga, Ma: pin.SE3, gb, Mb: pin.SE3):
-    """Distance, witness points and unit normal from a to b (coal's where they touch)."""
-    req, res = coal.DistanceRequest(), coal.DistanceResult()
-    req.gjk_tolerance = GJK_TOLERANCE
-    coal.distance(ga, coal.Transform3s(Ma.rotation, Ma.translation), gb,
-                  coal.Transform3s(Mb.rotation, Mb.translation), req, res)  # fmt: skip
-    return _result(res)
 
 
 def _result(res: coal.DistanceResult):

@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody.arm.stiffness import StiffnessModel
-from wholebody.collision import CollisionModel, Obstacle
+from wholebody.collision import CollisionModel, Obstacle, PairDistance
 from wholebody.control import Controller, RunLog, summary
 from wholebody.control.controller import _progress
 from wholebody.control.log import concatenate
@@ -330,15 +330,20 @@ def run_scenario(
 
 
 def _collision(
-    spec: ScenarioSpec, robot: Robot
+    spec: ScenarioSpec,
+    robot: Robot,
+    attached: Sequence[tuple[str, Obstacle]] = (),
+    start: np.ndarray | None = None,
 ) -> tuple[CollisionAvoidance | None, CollisionModel | None]:
     """The scenario's ``[collision]``: the constraint (None unless enforced) and the model
-    whose closest approach the metrics report (None without the section)."""
+    whose closest approach the metrics report (None without the section); ``attached`` and
+    ``start`` as :class:`~wholebody.collision.CollisionModel` takes them (a carry)."""
     cs = spec.collision
     if cs is None:
         return None, None
     obstacles = [obstacle_of(spec.objects[name]) for name in cs.obstacles]
-    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision)
+    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision,
+                           attached=attached, start=start)  # fmt: skip
     if not cs.enforce:
         return None, model
     task = CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
@@ -355,7 +360,7 @@ def _carrying(
     held: dict[str, tuple[str, np.ndarray]],
     collision: CollisionAvoidance | None,
     model: CollisionModel,
-) -> tuple[CollisionAvoidance | None, CollisionModel]:
+) -> tuple[CollisionAvoidance | None, CollisionModel | None]:
     """The phase's collision task and model: the scenario's, or with the objects the phase
     carries attached to their hands (their pose relative to the hand taken where the carry
     starts, the grasp's contacts left out), so that the arms keep off a carried panel."""
@@ -372,14 +377,7 @@ def _carrying(
             held[name] = (frame.name, np.linalg.solve(state.pose(frame), pose))
         obj = obstacle_of(spec.objects[name])
         attached.append((held[name][0], Obstacle(obj.name, obj.shape, obj.size, held[name][1])))
-    cs = spec.collision
-    obstacles = [obstacle_of(spec.objects[n]) for n in cs.obstacles]
-    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision,
-                           attached=attached, start=state.q)  # fmt: skip
-    if not cs.enforce:
-        return None, model
-    return CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
-                              speed=cs.speed), model  # fmt: skip
+    return _collision(spec, robot, attached, state.q)
 
 
 def collision_model(spec: ScenarioSpec, robot: Robot) -> CollisionModel | None:
@@ -399,14 +397,14 @@ def obstacle_of(obj: ObjectSpec) -> Obstacle:
 
 def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: RunLog,
                      safety: float, within: float = 0.1) -> dict:  # fmt: skip
-    """``min_collision_distance_m`` over every logged step and checked pair, with the pair
-    and the time (s), and ``collision_limited``: per pair held at the safety distance (within
-    1 mm of it), the tasks more than 1 mm (or rad) off their target at those steps, and how
-    many steps (a correlation, not the solver's attribution). ``models``: each phase's model
-    (carried objects attached) with its steps' mask. Pairs farther than ``within`` (m) are
-    skipped by the bounding spheres; if none comes that close, every pair is measured on
-    every 10th step."""
-    best = (math.inf, "", 0.0)
+    """``min_collision_distance_m`` over every logged step and checked pair, with the pair,
+    the time (s) and its witness points (m, world), and ``collision_limited``: per pair held
+    at the safety distance (within 1 mm of it), the tasks more than 1 mm (or rad) off their
+    target at those steps, and how many steps (a correlation, not the solver's attribution).
+    ``models``: each phase's model (carried objects attached) with its steps' mask. Pairs
+    farther than ``within`` (m) are skipped by the bounding spheres; if none comes that
+    close, every pair is measured on every 10th step."""
+    best: tuple[float, PairDistance | None, float] = (math.inf, None, 0.0)
     limited: dict[tuple[str, str], int] = {}
     owner = np.zeros(len(log), dtype=int)
     for m, (_, mask) in enumerate(models):
@@ -416,15 +414,18 @@ def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: R
             model = models[owner[k]][0]
             for pair in model.distances(model.robot.update(log.q[k]), limit):
                 if pair.distance < best[0]:
-                    best = (pair.distance, pair.name, float(log.t[k]))
+                    best = (pair.distance, pair, float(log.t[k]))
                 if pair.distance <= safety + 1e-3:
                     for task in _unmet(log, k):
                         limited[(pair.name, task)] = limited.get((pair.name, task), 0) + 1
         if math.isfinite(best[0]):
             break
-    return {"min_collision_distance_m": best[0] if math.isfinite(best[0]) else None,
-            "min_collision_pair": best[1],
+    pair = best[1]
+    return {"min_collision_distance_m": pair.distance if pair else None,
+            "min_collision_pair": pair.name if pair else "",
             "min_collision_time_s": best[2],
+            "min_collision_points_m": [pair.point_a.tolist(), pair.point_b.tolist()]
+            if pair else None,
             "collision_limited": [{"pair": p, "task": t, "steps": n}
                                   for (p, t), n in sorted(limited.items())]}  # fmt: skip
 

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from wholebody.collision import CollisionModel
+from wholebody.collision import CollisionModel, PairDistance
 from wholebody.scenarios.runner import ScenarioRun
 from wholebody.scenarios.spec import ObjectSpec, ScenarioSpec
 from wholebody.viz.scene import Scene
@@ -38,18 +38,17 @@ def draw_objects(scene: Scene, spec: ScenarioSpec) -> None:
             scene.ellipsoid(obj.name, [obj.radius] * 3, _pose(obj), color=color)
 
 
-def _draw_closest(scene: Scene, run: ScenarioRun, t: float) -> None:
-    """The run's closest approach (its pair at its time) as a line, and a marker at it."""
-    from wholebody.scenarios.runner import collision_model
-
-    model = collision_model(run.spec, scene.robot)
-    k = int(np.argmin(np.abs(run.log.t - t)))
-    pairs = [p for p in model.distances(scene.robot.update(run.log.q[k]), 0.1)
-             if p.name == run.metrics["min_collision_pair"]]  # fmt: skip
-    if pairs:
-        scene.closest_pairs(pairs, most=1, safety=run.spec.collision.safety)
-        scene.marker("closest_approach", (pairs[0].point_a + pairs[0].point_b) / 2,
-                     color="#d62728", radius=0.01)  # fmt: skip
+def _draw_closest(scene: Scene, run: ScenarioRun) -> None:
+    """The run's closest approach (its pair's witness points, from the metrics) as a line,
+    and a marker between them."""
+    m = run.metrics
+    a, b = (np.asarray(p) for p in m["min_collision_points_m"])
+    gap = b - a
+    normal = gap / np.linalg.norm(gap) if np.linalg.norm(gap) > 0 else np.zeros(3)
+    pair = PairDistance(m["min_collision_pair"], "", "", m["min_collision_distance_m"], a, b,
+                        normal, np.zeros(0))  # fmt: skip
+    scene.closest_pairs([pair], most=1, safety=run.spec.collision.safety)
+    scene.marker("closest_approach", (a + b) / 2, color="#d62728", radius=0.01)
 
 
 class LiveView:
@@ -93,9 +92,8 @@ def show_run(scene: Scene, run: ScenarioRun, fps: float = 30.0) -> None:
             scene.path(f"{name}_executed", pos, color=color)
             scene.path(f"{name}_reference", ref, color="#7f7f7f")
             scene.marker(f"{name}_goal", ref[-1], color=color)
-    closest = run.metrics.get("min_collision_time_s")
-    if closest is not None and run.metrics.get("min_collision_distance_m") is not None:
-        _draw_closest(scene, run, closest)
+    if run.metrics.get("min_collision_points_m") is not None:
+        _draw_closest(scene, run)
     carried = {
         f"scene/props/{k}": v for k, v in run.object_poses.items() if not np.allclose(v[0], v[-1])
     }

@@ -116,8 +116,8 @@ CASES = [
     (
         "a joint whose URDF limit has no lower and upper",
         "robot.urdf",
-        '<limit lower="-0.79" upper="0.79" effort="150.0" velocity="1.0"/>',
-        '<limit effort="150.0" velocity="1.0"/>',
+        '<limit lower="-0.79" upper="0.79" effort="300.0" velocity="1.0"/>',
+        '<limit effort="300.0" velocity="1.0"/>',
         ModelError,
         ["robot.urdf", "joint 'waist_yaw' cannot move", "[0, 0]", "fixed joint"],
     ),
@@ -221,8 +221,8 @@ CASES = [
     (
         "URDF velocity negative",
         "robot.urdf",
-        'effort="150.0" velocity="1.0"',
-        'effort="150.0" velocity="-1"',
+        'effort="300.0" velocity="1.0"',
+        'effort="300.0" velocity="-1"',
         ModelError,
         ["joint 'waist_pitch'", "<limit velocity> = -1 is negative"],
     ),

@@ -42,7 +42,8 @@ def test_paper_numbers_are_in_the_files():
     obst = load_scenario(tasks_dir() / "obstacle_avoidance.toml")
     for c in ("cylinder_1", "cylinder_2"):
         assert obst.objects[c].radius == 0.04 and obst.objects[c].height == 0.2
-    assert obst.objects["cylinder_1"].position == (1.725, -0.4, 1.09)
+    assert obst.objects["cylinder_1"].position == (1.755, -0.4, 1.09)  # 3 cm back, said why
+    assert "printed at x = 1.725" in obst.objects["cylinder_1"].note
 
 
 def copy_scenario(tmp_path: Path, name: str = "coordinated_carry") -> Path:
@@ -123,7 +124,7 @@ CASES = [
         "non-positive phase duration",
         "duration = 20.0",
         "duration = 0.0",
-        ["[phases[2].duration]", "> 0"],
+        ["[phases[3].duration]", "> 0"],
     ),
     (
         "box with a zero edge",

@@ -127,9 +127,9 @@ ARM_LIMITS = (
 WAIST_VELOCITY = (1.0, 1.0, 1.0)  # rad/s
 ARM_VELOCITY = (1.0, 2.0, 2.0, 2.0, 2.5, 3.0, 3.0, 3.0)  # rad/s
 WHEEL_VELOCITY = 25.0  # rad/s: 2 m/s at the rim
-WAIST_EFFORT = 150.0  # N m (informative)
-ARM_EFFORT = (80.0, 80.0, 80.0, 40.0, 40.0, 15.0, 15.0, 10.0)
-WHEEL_EFFORT = 30.0
+WAIST_EFFORT = 300.0  # N m: the physics runs (wholebody.sim) need up to 280 for the torso
+ARM_EFFORT = (80.0, 80.0, 80.0, 40.0, 40.0, 15.0, 15.0, 10.0)  # N m
+WHEEL_EFFORT = 30.0  # N m
 
 # Masses (kg); upper arm and forearm are the bodies of the paper's gravity energy.
 BASE_MASS, WHEEL_MASS, COLUMN_MASS = 40.0, 1.5, 8.0

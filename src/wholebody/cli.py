@@ -156,14 +156,17 @@ def _replay(scene, run, out: Path, hold: bool) -> None:
         print("no terminal to wait on: the MeshCat server is closed; open the replay page")
 
 
-def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) -> int:
+def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool,
+             sim: str = "kinematic") -> int:  # fmt: skip
+    """Run a scenario, write its outputs, report it; 1 if a physics run was stopped."""
     from wholebody.scenarios import load_scenario, run_scenario
     from wholebody.scenarios.outputs import write_run
 
     spec = load_scenario(path)
     scene, live = _start_viewer(spec) if viz else (None, None)
     try:
-        run = run_scenario(spec, backend=backend, progress=True, on_step=live)
+        run = run_scenario(spec, backend=backend, progress=True, on_step=live, sim=sim,
+                           on_objects=live.update_objects if live else None)  # fmt: skip
         files = write_run(run, out)
         _report_run(run, files)
         if scene is not None:
@@ -171,7 +174,36 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool) 
     finally:
         if scene is not None:
             scene.close()
+    if run.metrics.get("stopped"):
+        print(f"wholebody: the run stopped early: {run.metrics['stopped']}", file=sys.stderr)
+        return 1
     return 0
+
+
+def _overshoot(m: dict) -> str:
+    """How far past a limit the joints went, when they did."""
+    if not m["limit_violations"]:
+        return ""
+    return f" (at most {1e3 * m['limit_violation_max']:.2f} mrad or mm past a limit)"
+
+
+def _report_physics(m: dict) -> None:
+    """A physics run's summary lines: torque peaks, saturation, grasps, contacts, speed."""
+    peaks = ", ".join(f"{g} {v:.0f} N m ({100 * m['torque_peak_fraction'][g]:.0f} %)"
+                      for g, v in m["torque_peak_nm"].items())  # fmt: skip
+    print(f"  physics (MuJoCo)  {m['real_time_factor']:.1f}x real time; peak torque {peaks}")
+    if m["torque_saturated"]:
+        worst = sorted(m["torque_saturated"].items(), key=lambda x: -x[1])[:3]
+        print("  at the torque limit: " + ", ".join(f"{j} {100 * f:.1f} % of steps"
+                                                   for j, f in worst))  # fmt: skip
+    for obj, hands in m["grasp_force_peak_n"].items():
+        squeeze = m["squeeze_force_n"].get(obj)
+        extra = (f"; squeeze peak {squeeze['peak']:.1f} N, mean {squeeze['mean']:.1f} N"
+                 if squeeze else "")  # fmt: skip
+        grips = ", ".join(f"{h} {f:.1f} N" for h, f in hands.items())
+        print(f"  grasp of {obj}: peak force {grips}{extra}")
+    for c in m["contacts"][:5]:
+        print(f"  contact {c['pair']} from {c['first_s']:.2f} s, up to {c['peak_force_n']:.1f} N")
 
 
 def _report_run(run, files: dict[str, Path]) -> None:
@@ -179,10 +211,11 @@ def _report_run(run, files: dict[str, Path]) -> None:
     per phase, the files written."""
     m = run.metrics
     print(
-        f"{run.spec.name} [{run.backend}]: {len(run.log)} steps in {run.wall_time:.1f} s; "
+        f"{run.spec.name} [{run.backend}{', MuJoCo' if m.get('sim') == 'mujoco' else ''}]: "
+        f"{len(run.log)} steps in {run.wall_time:.1f} s; "
         f"control step median {m['step_time_us']['median']:.0f} us "
         f"(1/median = {m['median_step_rate_hz']:.0f} Hz); limit violations "
-        f"{m['limit_violations']}, solver failures {m['solver_failures']}"
+        f"{m['limit_violations']}{_overshoot(m)}, solver failures {m['solver_failures']}"
     )
     for phase, entry in m["phases"].items():
         worst = max((v for hand in entry["mae_m"].values() for v in hand.values()), default=0.0)
@@ -196,6 +229,8 @@ def _report_run(run, files: dict[str, Path]) -> None:
               f" mm at {m['min_collision_time_s']:.2f} s")  # fmt: skip
         for entry in m["collision_limited"]:
             print(f"  {entry['pair']} held {entry['task']} back for {entry['steps']} steps")
+    if m.get("sim") == "mujoco":
+        _report_physics(m)
     for name, f in files.items():
         print(f"  {name:17s} {f}")
 
@@ -215,7 +250,8 @@ def _output_dir(out: Path) -> Path:
 def _run(args: argparse.Namespace) -> int:
     path = _scenario_path(args.scenario)
     out = _output_dir(Path(args.out) if args.out else Path("runs") / path.stem)
-    return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty())
+    return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty(),
+                    sim=args.sim)  # fmt: skip
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -244,7 +280,7 @@ def _compare(args: argparse.Namespace) -> int:
     try:
         for backend in args.backends:  # each run's log, metrics, figures kept as it ends
             print(f"running {spec.name} with {backend} ...")
-            run = run_scenario(spec, backend=backend, progress=True)
+            run = run_scenario(spec, backend=backend, progress=True, sim=args.sim)
             write_run(run, out / backend, figures=False)
             runs.append(run)
             write_figures(run, out / backend)
@@ -282,6 +318,13 @@ def _scenario_help(what: str) -> str:
     return f"{what}: a scenario file or a bundled name: {', '.join(bundled_scenarios())}"
 
 
+def _add_sim_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sim", choices=("kinematic", "mujoco"), default="kinematic",
+                        help="kinematic: the commands integrated exactly (default); mujoco: "
+                        "physics in the loop (the sim extra): joint servos with torque "
+                        "limits, objects with mass, grasps as welds")  # fmt: skip
+
+
 def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
     """``run``, ``compare`` and ``demo``."""
     run = sub.add_parser("run", help="run a scenario file (or a bundled scenario's name)")
@@ -293,6 +336,7 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
                      "(a standalone replay) and, on a terminal, keep the viewer open until "
                      "Enter")  # fmt: skip
     run.add_argument("--out", default=None, help="output directory (default runs/NAME)")
+    _add_sim_option(run)
     run.set_defaults(func=_run)
     compare = sub.add_parser(
         "compare",
@@ -304,6 +348,7 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
                          "its BACKEND/ subdirectory)")  # fmt: skip
     compare.add_argument("--backends", nargs="+", default=["pinv", "projection", "hqp"],
                          choices=BACKENDS)  # fmt: skip
+    _add_sim_option(compare)
     compare.set_defaults(func=_compare)
     demo = sub.add_parser(
         "demo",

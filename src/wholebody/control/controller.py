@@ -12,11 +12,12 @@ One step at time ``t_k = k dt``:
 4. the tasks' integrators advance, each with its own anti-windup (its integral stops
    growing while a bound limits that task: :meth:`Stack.saturated_tasks
    <wholebody.solvers.Stack.saturated_tasks>`; a joint no task moves may rest on its limit);
-5. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold).
+5. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold), or with a
+   ``plant`` the configuration it reaches under ``u_k`` (a physics simulation).
 
 ``step_time`` is the wall time of the control computation of a step: targets (reference
 sampling), kinematics, stack evaluation, solve, the integrators' advance and the integration,
-without the log's own recording and monitoring.
+without the log's own recording and monitoring (and without a plant's simulation).
 """
 
 from __future__ import annotations
@@ -44,7 +45,16 @@ from wholebody.tasks.arm_energy import ArmPotentialEnergy
 from wholebody.tasks.base import Objective, Task
 from wholebody.tasks.frame import FrameTask
 
-__all__ = ["Controller", "ReferenceTask"]
+__all__ = ["Controller", "Plant", "ReferenceTask"]
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """What a controller's commands drive: ``step(q, u, dt)`` applies the actuated velocity
+    ``u`` for ``dt`` seconds from ``q`` and returns the configuration reached (:meth:`Robot.
+    integrate` is the exact kinematic one; :class:`wholebody.sim.MujocoPlant` is physics)."""
+
+    def step(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray: ...
 
 
 @runtime_checkable
@@ -85,6 +95,12 @@ class Controller:
         retreat to a ready posture when the tasks stall in a local minimum, then retry. The
         run log's ``meta["retreats"]`` lists them (``[start, end]`` in s; end None if the run
         ended during one).
+    plant
+        What the commands drive (default: the exact integration :meth:`Robot.integrate`):
+        an object with ``step(q, u, dt) -> q`` returning the configuration reached, such as
+        :class:`wholebody.sim.MujocoPlant` (physics), whose configuration the controller then
+        reads. A plant whose ``stop_reason`` becomes a string ends the run after that step
+        (the log holds the steps done; ``meta["stopped"]`` the reason).
     threads
         Threads of the BLAS and OpenMP libraries (numpy's, scipy's) while :meth:`run` runs
         the loop, restored after (threadpoolctl); None leaves the libraries' own setting.
@@ -105,6 +121,7 @@ class Controller:
         monitors: Sequence[Objective] = (),
         feedforward: str = "midpoint",
         recovery: StallRecovery | None = None,
+        plant: Plant | None = None,
         threads: int | None = 1,
     ) -> None:
         if not dt > 0:
@@ -145,6 +162,10 @@ class Controller:
             raise WholebodyError("recovery must be made for the controller's stack: "
                                  "StallRecovery(robot, stack)")  # fmt: skip
         self.recovery = recovery
+        if plant is not None and not callable(getattr(plant, "step", None)):
+            raise WholebodyError(f"plant must have step(q, u, dt) -> q (e.g. "
+                                 f"wholebody.sim.MujocoPlant), got {plant!r}")  # fmt: skip
+        self.plant = plant
         self.threads = _thread_count(threads)
 
     def _sampled_targets(self, k0: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -196,7 +217,7 @@ class Controller:
             self.stack.set_velocity(u0, self.dt)
         bar = _progress(n, progress)
         with _threads(self.threads), _gc_paused():  # no collection mid-step
-            q = self._loop(q, n, log, callback, bar)
+            q, done = self._loop(q, n, log, callback, bar)
         if bar is not None:
             bar.close()
         info = {
@@ -212,7 +233,9 @@ class Controller:
             **self._retreats(),
             **(meta or {}),
         }
-        return log.finish(info)
+        if done < n:
+            info["stopped"] = self.plant.stop_reason  # type: ignore[union-attr]
+        return log.finish(info, done)
 
     def _retreats(self) -> dict[str, list[list[float | None]]]:
         """``{"retreats": [[start, end], ...]}`` with a recovery, else nothing."""
@@ -227,9 +250,11 @@ class Controller:
         log: _Recorder,
         callback: Callable[[int, float, np.ndarray], None] | None,
         bar: object,
-    ) -> np.ndarray:
-        """The ``n`` control steps from ``q``; the references sampled a block at a time."""
+    ) -> tuple[np.ndarray, int]:
+        """The ``n`` control steps from ``q`` (fewer if the plant stops the run); the
+        references sampled a block at a time. The final configuration and the steps done."""
         robot, tasks, rec = self.robot, list(self.references), self.recovery
+        advance = robot.integrate if self.plant is None else self.plant.step
         for k in range(n):
             start = time.perf_counter()  # the step's time includes its share of the sampling
             if k % _BLOCK == 0:
@@ -247,13 +272,19 @@ class Controller:
                 stack.advance(state, self.dt, result=result)
             else:
                 rec.advance(state, self.dt, result)
-            q = robot.integrate(q, result.u, self.dt)
-            log.step_time[k] = compute + (time.perf_counter() - start)
+            if self.plant is None:  # the integration is the controller's own work
+                q = advance(q, result.u, self.dt)
+                log.step_time[k] = compute + (time.perf_counter() - start)
+            else:  # a plant's step (a simulation) is not the controller's time
+                log.step_time[k] = compute + (time.perf_counter() - start)
+                q = advance(q, result.u, self.dt)
             if callback is not None:
                 callback(k, t + self.dt, q)
             if bar is not None:
                 bar.update(1)  # type: ignore[attr-defined]
-        return q
+            if self.plant is not None and getattr(self.plant, "stop_reason", None):
+                return q, k + 1
+        return q, n
 
 
 _BLOCK = 1024  # steps of reference sampled at once (memory: 176 bytes a step a reference)
@@ -347,24 +378,25 @@ class _Recorder:
         for m in self.others:
             self.values[m.name][k] = m.evaluate(state).value
 
-    def finish(self, meta: dict) -> RunLog:
+    def finish(self, meta: dict, n: int) -> RunLog:
+        """The log of the first ``n`` steps."""
         return RunLog(
-            t=self.t,
-            q=self.q,
-            u=self.u,
-            joint_positions=self.jp,
-            step_time=self.step_time,
-            solve_time=self.solve_time,
-            status=self.status,
-            limit_hit=self.limit_hit,
-            level_residuals=self.level_res,
-            task_errors=self.errors,
-            frame_positions=self.pos,
-            reference_positions=self.ref,
-            arms={a: ArmTrace(*v.T.copy()) for a, v in self.arms.items()},
-            objectives=self.values,
+            t=self.t[:n],
+            q=self.q[:n],
+            u=self.u[:n],
+            joint_positions=self.jp[:n],
+            step_time=self.step_time[:n],
+            solve_time=self.solve_time[:n],
+            status=self.status[:n],
+            limit_hit=self.limit_hit[:n],
+            level_residuals=self.level_res[:n],
+            task_errors={k: v[:n] for k, v in self.errors.items()},
+            frame_positions={k: v[:n] for k, v in self.pos.items()},
+            reference_positions={k: v[:n] for k, v in self.ref.items()},
+            arms={a: ArmTrace(*v[:n].T.copy()) for a, v in self.arms.items()},
+            objectives={k: v[:n] for k, v in self.values.items()},
             meta=meta,
-            failed=self.failed,
+            failed=self.failed[:n],
         )
 
 

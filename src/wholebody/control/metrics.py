@@ -29,6 +29,7 @@ from wholebody.solvers.result import SolverStatus
 __all__ = [
     "Tracking",
     "closed_chain_error",
+    "limit_overshoot",
     "limit_violations",
     "step_timing",
     "summary",
@@ -77,6 +78,15 @@ def limit_violations(log: RunLog, tolerance: float = 1e-9) -> int:
     return int(np.count_nonzero(bad.any(axis=1)))
 
 
+def limit_overshoot(log: RunLog) -> float:
+    """The largest distance (rad or m) of any joint beyond its position limits (0 within)."""
+    lo, hi = (np.asarray(v, dtype=float) for v in log.meta["position_limits"])
+    jp = log.joint_positions
+    if not len(jp):
+        return 0.0
+    return float(max(0.0, np.max(lo - jp), np.max(jp - hi)))
+
+
 def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -> float:
     """Largest position error (m) of a relative (closed-chain) task over the masked steps."""
     if task not in log.task_errors:
@@ -121,6 +131,7 @@ def summary(log: RunLog) -> dict:
             for g in log.meta.get("groups", {})
         },
         "limit_violations": limit_violations(log),
+        "limit_violation_max": limit_overshoot(log),
         "solver_failures": int(
             np.count_nonzero(
                 log.status >= SolverStatus.INFEASIBLE if log.failed is None else log.failed

@@ -52,6 +52,12 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     [home]                       # optional; joint = angle (rad), others at 0 (or at
                                  # the nearer limit when 0 is outside their range)
 
+    [sim]                        # optional: physics runs (wholebody.sim); any of the
+    servo_hz = 25.0              # fields of wholebody.robot.sim.SimSettings (timestep s,
+    armature = 0.01              # servo_hz Hz, damping_ratio, armature kg m^2, damping
+                                 # N m s/rad, effort_scale, gravity_compensation,
+                                 # stall_time s, base_force N, base_torque N m)
+
     [acceleration]               # optional; the hard bound |u - u_prev| <= a dt of
                                  # wholebody.tasks.AccelerationLimits
     joints = 20.0                # rad/s^2 (m/s^2 prismatic), default 20
@@ -68,7 +74,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from wholebody.errors import ConfigError
+from wholebody.errors import ConfigError, ModelError
+from wholebody.robot.sim import SimSettings
 from wholebody.robot.urdf import PACKAGE, resolve_package
 from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
@@ -165,6 +172,8 @@ class RobotConfig:
     """``[frames]``."""
     collision: CollisionConfig = field(default_factory=CollisionConfig)
     """``[collision]``."""
+    sim: Mapping[str, float | bool] = field(default_factory=dict)
+    """``[sim]`` as written: :class:`~wholebody.robot.sim.SimSettings` by name."""
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
@@ -185,7 +194,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     data = load_toml(path, "robot configuration")
 
     r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration", "locked",
-                      "frames", "collision"))  # fmt: skip
+                      "frames", "collision", "sim"))  # fmt: skip
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")
@@ -243,6 +252,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     collision = _read_collision(r, r.table(data, "collision", "", required=False))
     return RobotConfig(
         collision=collision,
+        sim=_read_sim(r, r.table(data, "sim", "", required=False)),
         path=path,
         name=name,
         urdf=urdf,
@@ -256,6 +266,22 @@ def read_robot_config(path: str | Path) -> RobotConfig:
         locked=locked,
         frames=frames,
     )
+
+
+def _read_sim(r: _Reader, table: Mapping[str, Any]) -> dict[str, float | bool]:
+    """``[sim]``: :class:`wholebody.robot.sim.SimSettings` by name (each checked there)."""
+    r.only(table, "sim", SimSettings.keys())
+    out: dict[str, float | bool] = {}
+    for key in table:
+        if key == "gravity_compensation":
+            out[key] = r.boolean(table, key, "sim", default=True)
+        else:
+            out[key] = r.number(table, key, "sim")
+    try:
+        SimSettings(**out)  # type: ignore[arg-type]
+    except ModelError as exc:
+        raise r.fail("sim", str(exc)) from None
+    return out
 
 
 def _read_collision(r: _Reader, table: Mapping[str, Any]) -> CollisionConfig:

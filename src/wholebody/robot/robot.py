@@ -36,6 +36,7 @@ from wholebody.robot.compiled import RobotKinematics
 from wholebody.robot.config import ACCELERATION_DEFAULTS, RobotConfig
 from wholebody.robot.configurations import Configurations
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
+from wholebody.robot.sim import SimSettings
 from wholebody.robot.state import RobotState
 from wholebody.robot.urdf import UrdfInfo, read_urdf
 from wholebody.robot.wheels import check_base_geometry
@@ -231,6 +232,11 @@ class Robot(Configurations):
             return self.update(self.check_configuration(q)).com_position().copy()
         body = body if isinstance(body, Body) else self.body(body)
         return self.update(self.check_configuration(q)).com_position(body)
+
+    @property
+    def sim_settings(self) -> SimSettings:
+        """What a physics run adds to the URDF: ``robot.toml [sim]`` over the defaults."""
+        return SimSettings(**self.config.sim)  # type: ignore[arg-type]
 
     def geometry(self, kind: str = "visual") -> tuple[pin.GeometryModel, str]:
         """The URDF's ``"visual"`` or ``"collision"`` geometry for :attr:`model` (locked

@@ -2,7 +2,8 @@
 
 ``write_run`` writes ``run.npz`` (the :class:`~wholebody.control.RunLog`), ``metrics.json``
 and the figures ``hands.png``, ``joint_velocities.png``, ``arm_energy.png``
-(``write_figures`` the figures alone).
+(``write_figures`` the figures alone); a physics run also ``physics.npz`` (per step: torque
+peaks per joint group, grasp forces, squeeze, the free objects' poses) and ``physics.png``.
 ``comparison`` builds the Table 2 rows (plain pseudo-inverse, the paper's projection, the
 hierarchical QP) from runs of one scenario; ``write_comparison`` writes them as
 ``comparison.md`` and ``comparison.json``.
@@ -22,12 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from wholebody.control.log import json_default
-from wholebody.files import write_json, write_text
+from wholebody.files import write_json, write_npz, write_text
 from wholebody.scenarios import plots
 from wholebody.scenarios.runner import ScenarioRun
 
-__all__ = ["OutputsInterrupted", "comparison", "comparison_markdown", "write_comparison",
-           "write_figures", "write_run"]  # fmt: skip
+__all__ = ["OutputsInterrupted", "comparison", "comparison_markdown", "physics_arrays",
+           "write_comparison", "write_figures", "write_run"]  # fmt: skip
 
 BACKEND_LABELS = {
     "pinv": "pseudo-inverse (paper's baseline)",
@@ -65,7 +66,24 @@ def write_run(run: ScenarioRun, out: Path, *, figures: bool = True) -> dict[str,
             partial(write_json, out / "metrics.json", run.metrics, indent=2, default=json_default),
         ),
     ]
+    if run.physics is not None:
+        jobs.append(("physics", partial(write_npz, out / "physics.npz", physics_arrays(run))))
     return _write_all(jobs + (_figure_jobs(run, out) if figures else []))
+
+
+def physics_arrays(run: ScenarioRun) -> dict[str, np.ndarray]:
+    """A physics run's records as flat arrays (``physics.npz``): ``t`` (s); per group
+    ``torque/GROUP`` (N, joints; N m) and ``torque_limit/GROUP``; per grasp
+    ``grasp_force/OBJECT/FRAME`` (N, 3; N, world); ``squeeze/OBJECT`` (N; N, NaN unless two
+    hands hold it); ``pose/OBJECT`` (N, 4, 4) of the free objects; ``saturated`` (N, nv)."""
+    p = run.physics or {}
+    out = {"t": run.log.t, "saturated": p["saturated"]}
+    out.update({f"torque/{g}": v for g, v in p["group_torque"].items()})
+    out.update({f"torque_limit/{g}": v for g, v in p["group_limit"].items()})
+    out.update({f"grasp_force/{o}/{f}": v for (o, f), v in p["grasp_force"].items()})
+    out.update({f"squeeze/{o}": v for o, v in p["squeeze"].items()})
+    out.update({f"pose/{o}": v for o, v in p["object_poses"].items()})
+    return out
 
 
 def write_figures(run: ScenarioRun, out: Path) -> dict[str, Path]:
@@ -94,7 +112,9 @@ def _figure_jobs(run: ScenarioRun, out: Path) -> list[tuple[str, Callable[[], Pa
             partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
         ),
         ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title)),
-    ]
+    ] + ([("physics_figure", partial(plots.physics, log, run.physics, out / "physics.png",
+                                     title=f"{title} under physics (MuJoCo)"))]
+         if run.physics is not None else [])  # fmt: skip
 
 
 def comparison(runs: list[ScenarioRun]) -> list[dict]:
@@ -120,6 +140,12 @@ def comparison(runs: list[ScenarioRun]) -> list[dict]:
                 "solver_failures": m["solver_failures"],
                 "limit_violations": m["limit_violations"],
                 "closed_chain_error_max_m": m.get("closed_chain_error_max_m", 0.0),
+                "sim": m.get("sim", "kinematic"),
+                "max_tracking_error_m": max(m["max_tracking_error_m"].values(), default=0.0),
+                "torque_peak_fraction": max(
+                    m.get("torque_peak_fraction", {}).values(), default=float("nan")
+                ),
+                "stopped": m.get("stopped"),
             }
         )
     return rows
@@ -144,6 +170,9 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
         head.append("waist travel (rad)")
     head += [f"final {a} arm energy (J)" for a in arms]
     head += ["failures", "limit violations"]
+    physics = any(r.get("sim") == "mujoco" for r in rows)
+    if physics:
+        head += ["max hand error (mm)", "closed chain (mm)", "peak torque (% of limit)"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["label"], f"{r['step_time_us_median']:.0f}", f"{r['median_step_rate_hz']:.0f}"]
@@ -153,6 +182,11 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
             cells += [f"{r['waist_travel_rad']:.3f}"]
         cells += [f"{r['final_arm_energy_j'].get(a, float('nan')):.3f}" for a in arms]
         cells += [str(r["solver_failures"]), str(r["limit_violations"])]
+        if physics:
+            cells += [f"{1e3 * r['max_tracking_error_m']:.2f}",
+                      f"{1e3 * r['closed_chain_error_max_m']:.2f}",
+                      f"{100 * r['torque_peak_fraction']:.0f}"
+                      + (" (stopped)" if r.get("stopped") else "")]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",
@@ -169,7 +203,10 @@ def write_comparison(runs: list[ScenarioRun], out: Path) -> dict[str, Path]:
     rows = comparison(runs)
     spec = runs[0].spec
     table = {"scenario": spec.name, "rows": rows}
-    md = comparison_markdown(rows, spec.title or spec.name)
+    title = spec.title or spec.name
+    if runs[0].metrics.get("sim") == "mujoco":
+        title += " (MuJoCo physics)"
+    md = comparison_markdown(rows, title)
     return _write_all(
         [
             ("markdown", partial(write_text, out / "comparison.md", md)),

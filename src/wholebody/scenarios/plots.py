@@ -579,3 +579,55 @@ def _plain(ax, bins: int = 5) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(bins))
     ax.grid(alpha=0.3)
     ax.tick_params(labelsize=8)
+
+
+# ---------------------------------------------------------------------- physics
+def physics(log: RunLog, physics: Mapping, out: Path, title: str = "",
+            kinematic: RunLog | None = None) -> Path:  # fmt: skip
+    """:func:`physics_figure` written to ``out`` (PNG)."""
+    return _save(physics_figure(log, physics, title, kinematic), out)
+
+
+def physics_figure(log: RunLog, physics: Mapping, title: str = "",
+                   kinematic: RunLog | None = None) -> Figure:  # fmt: skip
+    """A physics run over time: each hand's distance to its reference (mm; a kinematic run
+    of the same scenario dashed beside it, if given) and the closed chain's error; the peak
+    torque of each joint group as a share of its limit; each grasp's force and the squeeze
+    (N). Phases shaded and named."""
+    groups = plotted_groups(log)
+    fig = _figure(figsize=(11.0, 7.6))
+    _margins(fig, 0.85, 2.6, 0.5, 0.8, hspace=0.15)
+    ax_err, ax_tau, ax_f = fig.subplots(3, 1, sharex=True)
+    for name in log.frame_positions:
+        e = np.linalg.norm(log.frame_positions[name] - log.reference_positions[name], axis=1)
+        ax_err.plot(*thin(log.t, 1e3 * e), lw=0.9, label=f"{name} (physics)")
+        if kinematic is not None and name in kinematic.frame_positions:
+            k = kinematic.frame_positions[name] - kinematic.reference_positions[name]
+            ax_err.plot(*thin(kinematic.t, 1e3 * np.linalg.norm(k, axis=1)), lw=0.8, ls="--",
+                        label=f"{name} (kinematic)")  # fmt: skip
+    if "closed_chain" in log.task_errors:
+        chain = np.linalg.norm(log.task_errors["closed_chain"][:, :3], axis=1)
+        ax_err.plot(*thin(log.t, 1e3 * chain), lw=0.9, color="k", label="closed chain")
+    ax_err.set_ylabel("tracking error\n(mm)", fontsize=9)
+    for g in groups:
+        if g in physics["group_torque"]:
+            share = (physics["group_torque"][g] / physics["group_limit"][g]).max(axis=1)
+            ax_tau.plot(*thin(log.t, 100 * share), lw=0.9, label=g.replace("_", " "))
+    ax_tau.axhline(100, color="#d62728", lw=0.8, ls=":")
+    ax_tau.set_ylabel("peak torque\n(% of limit)", fontsize=9)
+    for (obj, frame), force in physics["grasp_force"].items():
+        ax_f.plot(*thin(log.t, np.linalg.norm(force, axis=1)), lw=0.9, label=f"{obj} at {frame}")
+    for obj, s in physics.get("squeeze", {}).items():
+        ax_f.plot(*thin(log.t, s), lw=0.9, color="k", label=f"{obj} squeeze")
+    ax_f.set_ylabel("grasp force\n(N)", fontsize=9)
+    for ax in (ax_err, ax_tau, ax_f):
+        _plain(ax)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0,
+                      frameon=False)  # fmt: skip
+    ax_f.set_xlabel("time (s)")
+    ax_err.set_xlim(float(log.t[0]), float(log.t[-1] + log.dt))
+    _shade_phases((ax_err, ax_tau, ax_f), log)
+    _phase_labels(ax_err, log, 11.0 - 0.85 - 2.6)
+    fig.suptitle(title or "physics run (MuJoCo)", fontsize=11)
+    return fig

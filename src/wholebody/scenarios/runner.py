@@ -53,6 +53,8 @@ from wholebody.planning.trajectory import (
 )
 from wholebody.presets import default_stiffness, paper_stack
 from wholebody.robot import Robot, RobotState, load_robot
+from wholebody.robot.sim import SimSettings
+from wholebody.scenarios.physics import physics_metrics, physics_poses, physics_records
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
@@ -80,6 +82,8 @@ class ScenarioRun:
     metrics: dict
     object_poses: dict[str, np.ndarray] = field(default_factory=dict)  # (N, 4, 4) each
     wall_time: float = 0.0
+    physics: dict | None = None
+    """A physics run's records (:meth:`wholebody.sim.PhysicsLog.arrays`), else None."""
 
 
 def make_solver(backend: str) -> Solver:
@@ -226,14 +230,23 @@ def run_scenario(
     progress: bool = False,
     on_step: Callable[[int, float, np.ndarray], None] | None = None,
     duration_scale: float = 1.0,
+    sim: str = "kinematic",
+    sim_settings: SimSettings | None = None,
+    on_objects: Callable[[dict[str, np.ndarray]], None] | None = None,
 ) -> ScenarioRun:
     """Run every phase of a scenario with a backend (default: the scenario's).
 
     ``on_step(k, t, q)`` is called after every control step (live visualisation).
     ``duration_scale`` shortens or stretches every phase (tests use it to run quickly).
+    ``sim``: ``"kinematic"`` (the commands integrated exactly) or ``"mujoco"`` (physics:
+    :class:`wholebody.sim.MujocoPlant`, with ``sim_settings`` or the robot's ``[sim]``; the
+    carried objects welded to their hands, both hands of a closed chain; a run the plant
+    stops ends there, its reason in ``metrics["stopped"]``); ``on_objects(poses)`` is called
+    after every step of a physics run with the free objects' poses (4x4, world).
     """
     backend = backend or spec.backend
     robot = scenario_robot(spec)
+    plant = _plant(spec, robot, sim, sim_settings)
     weights = spec.stack
     stiffness = _stiffness(spec, robot)
     for hand in spec.hands.values():
@@ -246,6 +259,8 @@ def run_scenario(
     solver = make_solver(backend)
     planners = _Planners(spec)
     q = start_configuration(spec, robot)
+    if plant is not None:
+        plant.reset(q)
     state = robot.update(q)
     starts = {h: state.pose(t.frame) for h, t in tasks.items()}
     logs, start_wall, t0 = [], time.perf_counter(), 0.0
@@ -258,18 +273,7 @@ def run_scenario(
         phases[phase.name] = [t0, t0 + duration]
         refs = planners.phase(_scaled(phase, duration), starts)
         entries = [tasks[h] for h in refs]
-        first: list[RelativeFrameTask] = []
-        if phase.closed_chain:
-            secondary = next(h for h in phase.hands if h != phase.primary)
-            chain = RelativeFrameTask(
-                robot,
-                tasks[phase.primary].frame,
-                tasks[secondary].frame,
-                name="closed_chain",
-                kp=tasks[phase.primary].kp[0],
-            )
-            chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
-            first.append(chain)  # a level above the hands: the grasp is never traded
+        first = _chain(robot, phase, tasks, starts)
         phase_collision, phase_model = collision, collision_model
         if spec.collision is not None:
             phase_collision, phase_model = _carrying(spec, robot, phase, state, tasks, held,
@@ -291,17 +295,14 @@ def run_scenario(
             dt=spec.dt,
             references={tasks[h]: r for h, r in refs.items()},
             monitors=monitors,
+            plant=plant,
         )
+        if plant is not None:
+            plant.hold(_grips(phase, tasks))
         if bar is not None:
             bar.set_postfix_str(phase.name)
-        done = sum(len(x) for x in logs)
-
-        def callback(k, t, qk, offset=t0, done=done):
-            if bar is not None:
-                bar.update(1)
-            if on_step is not None:
-                on_step(done + k, offset + t, qk)
-
+        objects = on_objects if plant is not None else None
+        callback = _callback(bar, on_step, objects, plant, t0, sum(len(x) for x in logs))
         log = controller.run(q, duration, callback=callback, meta={"phase": phase.name},
                              u0=logs[-1].u[-1] if logs else None)  # fmt: skip
         logs.append(log)
@@ -316,17 +317,90 @@ def run_scenario(
             if hp.carry is not None:
                 carries.setdefault(hp.carry, []).append((hand, t0, t0 + duration))
         t0 += duration
+        if "stopped" in log.meta:
+            break
     if bar is not None:
         bar.close()
     log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend,
-                             "start": spec.start})  # fmt: skip
-    poses = _object_poses(robot, log, spec.objects, carries, {h: tasks[h].frame for h in tasks})
+                             "start": spec.start, "sim": sim})  # fmt: skip
     metrics = _metrics(log, spec, duration_scale)
+    metrics["sim"], metrics["stopped"] = sim, logs[-1].meta.get("stopped")
+    frames = {h: tasks[h].frame for h in tasks}
+    if plant is None:
+        poses, physics = _object_poses(robot, log, spec.objects, carries, frames), None
+    else:
+        physics = physics_records(plant, log, frames)
+        poses = physics_poses(spec.objects, physics)
+        metrics.update(physics_metrics(plant, physics))
     if collision_model is not None:
         masks = [(model, log.phase_mask(name)) for name, model in phase_models]
         metrics.update(closest_approach(masks, log, spec.collision.safety))
         metrics["collision_pairs"] = collision_model.summary()
-    return ScenarioRun(spec, backend, log, metrics, poses, time.perf_counter() - start_wall)
+    wall = time.perf_counter() - start_wall
+    if plant is not None:  # simulated time per wall second, the controller's time included
+        metrics["real_time_factor"] = len(log) * spec.dt / wall
+    return ScenarioRun(spec, backend, log, metrics, poses, wall, physics)
+
+
+def _chain(robot: Robot, phase: PhaseSpec, tasks: dict[str, FrameTask],
+           starts: dict[str, np.ndarray]) -> list[RelativeFrameTask]:  # fmt: skip
+    """A closed-chain phase's relative pose task (the secondary hand in the primary's frame,
+    held where the phase starts), for a level above the hands: the grasp is never traded."""
+    if not phase.closed_chain:
+        return []
+    secondary = next(h for h in phase.hands if h != phase.primary)
+    chain = RelativeFrameTask(robot, tasks[phase.primary].frame, tasks[secondary].frame,
+                              name="closed_chain", kp=tasks[phase.primary].kp[0])  # fmt: skip
+    chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
+    return [chain]
+
+
+def _callback(bar, on_step, on_objects, plant, offset: float, done: int):
+    """A phase's step callback: the progress bar, ``on_step`` with the run's step and time,
+    and ``on_objects`` with the plant's objects (a physics run)."""
+
+    def callback(k: int, t: float, q: np.ndarray) -> None:
+        if bar is not None:
+            bar.update(1)
+        if on_step is not None:
+            on_step(done + k, offset + t, q)
+        if on_objects is not None:
+            on_objects(plant.object_poses())
+
+    return callback
+
+
+def _plant(spec: ScenarioSpec, robot: Robot, sim: str, settings: SimSettings | None):
+    """The physics plant of a ``sim="mujoco"`` run (None for ``"kinematic"``), with a weld
+    for every (object, hand) a phase carries."""
+    if sim == "kinematic":
+        return None
+    if sim != "mujoco":
+        raise ConfigError(f"unknown sim {sim!r}: expected 'kinematic' or 'mujoco'")
+    try:
+        from wholebody.sim import MujocoPlant
+    except ImportError as exc:  # the sim extra
+        raise ConfigError(f'physics runs need MuJoCo: pip install "wholebody[sim]" ({exc})'
+                          ) from None  # fmt: skip
+    frames = {h: s.frame for h, s in spec.hands.items()}
+    grasps = {(o, frames[h]) for phase in spec.phases for h, o in _carried(phase).items()}
+    return MujocoPlant(robot, spec.objects.values(), sorted(grasps),
+                       settings or robot.sim_settings)  # fmt: skip
+
+
+def _carried(phase: PhaseSpec) -> dict[str, str]:
+    """Hand -> the object it holds in ``phase``: the hand whose ``carry`` names it and, in a
+    closed-chain phase, the chain's other hand too (both hands grip a carried panel)."""
+    held = {h: hp.carry for h, hp in phase.hands.items() if hp.carry}
+    if phase.closed_chain and held:
+        obj = next(iter(held.values()))
+        held.update({h: obj for h in phase.hands if h not in held})
+    return held
+
+
+def _grips(phase: PhaseSpec, tasks: dict[str, FrameTask]) -> list[tuple[str, str]]:
+    """The (object, hand frame) welds on during ``phase``."""
+    return [(obj, tasks[h].frame.name) for h, obj in _carried(phase).items()]
 
 
 def _collision(
@@ -487,6 +561,8 @@ def _metrics(log: RunLog, spec: ScenarioSpec, duration_scale: float) -> dict:
     m["phases"] = {}
     chain_max = 0.0
     for phase in spec.phases:
+        if phase.name not in log.meta["phases"]:  # a run stopped before it
+            continue
         mask = log.phase_mask(phase.name)
         entry: dict = {"mae_m": {}, "mse_m2": {}}
         for hand, hp in phase.hands.items():

@@ -51,6 +51,8 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     position = [1.72, 0.0, 0.42]       # centre (m, world)
     obstacle = false                   # true: phases may avoid it
     margin = 0.0                       # m added around it for avoidance
+    mass = 2.0                         # kg, physics runs only: a free body of uniform
+                                       # density (without: fixed in the world)
     note = "..."                       # optional provenance / decisions
 
     [collision]                        # optional: wholebody.tasks.CollisionAvoidance
@@ -149,6 +151,8 @@ class ObjectSpec:
     obstacle: bool = False
     margin: float = 0.0
     note: str = ""
+    mass: float | None = None
+    """kg, for physics runs: a free body of uniform density (None: fixed in the world)."""
 
 
 @dataclass(frozen=True)
@@ -397,7 +401,8 @@ def _objects(r: TomlReader, raw: Any) -> dict[str, ObjectSpec]:
 def _object(r: TomlReader, table: Any, where: str) -> ObjectSpec:
     if not isinstance(table, dict):
         raise r.fail(where, "expected a table")
-    keys = ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note")
+    keys = ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note",
+            "mass")  # fmt: skip
     r.only(table, where, keys)
     kind = r.string(table, "kind", where, choices=KINDS)
     obj = ObjectSpec(
@@ -410,6 +415,7 @@ def _object(r: TomlReader, table: Any, where: str) -> ObjectSpec:
         obstacle=r.boolean(table, "obstacle", where, default=False),
         margin=r.number(table, "margin", where, default=0.0),
         note=r.string(table, "note", where, default=""),
+        mass=r.number(table, "mass", where, positive=True) if "mass" in table else None,
     )
     if kind == "box" and min(obj.size) <= 0:
         raise r.fail(f"{where}.size", f"box edges must be > 0 m, got {list(obj.size)}")

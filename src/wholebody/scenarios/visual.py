@@ -64,6 +64,11 @@ class LiveView:
         self.collision, self.influence, self.safety = collision, influence, safety
         """With a collision model, each drawn frame also shows the closest pairs within
         ``influence`` (m): :meth:`Scene.closest_pairs`."""
+        self._objects: dict[str, np.ndarray] = {}
+
+    def update_objects(self, poses: dict[str, np.ndarray]) -> None:
+        """The objects' poses (a physics run's ``on_objects``), drawn with the next frame."""
+        self._objects = poses
 
     def __call__(self, k: int, t: float, q: np.ndarray) -> None:
         if self._start is None:
@@ -71,6 +76,8 @@ class LiveView:
         if k % self.every:
             return
         self.scene.show(q)
+        for name, pose in self._objects.items():
+            self.scene.move(f"scene/props/{name}", pose)
         if self.collision is not None:
             state = self.collision.robot.update(q)
             self.scene.closest_pairs(self.collision.distances(state, self.influence),

@@ -1,0 +1,73 @@
+"""``robot.toml [sim]``: what a physics run adds to a robot's URDF (:mod:`wholebody.sim`).
+
+Kept apart from the simulator so that reading a robot needs no MuJoCo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from wholebody.errors import ModelError
+
+__all__ = ["SimSettings"]
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """What the physics run adds to a robot's URDF (``robot.toml [sim]``).
+
+    Attributes
+    ----------
+    timestep
+        Physics step (s); the control period must be a whole number of them.
+    servo_hz
+        Bandwidth (Hz) of each joint's velocity servo: ``kp = w^2``, ``kv = 2 zeta w`` with
+        ``w = 2 pi servo_hz``, through the robot's inertia ``M(q)``
+        (:class:`wholebody.sim.MujocoPlant`).
+    damping_ratio
+        ``zeta`` of the servos.
+    armature
+        Rotor inertia reflected at each joint (kg m^2, kg for a prismatic joint).
+    damping
+        Viscous friction of each joint (N m s/rad, N s/m), not compensated by the servo.
+    effort_scale
+        Factor on every effort limit (1: the URDF's).
+    gravity_compensation
+        The servos add the model's gravity and Coriolis torques of the robot (not of a
+        carried object, which the servo does not know).
+    stall_time
+        A joint held at its torque limit this long (s) stops the run, reported.
+    base_force, base_torque
+        Limits (N, N m) of a planar base without wheels (a directly actuated base), and
+        of a wheeled base along a direction its wheels do not drive (a differential base's
+        sideways force: the wheels' grip).
+    """
+
+    timestep: float = 0.001
+    servo_hz: float = 25.0
+    damping_ratio: float = 1.0
+    armature: float = 0.01
+    damping: float = 0.1
+    effort_scale: float = 1.0
+    gravity_compensation: bool = True
+    stall_time: float = 0.25
+    base_force: float = 1000.0
+    base_torque: float = 300.0
+
+    def __post_init__(self) -> None:
+        for name in ("timestep", "servo_hz", "damping_ratio", "effort_scale", "stall_time",
+                     "base_force", "base_torque"):  # fmt: skip
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ModelError(f"sim setting {name} must be a finite number > 0, got {value!r}")
+        for name in ("armature", "damping"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
+                raise ModelError(f"sim setting {name} must be a number >= 0, got {value!r}")
+
+    @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        """The setting names (``robot.toml [sim]``'s keys)."""
+        return tuple(f.name for f in fields(cls))

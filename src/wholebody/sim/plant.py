@@ -1,0 +1,373 @@
+"""MuJoCo physics in the control loop: the controller's velocities through joint servos.
+
+Each control period the controller commands actuated velocities ``u``; the plant turns them
+into model velocities ``v = A u`` (a planar base's twist rotated into the world by the
+simulated yaw at every physics step) and runs ``dt / timestep`` physics steps in which every
+degree of freedom of the robot follows its velocity through a **PI velocity servo with the
+robot's inertia** (an inverse-dynamics joint servo, as a torque-controlled robot runs it)::
+
+    tau = M(q) (kv (v - qd) + kp s) + b(q, qd),      s' = v - qd   (the setpoint lag)
+
+with ``kv = 2 zeta w``, ``kp = w^2`` (``w = 2 pi servo_hz``): every joint answers like a
+critically damped second-order system of bandwidth ``servo_hz`` whatever the posture (gains
+on the joint's own inertia alone went unstable where two axes align and the inertia a joint
+sees collapses). Each torque is clamped at the joint's limit, a wheeled base's force so that
+no wheel exceeds its own (``s`` stops growing while clamped and never asks more than the
+limit at the start posture's inertia); ``b`` is the robot's gravity and Coriolis torque from
+the model when ``gravity_compensation``. ``M`` and ``b`` are the robot's own: a carried
+object's weight and the grasp's forces are not in them, the servo's lag holds them. Velocity
+commands are ramped over the period from the last one (first-order hold), as a drive
+interpolates its setpoints. The controller then reads the simulated configuration, not its
+own integration.
+
+Per control period the plant records the applied torque's peak, the joints that saturated,
+every grasp's force on its object, the contacts and the free objects' poses
+(:class:`PhysicsLog`). A joint
+held at its limit for ``stall_time`` sets :attr:`MujocoPlant.stop_reason`, which ends the
+run with the joint, the torque it asked for and its limit, rather than letting it diverge.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from wholebody.errors import DimensionError, ModelError
+from wholebody.robot import Robot
+from wholebody.robot.sim import SimSettings
+from wholebody.sim.world import World, build_world
+
+if TYPE_CHECKING:
+    from wholebody.scenarios.spec import ObjectSpec
+
+__all__ = ["MujocoPlant", "PhysicsLog"]
+
+
+@dataclass
+class PhysicsLog:
+    """Per control period (rows), in the robot's velocity order (Pinocchio ``nv``; a planar
+    root's three are world x, y, yaw).
+
+    Attributes
+    ----------
+    torque_peak
+        (N, nv) peak |applied torque| over the period's physics steps (N m, N).
+    demand_peak
+        (N, nv) peak |torque the servo asked for| (above the limit when saturated).
+    saturated
+        (N, nv) whether the joint was at its limit in the period.
+    wheel_torque_peak
+        (N, wheels) peak |wheel torque| that gives the planar base's force (N m, ``B^T W``;
+        empty without wheels). The wheels' own joints only spin in the model.
+    grasp_force
+        ``(object, hand frame)`` -> (N, 3) force of that grasp on the object at the
+        period's end (N, world; zero while not grasping).
+    object_poses
+        Free object -> (N, 4, 4) pose at the start of the period (world).
+    contacts
+        ``"shape|object"`` -> ``[first time (s), peak normal force (N)]`` of every contact of
+        a robot shape with a fixed object (free objects do not touch the robot) and of a
+        held object with anything, sampled at the periods' ends.
+    """
+
+    torque_peak: list[np.ndarray] = field(default_factory=list)
+    demand_peak: list[np.ndarray] = field(default_factory=list)
+    saturated: list[np.ndarray] = field(default_factory=list)
+    wheel_torque_peak: list[np.ndarray] = field(default_factory=list)
+    grasp_force: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict)
+    object_poses: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    contacts: dict[str, list[float]] = field(default_factory=dict)
+
+    def arrays(self) -> dict[str, object]:
+        """The records as arrays."""
+        return {
+            "torque_peak": np.array(self.torque_peak),
+            "demand_peak": np.array(self.demand_peak),
+            "saturated": np.array(self.saturated),
+            "wheel_torque_peak": np.array(self.wheel_torque_peak),
+            "grasp_force": {k: np.array(v) for k, v in self.grasp_force.items()},
+            "object_poses": {k: np.array(v) for k, v in self.object_poses.items()},
+            "contacts": {k: list(v) for k, v in self.contacts.items()},
+        }
+
+
+class MujocoPlant:
+    """A robot and objects in MuJoCo, stepped by a controller's velocity commands.
+
+    ``plant.step(q, u, dt)`` has the signature of :meth:`Robot.integrate` (``q`` is
+    ignored: the state is the simulator's) and returns the simulated configuration; give the
+    plant to :class:`~wholebody.control.Controller` (``plant=``). ``grasps``: the
+    ``(object, hand frame)`` pairs that may be welded (:meth:`hold`).
+    """
+
+    def __init__(self, robot: Robot, objects: Iterable[ObjectSpec] = (),
+                 grasps: Iterable[tuple[str, str]] = (),
+                 settings: SimSettings | None = None) -> None:  # fmt: skip
+        self.robot = robot
+        self.settings = settings or SimSettings()
+        self.world: World = build_world(robot, objects, grasps, self.settings)
+        self.model = self.world.model
+        self.data = mujoco.MjData(self.model)
+        self._maps()
+        self.stop_reason: str | None = None
+        self.log = PhysicsLog()
+        self.reset(robot.neutral())
+
+    # ------------------------------------------------------------------ configuration maps
+    def _maps(self) -> None:
+        """Index arrays between Pinocchio's ``q`` and MuJoCo's ``qpos``."""
+        model, m = self.robot.model, self.model
+        scalar, cont, planar = [], [], []
+        for i, names in self.world.joints.items():
+            j = model.joints[i]
+            adr = [int(m.jnt_qposadr[m.joint(n).id]) for n in names]
+            if len(names) == 3:
+                planar.append((j.idx_q, *adr))
+            elif j.nq == 2:
+                cont.append((j.idx_q, adr[0]))
+            else:
+                scalar.append((j.idx_q, adr[0]))
+        self._scalar = np.array(scalar, dtype=int).reshape(-1, 2)
+        self._cont = np.array(cont, dtype=int).reshape(-1, 2)
+        self._planar = planar[0] if planar else None
+        self.planar = bool(planar)
+        """Whether the robot's root is a planar base (its first three velocities: world x,
+        y, yaw)."""
+        self._dofs = self.world.dofs
+        self._actuators = np.array([m.actuator(m.joint(m.dof_jntid[d]).name).id
+                                    for d in self._dofs])  # fmt: skip
+        self._A = np.asarray(self.robot.actuation)
+        base = self.robot.base
+        self._wheels = base.matrix if (planar and base.wheel_joints) else np.zeros((3, 0))
+        self._wheel_limit = (
+            min(self.world.effort[self.robot.model.joints[self.robot.model.getJointId(w)].idx_v]
+                for w in base.wheel_joints) if self._wheels.size else np.inf
+        )  # fmt: skip
+
+    def qpos(self, q: np.ndarray) -> np.ndarray:
+        """MuJoCo's robot positions of a Pinocchio configuration (objects untouched)."""
+        qpos = self.data.qpos.copy()
+        s, c = self._scalar, self._cont
+        qpos[s[:, 1]] = q[s[:, 0]]
+        qpos[c[:, 1]] = np.arctan2(q[c[:, 0] + 1], q[c[:, 0]])
+        if self._planar is not None:
+            iq, ax, ay, ayaw = self._planar
+            qpos[[ax, ay]] = q[iq : iq + 2]
+            qpos[ayaw] = np.arctan2(q[iq + 3], q[iq + 2])
+        return qpos
+
+    def configuration(self) -> np.ndarray:
+        """The simulated robot's Pinocchio configuration."""
+        qpos, q = self.data.qpos, np.empty(self.robot.nq)
+        s, c = self._scalar, self._cont
+        q[s[:, 0]] = qpos[s[:, 1]]
+        q[c[:, 0]], q[c[:, 0] + 1] = np.cos(qpos[c[:, 1]]), np.sin(qpos[c[:, 1]])
+        if self._planar is not None:
+            iq, ax, ay, ayaw = self._planar
+            q[iq : iq + 4] = qpos[ax], qpos[ay], np.cos(qpos[ayaw]), np.sin(qpos[ayaw])
+        return q
+
+    # ------------------------------------------------------------------ running
+    def reset(self, q: np.ndarray) -> None:
+        """Robot at ``q`` and at rest, objects where the model puts them, grasps off, the
+        servos' anti-windup bound from the inertia at ``q``, the log emptied."""
+        q = self.robot.check_configuration(q)
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = self.qpos(q)
+        self.data.eq_active[:] = 0
+        mujoco.mj_forward(self.model, self.data)
+        w = 2 * np.pi * self.settings.servo_hz
+        self.kp, self.kv = w * w, 2 * self.settings.damping_ratio * w
+        M = np.empty((self.model.nv, self.model.nv))
+        mujoco.mj_fullM(self.model, self.data, M)
+        self._lag_bound = self.world.effort / (self.kp * np.diag(M)[self._dofs])
+        self._acc, self._force = np.zeros(self.model.nv), np.zeros(self.model.nv)
+        self.lag = np.zeros(self.robot.nv)
+        self._command = np.zeros(self.robot.nv)
+        self._stalled = np.zeros(self.robot.nv, dtype=int)
+        self.stop_reason = None
+        self.log = PhysicsLog()
+        self.time = 0.0
+
+    def hold(self, grasps: Iterable[tuple[str, str]]) -> None:
+        """Weld each ``(object, hand frame)`` of ``grasps`` where they are now (a weld on
+        already stays as it is); every other grasp released."""
+        grasps = set(grasps)
+        unknown = sorted(grasps - set(self.world.welds))
+        if unknown:
+            raise ModelError(f"no grasp {unknown[0]} in the model; its grasps: "
+                             f"{list(self.world.welds)}")  # fmt: skip
+        for (name, frame), eq in self.world.welds.items():
+            on = (name, frame) in grasps
+            if on and not self.data.eq_active[eq]:
+                self._weld_here(eq, self.world.hand_bodies[frame], self.world.objects[name])
+            self.data.eq_active[eq] = int(on)
+
+    def _weld_here(self, eq: int, hand: int, obj: int) -> None:
+        """The weld's relative pose set to the bodies' current one (no jump when it starts)."""
+        d = self.data
+        R_h, R_o = d.xmat[hand].reshape(3, 3), d.xmat[obj].reshape(3, 3)
+        pos = R_h.T @ (d.xpos[obj] - d.xpos[hand])
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, (R_h.T @ R_o).ravel())
+        self.model.eq_data[eq, :3] = 0.0  # anchor: the object's origin
+        self.model.eq_data[eq, 3:6] = pos
+        self.model.eq_data[eq, 6:10] = quat
+        self.model.eq_data[eq, 10] = 1.0
+
+    def step(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """Run the physics for ``dt`` (s) under the command ``u``; the configuration reached."""
+        del q  # the state is the simulator's
+        n = round(dt / self.settings.timestep)
+        if n < 1 or abs(n * self.settings.timestep - dt) > 1e-9:
+            raise DimensionError(f"the control period {dt} s must be a whole number of physics "
+                                 f"steps of {self.settings.timestep} s")  # fmt: skip
+        v = self._A @ np.asarray(u, dtype=float)
+        m, d = self.model, self.data
+        self._record_poses()
+        peak, demand = np.zeros(self.robot.nv), np.zeros(self.robot.nv)
+        wheels = np.zeros(self._wheels.shape[1])
+        saturated = np.zeros(self.robot.nv, dtype=bool)
+        previous, self._command = self._command, v
+        for i in range(n):
+            mujoco.mj_step1(m, d)
+            tau, asked = self._servo(previous + (v - previous) * ((i + 1) / n))
+            at_limit = np.abs(asked) > self.world.effort
+            if wheels.size:  # the base's force as its wheels can give it
+                at_limit[:3] |= self._wheel_limited(tau)
+                np.maximum(wheels, np.abs(self._wheel_torques(tau)), out=wheels)
+            d.ctrl[self._actuators] = tau
+            np.maximum(peak, np.abs(tau), out=peak)
+            np.maximum(demand, np.abs(asked), out=demand)
+            saturated |= at_limit
+            self._stalled = np.where(at_limit, self._stalled + 1, 0)
+            mujoco.mj_step2(m, d)
+        self.time += n * self.settings.timestep
+        self._record(peak, demand, saturated, wheels)
+        self._check(demand)
+        return self.configuration()
+
+    def _wheel_limited(self, tau: np.ndarray) -> bool:
+        """Scale the planar base's force and torque ``tau[:3]`` (in place) so that no wheel
+        needs more than its torque limit; whether it had to."""
+        excess = np.abs(self._wheel_torques(tau)).max() / self._wheel_limit
+        if excess <= 1.0:
+            return False
+        tau[:3] /= excess
+        return True
+
+    def _wheel_torques(self, tau: np.ndarray) -> np.ndarray:
+        """The wheel torques (N m) that give the planar base's force and torque ``tau[:3]``
+        (world x, y, yaw): ``B^T W`` with ``W`` in the base frame (rolling without slip)."""
+        yaw = self.data.qpos[self._planar[3]]  # type: ignore[index]
+        c, s = np.cos(yaw), np.sin(yaw)
+        wrench = np.array([c * tau[0] + s * tau[1], -s * tau[0] + c * tau[1], tau[2]])
+        return self._wheels.T @ wrench
+
+    def _servo(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The clamped torque of every robot dof and the torque asked for."""
+        d, h = self.data, self.settings.timestep
+        target = v.copy()
+        if self._planar is not None:  # the base twist (base frame) into the world
+            yaw = d.qpos[self._planar[3]]
+            c, s = np.cos(yaw), np.sin(yaw)
+            target[0], target[1] = c * v[0] - s * v[1], s * v[0] + c * v[1]
+        error = target - d.qvel[self._dofs]
+        self._acc[self._dofs] = self.kv * error + self.kp * self.lag
+        mujoco.mj_mulM(self.model, d, self._force, self._acc)  # M(q) acc, sparse
+        asked = self._force[self._dofs]
+        if self.settings.gravity_compensation:
+            asked += d.qfrc_bias[self._dofs]
+        limit = self.world.effort
+        tau = np.clip(asked, -limit, limit)
+        free = np.abs(asked) <= limit
+        self.lag = np.where(free, self.lag + error * h, self.lag)
+        np.clip(self.lag, -self._lag_bound, self._lag_bound, out=self.lag)
+        return tau, asked
+
+    def _record(self, peak: np.ndarray, demand: np.ndarray, saturated: np.ndarray,
+                wheels: np.ndarray) -> None:  # fmt: skip
+        log = self.log
+        log.torque_peak.append(peak)
+        log.demand_peak.append(demand)
+        log.saturated.append(saturated)
+        log.wheel_torque_peak.append(wheels)
+        for key, eq in self.world.welds.items():
+            log.grasp_force.setdefault(key, []).append(self._grasp_force(eq, key[0]))
+        self._record_contacts()
+
+    def _record_contacts(self) -> None:
+        """The contacts now of the robot and of the objects it holds: first time and peak
+        normal force per pair."""
+        m, d = self.model, self.data
+        held = {self.world.objects[o] for (o, _), eq in self.world.welds.items()
+                if d.eq_active[eq]}  # fmt: skip
+        wrench = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            a, b = int(c.geom[0]), int(c.geom[1])
+            if not self._touches(a, held):
+                a, b = b, a
+            if not self._touches(a, held):
+                continue
+            mujoco.mj_contactForce(m, d, i, wrench)
+            key = f"{m.geom(a).name}|{m.geom(b).name}"
+            entry = self.log.contacts.setdefault(key, [self.time, 0.0])
+            entry[1] = max(entry[1], abs(float(wrench[0])))
+
+    def _touches(self, geom: int, held: set[int]) -> bool:
+        """Whether a contact of ``geom`` is reported: a robot shape's, or a held object's."""
+        m = self.model
+        return m.geom_contype[geom] == 1 or int(m.geom_bodyid[geom]) in held
+
+    def object_poses(self) -> dict[str, np.ndarray]:
+        """The free objects' poses now (4x4, world)."""
+        out = {}
+        for name, body in self.world.objects.items():
+            T = np.eye(4)
+            T[:3, :3] = self.data.xmat[body].reshape(3, 3)
+            T[:3, 3] = self.data.xpos[body]
+            out[name] = T
+        return out
+
+    def _record_poses(self) -> None:
+        """The free objects' poses at the start of a control period (the controller's
+        ``q`` of that step)."""
+        for name, T in self.object_poses().items():
+            self.log.object_poses.setdefault(name, []).append(T)
+
+    def _grasp_force(self, eq: int, obj: str) -> np.ndarray:
+        """Force (N, world) of weld ``eq`` on the object: its constraint rows' ``J^T f`` on
+        the object's free joint's translation."""
+        d, m = self.data, self.model
+        if not d.eq_active[eq]:
+            return np.zeros(3)
+        rows = (d.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY) & (d.efc_id == eq)
+        force = np.where(rows, d.efc_force, 0.0)
+        qfrc = np.zeros(m.nv)
+        mujoco.mj_mulJacTVec(m, d, qfrc, force)
+        dof = m.jnt_dofadr[m.body_jntadr[self.world.objects[obj]]]
+        return qfrc[dof : dof + 3].copy()
+
+    def _check(self, demand: np.ndarray) -> None:
+        """:attr:`stop_reason` when a joint stalls at its limit or the state is not finite."""
+        if not np.isfinite(self.data.qpos).all() or not np.isfinite(self.data.qvel).all():
+            self.stop_reason = f"the simulation diverged at t = {self.time:.3f} s (not finite)"
+            return
+        stall = round(self.settings.stall_time / self.settings.timestep)
+        stalled = np.flatnonzero(self._stalled >= stall)
+        if stalled.size:
+            k = int(stalled[np.argmax(demand[stalled] / self.world.effort[stalled])])
+            self.stop_reason = (
+                f"actuator limit too low: {self.dof_name(k)} asked for {demand[k]:.1f} "
+                f"(limit {self.world.effort[k]:.1f}, N m or N) for "
+                f"{self.settings.stall_time:g} s, at t = {self.time:.2f} s"
+            )
+
+    def dof_name(self, k: int) -> str:
+        """The name of the robot's ``k``-th velocity (Pinocchio order)."""
+        return self.model.joint(self.model.dof_jntid[self._dofs[k]]).name

@@ -76,7 +76,7 @@ def main() -> None:
     args = parser.parse_args()
     cases = [(n, b, s) for n in args.scenarios for b in ("projection", "hqp")
              for s in ("kinematic", "mujoco")]  # fmt: skip
-    for case in cases[:2]:  # warm: kernels loaded, first-call costs paid
+    for case in cases[:4]:  # warm, both backends: kernels loaded, first-call costs paid
         measure(*case)
     results: dict[tuple[str, str, str], list[dict[str, float]]] = {c: [] for c in cases}
     for _ in range(args.rounds):

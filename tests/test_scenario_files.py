@@ -42,7 +42,9 @@ def test_paper_numbers_are_in_the_files():
     obst = load_scenario(tasks_dir() / "obstacle_avoidance.toml")
     for c in ("cylinder_1", "cylinder_2"):
         assert obst.objects[c].radius == 0.04 and obst.objects[c].height == 0.2
-    assert obst.objects["cylinder_1"].position == (1.755, -0.4, 1.09)  # 3 cm back, said why
+    printed = (tasks_dir() / "obstacle_avoidance.toml").read_text()
+    assert "(1.725, -0.4, 1.09)" in printed  # the paper's place, in the file's header
+    assert obst.objects["cylinder_1"].position == (1.755, -0.4, 1.09)  # moved 3 cm: said why
     assert "printed at x = 1.725" in obst.objects["cylinder_1"].note
 
 

@@ -39,6 +39,11 @@ class SimSettings:
         carried object, which the servo does not know).
     stall_time
         A joint held at its torque limit this long (s) stops the run, reported.
+    friction
+        Sliding friction coefficient of every contact (robot shapes, objects, floor).
+    contact_time
+        Time constant (s) of the contacts' softness (MuJoCo's ``solref``, critically
+        damped): how fast a penetration is pushed out; at least two physics steps.
     base_force, base_torque
         Limits (N, N m) of a planar base without wheels (a directly actuated base), and
         of a wheeled base along a direction its wheels do not drive (a differential base's
@@ -53,15 +58,20 @@ class SimSettings:
     effort_scale: float = 1.0
     gravity_compensation: bool = True
     stall_time: float = 0.25
+    friction: float = 1.0
+    contact_time: float = 0.005
     base_force: float = 1000.0
     base_torque: float = 300.0
 
     def __post_init__(self) -> None:
         for name in ("timestep", "servo_hz", "damping_ratio", "effort_scale", "stall_time",
-                     "base_force", "base_torque"):  # fmt: skip
+                     "friction", "contact_time", "base_force", "base_torque"):  # fmt: skip
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ModelError(f"sim setting {name} must be a finite number > 0, got {value!r}")
+        if self.contact_time < 2 * self.timestep:
+            raise ModelError(f"sim setting contact_time ({self.contact_time} s) must be at "
+                             f"least two physics steps ({2 * self.timestep} s)")  # fmt: skip
         for name in ("armature", "damping"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):

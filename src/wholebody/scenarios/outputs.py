@@ -76,7 +76,7 @@ def physics_arrays(run: ScenarioRun) -> dict[str, np.ndarray]:
     ``torque/GROUP`` (N, joints; N m) and ``torque_limit/GROUP``; per grasp
     ``grasp_force/OBJECT/FRAME`` (N, 3; N, world); ``squeeze/OBJECT`` (N; N, NaN unless two
     hands hold it); ``pose/OBJECT`` (N, 4, 4) of the free objects; ``saturated`` (N, nv)."""
-    p = run.physics or {}
+    p = run.physics
     out = {"t": run.log.t, "saturated": p["saturated"]}
     out.update({f"torque/{g}": v for g, v in p["group_torque"].items()})
     out.update({f"torque_limit/{g}": v for g, v in p["group_limit"].items()})
@@ -140,6 +140,9 @@ def comparison(runs: list[ScenarioRun]) -> list[dict]:
                 "solver_failures": m["solver_failures"],
                 "limit_violations": m["limit_violations"],
                 "closed_chain_error_max_m": m.get("closed_chain_error_max_m", 0.0),
+                "closed_chain": any(
+                    "closed_chain_error_max_m" in e for e in m.get("phases", {}).values()
+                ),
                 "sim": m.get("sim", "kinematic"),
                 "max_tracking_error_m": max(m["max_tracking_error_m"].values(), default=0.0),
                 "torque_peak_fraction": max(
@@ -184,7 +187,8 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
         cells += [str(r["solver_failures"]), str(r["limit_violations"])]
         if physics:
             cells += [f"{1e3 * r['max_tracking_error_m']:.2f}",
-                      f"{1e3 * r['closed_chain_error_max_m']:.2f}",
+                      f"{1e3 * r['closed_chain_error_max_m']:.2f}" if r["closed_chain"]
+                      else "–",
                       f"{100 * r['torque_peak_fraction']:.0f}"
                       + (" (stopped)" if r.get("stopped") else "")]  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")

@@ -65,7 +65,8 @@ def physics_records(plant, log: RunLog, frames: Mapping[str, Frame]) -> dict:
 
 def physics_metrics(plant, rec: dict) -> dict:
     """``torque_peak_nm`` and ``torque_peak_fraction`` (of the limit) per group,
-    ``base_force_peak_n`` and ``base_torque_peak_nm``, ``torque_saturated`` (joint -> share
+    ``base_force_peak_n`` (the largest world x or y force on a planar base, N) and
+    ``base_torque_peak_nm`` (its yaw torque), ``torque_saturated`` (joint -> share
     of steps at the limit), ``grasp_force_peak_n`` (object -> hand -> N),
     ``squeeze_force_n`` (object -> peak |s| and mean s, N) and ``contacts`` (each robot shape
     that touched an object: when first and how hard)."""

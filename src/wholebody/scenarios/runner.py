@@ -86,12 +86,16 @@ class ScenarioRun:
     """A physics run's records (:meth:`wholebody.sim.PhysicsLog.arrays`), else None."""
 
 
-def make_solver(backend: str) -> Solver:
-    """The solver of a backend name (``projection``, ``pinv``, ``hqp``)."""
+def make_solver(backend: str, engine: str | None = None) -> Solver:
+    """The solver of a backend name (``projection``, ``pinv``, ``hqp``); ``engine``: the
+    hierarchical QP's QP engine (``daqp`` by default, ``proxsuite``, ``osqp`` or any
+    qpsolvers engine; only for ``hqp``)."""
     if backend in ("projection", "pinv"):
+        if engine is not None:
+            raise ConfigError(f"engine {engine!r} is for the hqp backend, not {backend!r}")
         return ProjectionSolver()
     if backend == "hqp":
-        return HierarchicalQPSolver()
+        return HierarchicalQPSolver() if engine is None else HierarchicalQPSolver(engine)
     raise ConfigError(f"unknown backend {backend!r}: expected projection, pinv or hqp")
 
 
@@ -233,6 +237,7 @@ def run_scenario(
     sim: str = "kinematic",
     sim_settings: SimSettings | None = None,
     on_objects: Callable[[dict[str, np.ndarray]], None] | None = None,
+    engine: str | None = None,
 ) -> ScenarioRun:
     """Run every phase of a scenario with a backend (default: the scenario's).
 
@@ -243,6 +248,7 @@ def run_scenario(
     carried objects welded to their hands, both hands of a closed chain; a run the plant
     stops ends there, its reason in ``metrics["stopped"]``); ``on_objects(poses)`` is called
     after every step of a physics run with the free objects' poses (4x4, world).
+    ``engine``: the hierarchical QP's QP engine (:func:`make_solver`).
     """
     backend = backend or spec.backend
     robot = scenario_robot(spec)
@@ -256,7 +262,7 @@ def run_scenario(
     collision, collision_model = _collision(spec, robot)
     held: dict[str, tuple[str, np.ndarray]] = {}  # carried object -> (frame, pose there)
     phase_models: list[tuple[str, CollisionModel]] = []
-    solver = make_solver(backend)
+    solver = make_solver(backend, engine)
     planners = _Planners(spec)
     q = start_configuration(spec, robot)
     if plant is not None:
@@ -362,10 +368,10 @@ def _callback(bar, on_step, on_objects, plant, offset: float, done: int):
     def callback(k: int, t: float, q: np.ndarray) -> None:
         if bar is not None:
             bar.update(1)
+        if on_objects is not None:  # before on_step: the frame it draws shows them
+            on_objects(plant.object_poses())
         if on_step is not None:
             on_step(done + k, offset + t, q)
-        if on_objects is not None:
-            on_objects(plant.object_poses())
 
     return callback
 

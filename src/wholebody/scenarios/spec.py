@@ -109,6 +109,7 @@ __all__ = [
     "ScenarioSpec",
     "StackSpec",
     "load_scenario",
+    "parse_scenario",
 ]
 
 BACKENDS = ("projection", "pinv", "hqp")
@@ -245,8 +246,15 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         Naming the file, the key and what was expected.
     """
     path = Path(path)
+    return parse_scenario(load_toml(path, "scenario"), path)
+
+
+def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
+    """Check a scenario's content (a parsed TOML document) as :func:`load_scenario` checks a
+    file; ``path`` names it in errors and resolves its relative paths (a sweep's cases are
+    their scenario file with keys changed)."""
+    path = Path(path)
     r = TomlReader(path)
-    data = load_toml(path, "scenario")
     r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases",
                       "collision"))  # fmt: skip
 

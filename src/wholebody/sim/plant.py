@@ -197,6 +197,7 @@ class MujocoPlant:
         """Weld each ``(object, hand frame)`` of ``grasps`` where they are now (a weld on
         already stays as it is); every other grasp released."""
         grasps = set(grasps)
+        mujoco.mj_kinematics(self.model, self.data)
         unknown = sorted(grasps - set(self.world.welds))
         if unknown:
             raise ModelError(f"no grasp {unknown[0]} in the model; its grasps: "
@@ -204,8 +205,25 @@ class MujocoPlant:
         for (name, frame), eq in self.world.welds.items():
             on = (name, frame) in grasps
             if on and not self.data.eq_active[eq]:
-                self._weld_here(eq, self.world.hand_bodies[frame], self.world.objects[name])
+                gap = self._reach(frame, name)
+                if gap > 0:
+                    self.stop_reason = (
+                        f"grasp of {name} failed at t = {self.time:.2f} s: "
+                        f"{frame} is {gap * 1e3:.0f} mm out of reach"
+                    )
+                    on = False
+                else:
+                    self._weld_here(eq, self.world.hand_bodies[frame], self.world.objects[name])
             self.data.eq_active[eq] = int(on)
+
+    def _reach(self, frame: str, name: str, margin: float = 0.05) -> float:
+        """How far (m) the hand's frame is beyond the object's bounding sphere plus
+        ``margin``: a grasp needs the hand at the object (0 or less)."""
+        obj = self.world.objects[name]
+        geom = int(self.model.body_geomadr[obj])
+        hand = self.robot.frame_pose(self.configuration(), frame)[:3, 3]
+        return float(np.linalg.norm(hand - self.data.xpos[obj]) - self.model.geom_rbound[geom]
+                     - margin)  # fmt: skip
 
     def _weld_here(self, eq: int, hand: int, obj: int) -> None:
         """The weld's relative pose set to the bodies' current one (no jump when it starts)."""
@@ -220,8 +238,15 @@ class MujocoPlant:
         self.model.eq_data[eq, 10] = 1.0
 
     def step(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        """Run the physics for ``dt`` (s) under the command ``u``; the configuration reached."""
-        del q  # the state is the simulator's
+        """Run the physics for ``dt`` (s) under the command ``u`` from ``q``, which must be
+        the simulated configuration (:meth:`reset` a plant to start elsewhere); the
+        configuration reached. If MuJoCo finds the state unusable (a NaN or a huge value:
+        it then resets its data), the run stops there (:attr:`stop_reason`) and the
+        configuration before the step is returned."""
+        now = self.configuration()
+        if not np.allclose(np.asarray(q, dtype=float), now, atol=1e-6):
+            raise ModelError("the plant is not at the controller's configuration: call "
+                             "plant.reset(q0) before running from q0")  # fmt: skip
         n = round(dt / self.settings.timestep)
         if n < 1 or abs(n * self.settings.timestep - dt) > 1e-9:
             raise DimensionError(f"the control period {dt} s must be a whole number of physics "
@@ -233,12 +258,11 @@ class MujocoPlant:
         wheels = np.zeros(self._wheels.shape[1])
         saturated = np.zeros(self.robot.nv, dtype=bool)
         previous, self._command = self._command, v
+        warnings = self._warnings()
         for i in range(n):
             mujoco.mj_step1(m, d)
-            tau, asked = self._servo(previous + (v - previous) * ((i + 1) / n))
-            at_limit = np.abs(asked) > self.world.effort
-            if wheels.size:  # the base's force as its wheels can give it
-                at_limit[:3] |= self._wheel_limited(tau)
+            tau, asked, at_limit = self._servo(previous + (v - previous) * ((i + 1) / n))
+            if wheels.size:
                 np.maximum(wheels, np.abs(self._wheel_torques(tau)), out=wheels)
             d.ctrl[self._actuators] = tau
             np.maximum(peak, np.abs(tau), out=peak)
@@ -247,9 +271,21 @@ class MujocoPlant:
             self._stalled = np.where(at_limit, self._stalled + 1, 0)
             mujoco.mj_step2(m, d)
         self.time += n * self.settings.timestep
+        mujoco.mj_kinematics(m, d)  # the bodies' poses at the new state, not the last step's
         self._record(peak, demand, saturated, wheels)
+        if self._warnings() != warnings:
+            self.stop_reason = (f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
+                                f"found a bad position, velocity or acceleration)")  # fmt: skip
+            self.data.qpos[:] = self.qpos(now)
+            return now
         self._check(demand)
         return self.configuration()
+
+    def _warnings(self) -> tuple[int, ...]:
+        """MuJoCo's counts of unusable states (bad position, velocity, acceleration)."""
+        w, kinds = self.data.warning, mujoco.mjtWarning
+        bad = (kinds.mjWARN_BADQPOS, kinds.mjWARN_BADQVEL, kinds.mjWARN_BADQACC)
+        return tuple(int(w[k].number) for k in bad)
 
     def _wheel_limited(self, tau: np.ndarray) -> bool:
         """Scale the planar base's force and torque ``tau[:3]`` (in place) so that no wheel
@@ -268,8 +304,9 @@ class MujocoPlant:
         wrench = np.array([c * tau[0] + s * tau[1], -s * tau[0] + c * tau[1], tau[2]])
         return self._wheels.T @ wrench
 
-    def _servo(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The clamped torque of every robot dof and the torque asked for."""
+    def _servo(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The clamped torque of every robot dof, the torque asked for, and which are at
+        their limit (a wheeled base's three when its wheels limit it)."""
         d, h = self.data, self.settings.timestep
         target = v.copy()
         if self._planar is not None:  # the base twist (base frame) into the world
@@ -284,10 +321,12 @@ class MujocoPlant:
             asked += d.qfrc_bias[self._dofs]
         limit = self.world.effort
         tau = np.clip(asked, -limit, limit)
-        free = np.abs(asked) <= limit
-        self.lag = np.where(free, self.lag + error * h, self.lag)
+        at_limit = np.abs(asked) > limit
+        if self._wheels.size and self._wheel_limited(tau):  # as its wheels can push it
+            at_limit[:3] = True
+        self.lag = np.where(at_limit, self.lag, self.lag + error * h)
         np.clip(self.lag, -self._lag_bound, self._lag_bound, out=self.lag)
-        return tau, asked
+        return tau, asked, at_limit
 
     def _record(self, peak: np.ndarray, demand: np.ndarray, saturated: np.ndarray,
                 wheels: np.ndarray) -> None:  # fmt: skip
@@ -354,17 +393,18 @@ class MujocoPlant:
         return qfrc[dof : dof + 3].copy()
 
     def _check(self, demand: np.ndarray) -> None:
-        """:attr:`stop_reason` when a joint stalls at its limit or the state is not finite."""
-        if not np.isfinite(self.data.qpos).all() or not np.isfinite(self.data.qvel).all():
-            self.stop_reason = f"the simulation diverged at t = {self.time:.3f} s (not finite)"
-            return
+        """:attr:`stop_reason` when a joint stalls at its limit."""
         stall = round(self.settings.stall_time / self.settings.timestep)
         stalled = np.flatnonzero(self._stalled >= stall)
         if stalled.size:
             k = int(stalled[np.argmax(demand[stalled] / self.world.effort[stalled])])
+            slide = self.model.jnt_type[self.model.dof_jntid[self._dofs[k]]] == \
+                mujoco.mjtJoint.mjJNT_SLIDE  # fmt: skip
+            unit = "N" if slide else "N m"
+            wheels = " (or its wheels' limit)" if self.planar and k < 3 else ""
             self.stop_reason = (
-                f"actuator limit too low: {self.dof_name(k)} asked for {demand[k]:.1f} "
-                f"(limit {self.world.effort[k]:.1f}, N m or N) for "
+                f"actuator limit too low: {self.dof_name(k)} asked for {demand[k]:.1f} {unit} "
+                f"(limit {self.world.effort[k]:.1f} {unit}{wheels}) for "
                 f"{self.settings.stall_time:g} s, at t = {self.time:.2f} s"
             )
 

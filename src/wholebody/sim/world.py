@@ -16,6 +16,7 @@ is added here, from :class:`SimSettings`:
   ``effort_scale``), rotor inertia (``armature``) and viscous friction (``damping``);
 * the collision shapes of the URDF (meshes as their convex hulls) touch the scenario's
   fixed objects but not each other (the controller keeps links apart where a scenario asks);
+  every contact has the friction and softness of ``friction`` and ``contact_time``;
 * objects with a mass are free bodies of uniform density resting on what is under them (a
   floor at z = 0 catches anything dropped), objects without one are fixed; neither touches
   the robot: a grasp is a **weld** between the hand's body and the object, off until a
@@ -105,7 +106,8 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
         for n, jt, axis in zip(names, ("slide", "slide", "hinge"), ((1, 0, 0), (0, 1, 0),
                                (0, 0, 1)), strict=True):  # fmt: skip
             body.add_joint(name=n, type=getattr(mujoco.mjtJoint, f"mjJNT_{jt.upper()}"),
-                           axis=axis, damping=settings.damping)  # fmt: skip
+                           axis=axis, damping=settings.damping,
+                           armature=settings.armature)  # fmt: skip
         return names
     if kind in _SCALAR or kind == "RevoluteUnaligned":
         axis, jtype = _SCALAR.get(kind) or tuple(joint.extract().axis), mujoco.mjtJoint.mjJNT_HINGE
@@ -183,7 +185,7 @@ def _object_geom(parent, obj: ObjectSpec, contact: tuple[int, int], pos) -> None
     else:
         gtype, size = mujoco.mjtGeom.mjGEOM_SPHERE, [obj.radius, 0, 0]
     parent.add_geom(name=obj.name, type=gtype, size=size, pos=pos, contype=contact[0],
-                    conaffinity=contact[1], friction=[1.0, 0.005, 0.0001])  # fmt: skip
+                    conaffinity=contact[1])  # fmt: skip
 
 
 def _hand_body(robot: Robot, frame: str) -> str:
@@ -208,6 +210,10 @@ def build_world(
     spec.option.timestep = settings.timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER
     spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+    spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE  # every contact alike:
+    spec.option.o_friction = [settings.friction, settings.friction, 0.005, 1e-4, 1e-4]
+    spec.option.o_solref = [settings.contact_time, 1.0]
+    spec.option.o_margin = 0.0
     effort = _effort(robot, settings)
     joints = _add_robot(spec, robot, settings, effort)
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],

@@ -10,6 +10,7 @@ with the same one-line help stands in for it otherwise).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import textwrap
 from collections.abc import Sequence
@@ -362,6 +363,69 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
     demo.set_defaults(func=_demo)
 
 
+def _add_sweep_command(sub: argparse._SubParsersAction) -> None:
+    """``sweep``: a campaign's cases on local processes or Ray."""
+    sweep = sub.add_parser("sweep", help="run a campaign (a scenario with keys varied) on "
+                           "every core, or on a Ray cluster with --ray")  # fmt: skip
+    sweep.add_argument("campaign", metavar="CAMPAIGN", help="a campaign file (TOML) or a "
+                       "bundled one's name: carry_weights, panda_targets")  # fmt: skip
+    sweep.add_argument("--out", required=True, help="directory of the results: one file per "
+                       "case, results.csv, best.md, plots; a sweep started again on it runs "
+                       "only the missing cases")  # fmt: skip
+    sweep.add_argument("--workers", type=int, default=None,
+                       help="local processes (default: every core)")  # fmt: skip
+    sweep.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
+                       help="run the cases as Ray tasks: on the cluster at ADDRESS "
+                       "(HOST:PORT), or without it on a local Ray instance")  # fmt: skip
+    sweep.add_argument("--retry-failed", action="store_true",
+                       help="run the cases that failed before again")  # fmt: skip
+    sweep.set_defaults(func=_sweep)
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _campaign_path(name: str) -> Path:
+    """A campaign file, or the name of a bundled one (``tasks/campaigns``)."""
+    from wholebody.resources import tasks_dir
+
+    path = Path(name)
+    if path.is_file():
+        return path
+    bundled = tasks_dir() / "campaigns" / (name if name.endswith(".toml") else f"{name}.toml")
+    if bundled.is_file():
+        return bundled
+    names = ", ".join(sorted(p.stem for p in (tasks_dir() / "campaigns").glob("*.toml")))
+    raise ConfigError(f"no campaign {name!r}: expected a file or one of {names}")
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from wholebody.sweep import load_campaign, run_sweep
+
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    campaign = load_campaign(_campaign_path(args.campaign))
+    out = _output_dir(Path(args.out))
+    signal.signal(signal.SIGTERM, _terminated)  # a scheduler's stop: as a Ctrl-C
+    try:
+        result = run_sweep(campaign, out, workers=args.workers, ray=args.ray is not None,
+                           address=args.ray or None, retry_failed=args.retry_failed)  # fmt: skip
+    except KeyboardInterrupt:
+        done = len(list((out / "cases").glob("case_*.json")))
+        print(f"wholebody: interrupted: {done} finished cases are in {out / 'cases'} (and "
+              f"results.csv); the same command runs the others", file=sys.stderr)  # fmt: skip
+        return 130
+    print(
+        f"{campaign.name}: {result.cases} cases, {result.found} found finished in {out}, "
+        f"{result.ran} run now in {result.wall_time:.1f} s; {result.failed} failed"
+    )
+    print((out / "best.md").read_text())
+    for name, path in result.files.items():
+        print(f"  {name:8s} {path}")
+    return 1 if result.rows and result.failed == len(result.rows) else 0
+
+
 def _add_humanlike_command(sub: argparse._SubParsersAction) -> None:
     """``humanlike evaluate``: the motion test on people."""
     hl = sub.add_parser("humanlike", help="the motion test on people: the robot's arm angle "
@@ -451,6 +515,7 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     )
     info.set_defaults(func=_info)
     _add_scenario_commands(sub)
+    _add_sweep_command(sub)
     warm = sub.add_parser("warmup", help="compile the kernels now (once per machine, cached)")
     warm.set_defaults(func=_warmup)
     _add_humanlike_command(sub)

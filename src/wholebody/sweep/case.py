@@ -1,0 +1,70 @@
+"""One case of a sweep, as a worker runs it: the case's scenario run like ``wholebody run``.
+
+:func:`run_case` is a plain top-level function of picklable arguments, so that a process
+pool and Ray run the same code. It never raises: a case that fails returns its error (type,
+message and the traceback's last lines) and the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+from wholebody.control.log import json_default
+from wholebody.sweep.campaign import Campaign, Case
+
+__all__ = ["headline", "run_case"]
+
+
+def headline(run) -> dict[str, float]:
+    """One number each, over the hands: ``tracking_error_max_m`` (the largest distance of a
+    hand to its reference, m), ``mae_max_m`` (the largest per-axis mean absolute error, m),
+    ``final_error_m`` (the largest distance at the last step, m)."""
+    log, m = run.log, run.metrics
+    final = [float(np.linalg.norm(log.frame_positions[h][-1] - log.reference_positions[h][-1]))
+             for h in log.frame_positions
+             if np.isfinite(log.reference_positions[h][-1]).all()]  # fmt: skip
+    mae = [v for axes in m["mae_m"].values() for v in axes.values()]
+    return {
+        "tracking_error_max_m": _worst(m["max_tracking_error_m"].values()),
+        "mae_max_m": _worst(mae),
+        "final_error_m": _worst(final),
+    }
+
+
+def _worst(values) -> float:
+    """The largest value; NaN if any is NaN or there is none (never a best case)."""
+    values = np.asarray(list(values), dtype=float)
+    return float(values.max()) if values.size and not np.isnan(values).any() else math.nan
+
+
+def run_case(campaign: Campaign, case: Case) -> dict[str, Any]:
+    """Run one case; its result: ``index``, ``values``, ``status`` (``"ok"``, ``"error"``,
+    or ``"stopped"``: a physics run ended early, its reason in ``error``), ``metrics``
+    (those of ``wholebody run``'s ``metrics.json`` and the :func:`headline` numbers),
+    ``error`` and ``wall_s``."""
+    from wholebody.scenarios.runner import run_scenario
+
+    start = time.perf_counter()
+    result: dict[str, Any] = {"index": case.index, "values": case.values}
+    try:
+        spec, options = campaign.case_spec(case)
+        run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
+                           engine=options.get("engine"),
+                           duration_scale=campaign.duration_scale)  # fmt: skip
+        metrics = json.loads(json.dumps(run.metrics, default=json_default))
+        metrics.update(headline(run))
+        stopped = metrics.get("stopped")  # a physics run the plant ended early
+        result.update(status="stopped" if stopped else "ok", metrics=metrics,
+                      error=stopped or "")  # fmt: skip
+    except Exception as exc:  # recorded, not raised: the sweep goes on
+        tail = traceback.format_exc().strip().splitlines()[-6:]
+        result.update(status="error", metrics={}, error=f"{type(exc).__name__}: {exc}",
+                      traceback="\n".join(tail))  # fmt: skip
+    result["wall_s"] = time.perf_counter() - start
+    return result

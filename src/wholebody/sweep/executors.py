@@ -1,0 +1,125 @@
+"""Where a sweep's cases run: a local process pool, or Ray (a local instance or a cluster).
+
+Both call the same function, :func:`wholebody.sweep.case.run_case`, with the same arguments
+(the campaign and one case), and hand every result to ``on_result`` in this process as soon as
+the case ends, in whatever order the cases end; the caller writes it (a Ray cluster's workers
+need no shared disk: results come back as values).
+
+* :func:`run_local`: ``concurrent.futures.ProcessPoolExecutor`` with ``workers`` processes
+  (spawned: no state shared with this one; each loads the cached kernels once);
+* :func:`run_ray`: one Ray task per case (``num_cpus=1``; a case's own error is its result,
+  never retried; Ray retries a task only when its worker dies), on
+  ``ray.init(address=...)``; without an address, a new local Ray instance for this sweep
+  with 127.0.0.1 as its node address (Ray 2.60's own servers still listen on every
+  interface: the README says so). The cluster's nodes need the same wholebody
+  (``pip install "wholebody[cluster]"``), and the scenario's files where the campaign names
+  them (the bundled ones come with the package).
+
+A Ctrl-C cancels the cases not started and ends those running (a local pool's worker
+processes are terminated); their results are not written, so a restart runs them. A
+worker that dies fails the cases it held (``--retry-failed`` runs them again) and the sweep
+goes on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any
+
+from wholebody.errors import ConfigError
+from wholebody.sweep.campaign import Campaign, Case
+from wholebody.sweep.case import run_case
+
+__all__ = ["run_local", "run_ray"]
+
+OnResult = Callable[[dict[str, Any]], None]
+
+
+def _lost(case: Case, why: str) -> dict[str, Any]:
+    """The result of a case whose worker died (not the case's own error: a crash, the
+    machine's memory): recorded, so that ``--retry-failed`` runs it again."""
+    return {"index": case.index, "values": case.values, "status": "error", "metrics": {},
+            "error": f"worker lost: {why}", "wall_s": 0.0}  # fmt: skip
+
+
+def run_local(campaign: Campaign, cases: Sequence[Case], workers: int,
+              on_result: OnResult) -> None:  # fmt: skip
+    """Run ``cases`` on ``workers`` local processes, at most two cases a worker queued at a
+    time; ``on_result`` for each as it ends. A worker that dies (a crash, out of memory)
+    fails the cases it held, the pool is started again and the sweep goes on."""
+    todo = list(reversed(cases))
+    while todo:
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
+                                   mp_context=multiprocessing.get_context("spawn"))  # fmt: skip
+        try:
+            _drain(pool, campaign, todo, 2 * workers, on_result)
+        except BaseException:
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()  # running cases abandoned: a restart runs them
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+
+
+def _drain(pool: ProcessPoolExecutor, campaign: Campaign, todo: list[Case], window: int,
+           on_result: OnResult) -> None:  # fmt: skip
+    """Feed ``todo`` (popped from its end) to ``pool``, ``window`` cases in flight; return
+    when it is empty or the pool broke (its cases in flight recorded as lost)."""
+    pending: dict = {}
+    while todo or pending:
+        while todo and len(pending) < window:
+            case = todo.pop()
+            pending[pool.submit(run_case, campaign, case)] = case
+        done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        for future in done:
+            case = pending.pop(future)
+            try:
+                on_result(future.result())
+            except BrokenProcessPool as exc:
+                on_result(_lost(case, str(exc) or "the worker process died"))
+                for other in pending:
+                    on_result(_lost(pending[other], "the pool broke"))
+                return
+
+
+def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
+            on_result: OnResult, workers: int | None = None) -> None:  # fmt: skip
+    """Run ``cases`` as Ray tasks on the cluster at ``address`` (``"HOST:PORT"``) or, with
+    None, on a new local Ray instance (node address 127.0.0.1, ``workers`` CPUs); at most
+    1000 in flight; ``on_result`` for each as it ends. A task lost to a crashed worker or
+    node is recorded as failed."""
+    try:
+        import ray
+        from ray.exceptions import RayError
+    except ImportError:
+        raise ConfigError('--ray needs Ray: pip install "wholebody[cluster]"') from None
+    if address:
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    else:
+        ray.init(address="local", _node_ip_address="127.0.0.1", num_cpus=workers,
+                 include_dashboard=False, log_to_driver=False)  # fmt: skip
+    pending: dict = {}
+    try:
+        remote = ray.remote(num_cpus=1)(run_case)
+        shared = ray.put(campaign)
+        todo = list(reversed(cases))
+        while todo or pending:
+            while todo and len(pending) < 1000:
+                case = todo.pop()
+                pending[remote.remote(shared, case)] = case
+            done, _ = ray.wait(list(pending), num_returns=min(len(pending), 16), timeout=1.0)
+            for ref in done:
+                case = pending.pop(ref)
+                try:
+                    on_result(ray.get(ref))
+                except RayError as exc:
+                    on_result(_lost(case, f"{type(exc).__name__}: {exc}"[:500]))
+    except BaseException:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        raise
+    finally:
+        ray.shutdown()

@@ -103,14 +103,20 @@ def _scenario_path(name: str) -> Path:
     """A scenario file path, or the name of a bundled one (``coordinated_carry``)."""
     from wholebody.resources import tasks_dir
 
+    return _file_or_bundled(name, tasks_dir(), "scenario")
+
+
+def _file_or_bundled(name: str, folder: Path, what: str) -> Path:
+    """``name`` as a file, else the bundled ``folder/name.toml``; else a
+    :class:`ConfigError` listing the bundled ones."""
+    from wholebody.resources import bundled_file
+
     path = Path(name)
-    if path.is_file():
-        return path
-    bundled = tasks_dir() / (name if name.endswith(".toml") else f"{name}.toml")
-    if bundled.is_file():
-        return bundled
-    names = ", ".join(bundled_scenarios())
-    raise ConfigError(f"no scenario {name!r}: expected a file or one of {names}")
+    found = path if path.is_file() else bundled_file(name, folder)
+    if found is None:
+        names = ", ".join(sorted(p.stem for p in folder.glob("*.toml")))
+        raise ConfigError(f"no {what} {name!r}: expected a file or one of {names}")
+    return found
 
 
 def _start_viewer(spec):
@@ -390,14 +396,7 @@ def _campaign_path(name: str) -> Path:
     """A campaign file, or the name of a bundled one (``tasks/campaigns``)."""
     from wholebody.resources import tasks_dir
 
-    path = Path(name)
-    if path.is_file():
-        return path
-    bundled = tasks_dir() / "campaigns" / (name if name.endswith(".toml") else f"{name}.toml")
-    if bundled.is_file():
-        return bundled
-    names = ", ".join(sorted(p.stem for p in (tasks_dir() / "campaigns").glob("*.toml")))
-    raise ConfigError(f"no campaign {name!r}: expected a file or one of {names}")
+    return _file_or_bundled(name, tasks_dir() / "campaigns", "campaign")
 
 
 def _sweep(args: argparse.Namespace) -> int:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["data_dir", "npz_path", "robots_dir", "share_dir", "tasks_dir"]
+__all__ = ["bundled_file", "data_dir", "npz_path", "robots_dir", "share_dir", "tasks_dir"]
 
 
 def share_dir() -> Path:
@@ -27,6 +27,12 @@ def robots_dir() -> Path:
 def tasks_dir() -> Path:
     """The bundled scenario files (the paper's experiments)."""
     return share_dir() / "tasks"
+
+
+def bundled_file(name: str, folder: Path) -> Path | None:
+    """The TOML file ``name`` (with or without ``.toml``) in ``folder``, or None."""
+    path = folder / (name if name.endswith(".toml") else f"{name}.toml")
+    return path if path.is_file() else None
 
 
 def data_dir() -> Path:

@@ -34,9 +34,7 @@ def physics_poses(objects: Mapping[str, ObjectSpec], physics: dict) -> dict[str,
         if name in physics["object_poses"]:
             out[name] = physics["object_poses"][name]
             continue
-        T = np.eye(4)
-        T[:3, 3] = obj.position
-        out[name] = np.repeat(T[None], n, axis=0)
+        out[name] = np.repeat(obj.pose[None], n, axis=0)
     return out
 
 

@@ -452,9 +452,7 @@ def _carrying(
     for hand, name in carried:
         frame = tasks[hand].frame
         if name not in held:
-            pose = np.eye(4)
-            pose[:3, 3] = spec.objects[name].position
-            held[name] = (frame.name, np.linalg.solve(state.pose(frame), pose))
+            held[name] = (frame.name, np.linalg.solve(state.pose(frame), spec.objects[name].pose))
         obj = obstacle_of(spec.objects[name])
         attached.append((held[name][0], Obstacle(obj.name, obj.shape, obj.size, held[name][1])))
     return _collision(spec, robot, attached, state.q)
@@ -468,11 +466,9 @@ def collision_model(spec: ScenarioSpec, robot: Robot) -> CollisionModel | None:
 def obstacle_of(obj: ObjectSpec) -> Obstacle:
     """A scenario object as a fixed collision shape (centre at its position, axes the
     world's; a cylinder along z)."""
-    pose = np.eye(4)
-    pose[:3, 3] = obj.position
     sizes = {"box": tuple(obj.size), "cylinder": (obj.radius, obj.height),
              "sphere": (obj.radius,)}  # fmt: skip
-    return Obstacle(obj.name, obj.kind, sizes[obj.kind], pose)
+    return Obstacle(obj.name, obj.kind, sizes[obj.kind], obj.pose)
 
 
 def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: RunLog,
@@ -539,8 +535,7 @@ def _object_poses(
     out = {}
     n = len(log)
     for name, obj in objects.items():
-        T = np.eye(4)
-        T[:3, 3] = obj.position
+        T = obj.pose
         poses = np.empty((n, 4, 4))
         k = 0  # poses before k are written
         for hand, t_start, t_end in carries.get(name, ()):

@@ -94,6 +94,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from wholebody.errors import ConfigError
 from wholebody.presets import SPRINGS, PaperWeights
 from wholebody.tomlreader import TomlReader, config_error, load_toml
@@ -154,6 +156,14 @@ class ObjectSpec:
     note: str = ""
     mass: float | None = None
     """kg, for physics runs: a free body of uniform density (None: fixed in the world)."""
+
+    @property
+    def pose(self) -> np.ndarray:
+        """Its pose where the scenario puts it (4x4, world): at its position, the world's
+        axes."""
+        T = np.eye(4)
+        T[:3, 3] = self.position
+        return T
 
 
 @dataclass(frozen=True)

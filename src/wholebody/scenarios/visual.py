@@ -8,18 +8,12 @@ import numpy as np
 
 from wholebody.collision import CollisionModel, PairDistance
 from wholebody.scenarios.runner import ScenarioRun
-from wholebody.scenarios.spec import ObjectSpec, ScenarioSpec
+from wholebody.scenarios.spec import ScenarioSpec
 from wholebody.viz.scene import Scene
 
 __all__ = ["LiveView", "draw_objects", "show_run"]
 
 HAND_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
-
-
-def _pose(obj: ObjectSpec) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = obj.position
-    return T
 
 
 def draw_objects(scene: Scene, spec: ScenarioSpec) -> None:
@@ -31,11 +25,11 @@ def draw_objects(scene: Scene, spec: ScenarioSpec) -> None:
             else ("#2ca02c" if obj.size[2] < 0.05 and obj.size[0] < 0.5 else "#b08d57")
         )
         if obj.kind == "box":
-            scene.box(obj.name, obj.size, _pose(obj), color=color)
+            scene.box(obj.name, obj.size, obj.pose, color=color)
         elif obj.kind == "cylinder":
-            scene.cylinder(obj.name, obj.radius, obj.height, _pose(obj), color=color)
+            scene.cylinder(obj.name, obj.radius, obj.height, obj.pose, color=color)
         else:
-            scene.ellipsoid(obj.name, [obj.radius] * 3, _pose(obj), color=color)
+            scene.ellipsoid(obj.name, [obj.radius] * 3, obj.pose, color=color)
 
 
 def _draw_closest(scene: Scene, run: ScenarioRun) -> None:

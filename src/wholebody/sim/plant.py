@@ -56,8 +56,6 @@ class PhysicsLog:
     ----------
     torque_peak
         (N, nv) peak |applied torque| over the period's physics steps (N m, N).
-    demand_peak
-        (N, nv) peak |torque the servo asked for| (above the limit when saturated).
     saturated
         (N, nv) whether the joint was at its limit in the period.
     wheel_torque_peak
@@ -75,7 +73,6 @@ class PhysicsLog:
     """
 
     torque_peak: list[np.ndarray] = field(default_factory=list)
-    demand_peak: list[np.ndarray] = field(default_factory=list)
     saturated: list[np.ndarray] = field(default_factory=list)
     wheel_torque_peak: list[np.ndarray] = field(default_factory=list)
     grasp_force: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict)
@@ -86,7 +83,6 @@ class PhysicsLog:
         """The records as arrays."""
         return {
             "torque_peak": np.array(self.torque_peak),
-            "demand_peak": np.array(self.demand_peak),
             "saturated": np.array(self.saturated),
             "wheel_torque_peak": np.array(self.wheel_torque_peak),
             "grasp_force": {k: np.array(v) for k, v in self.grasp_force.items()},
@@ -143,10 +139,6 @@ class MujocoPlant:
         self._A = np.asarray(self.robot.actuation)
         base = self.robot.base
         self._wheels = base.matrix if (planar and base.wheel_joints) else np.zeros((3, 0))
-        self._wheel_limit = (
-            min(self.world.effort[self.robot.model.joints[self.robot.model.getJointId(w)].idx_v]
-                for w in base.wheel_joints) if self._wheels.size else np.inf
-        )  # fmt: skip
 
     def qpos(self, q: np.ndarray) -> np.ndarray:
         """MuJoCo's robot positions of a Pinocchio configuration (objects untouched)."""
@@ -261,9 +253,8 @@ class MujocoPlant:
         warnings = self._warnings()
         for i in range(n):
             mujoco.mj_step1(m, d)
-            tau, asked, at_limit = self._servo(previous + (v - previous) * ((i + 1) / n))
-            if wheels.size:
-                np.maximum(wheels, np.abs(self._wheel_torques(tau)), out=wheels)
+            tau, asked, at_limit, wheel = self._servo(previous + (v - previous) * ((i + 1) / n))
+            np.maximum(wheels, np.abs(wheel), out=wheels)
             d.ctrl[self._actuators] = tau
             np.maximum(peak, np.abs(tau), out=peak)
             np.maximum(demand, np.abs(asked), out=demand)
@@ -272,7 +263,7 @@ class MujocoPlant:
             mujoco.mj_step2(m, d)
         self.time += n * self.settings.timestep
         mujoco.mj_kinematics(m, d)  # the bodies' poses at the new state, not the last step's
-        self._record(peak, demand, saturated, wheels)
+        self._record(peak, saturated, wheels)
         if self._warnings() != warnings:
             self.stop_reason = (f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
                                 f"found a bad position, velocity or acceleration)")  # fmt: skip
@@ -287,14 +278,16 @@ class MujocoPlant:
         bad = (kinds.mjWARN_BADQPOS, kinds.mjWARN_BADQVEL, kinds.mjWARN_BADQACC)
         return tuple(int(w[k].number) for k in bad)
 
-    def _wheel_limited(self, tau: np.ndarray) -> bool:
-        """Scale the planar base's force and torque ``tau[:3]`` (in place) so that no wheel
-        needs more than its torque limit; whether it had to."""
-        excess = np.abs(self._wheel_torques(tau)).max() / self._wheel_limit
+    def _wheel_limited(self, tau: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The wheel torques (N m) of the planar base's force and torque ``tau[:3]``, both
+        scaled (``tau`` in place) so that no wheel needs more than its torque limit; and
+        whether they had to be."""
+        wheel = self._wheel_torques(tau)
+        excess = np.abs(wheel).max() / self.world.wheel_limit
         if excess <= 1.0:
-            return False
+            return wheel, False
         tau[:3] /= excess
-        return True
+        return wheel / excess, True
 
     def _wheel_torques(self, tau: np.ndarray) -> np.ndarray:
         """The wheel torques (N m) that give the planar base's force and torque ``tau[:3]``
@@ -304,9 +297,10 @@ class MujocoPlant:
         wrench = np.array([c * tau[0] + s * tau[1], -s * tau[0] + c * tau[1], tau[2]])
         return self._wheels.T @ wrench
 
-    def _servo(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The clamped torque of every robot dof, the torque asked for, and which are at
-        their limit (a wheeled base's three when its wheels limit it)."""
+    def _servo(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The clamped torque of every robot dof, the torque asked for, which are at their
+        limit (a wheeled base's three when its wheels limit it), and the wheel torques (N m,
+        empty without wheels)."""
         d, h = self.data, self.settings.timestep
         target = v.copy()
         if self._planar is not None:  # the base twist (base frame) into the world
@@ -322,17 +316,17 @@ class MujocoPlant:
         limit = self.world.effort
         tau = np.clip(asked, -limit, limit)
         at_limit = np.abs(asked) > limit
-        if self._wheels.size and self._wheel_limited(tau):  # as its wheels can push it
-            at_limit[:3] = True
+        wheel = np.zeros(0)
+        if self._wheels.size:  # the base's force as its wheels can push it
+            wheel, limited = self._wheel_limited(tau)
+            at_limit[:3] |= limited
         self.lag = np.where(at_limit, self.lag, self.lag + error * h)
         np.clip(self.lag, -self._lag_bound, self._lag_bound, out=self.lag)
-        return tau, asked, at_limit
+        return tau, asked, at_limit, wheel
 
-    def _record(self, peak: np.ndarray, demand: np.ndarray, saturated: np.ndarray,
-                wheels: np.ndarray) -> None:  # fmt: skip
+    def _record(self, peak: np.ndarray, saturated: np.ndarray, wheels: np.ndarray) -> None:
         log = self.log
         log.torque_peak.append(peak)
-        log.demand_peak.append(demand)
         log.saturated.append(saturated)
         log.wheel_torque_peak.append(wheels)
         for key, eq in self.world.welds.items():

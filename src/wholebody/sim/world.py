@@ -29,6 +29,7 @@ the floor.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -84,6 +85,8 @@ class World:
     objects: dict[str, int] = field(default_factory=dict)
     welds: dict[tuple[str, str], int] = field(default_factory=dict)
     hand_bodies: dict[str, int] = field(default_factory=dict)
+    wheel_limit: float = math.inf
+    """The smallest wheel torque limit (N m) of a wheeled base (inf without wheels)."""
 
 
 def _quat(R: np.ndarray) -> list[float]:
@@ -233,11 +236,13 @@ def build_world(
     for i, names in joints.items():
         for k, n in enumerate(names):
             dofs[robot.model.joints[i].idx_v + k] = model.jnt_dofadr[model.joint(n).id]
+    wheels = _wheel_dofs(robot)
     return World(
         model, robot, joints, effort, dofs,
         objects={name: model.body(name).id for name in free},
         welds={w: model.equality(f"grasp_{w[0]}_{w[1]}").id for w in welds},
         hand_bodies={f: model.body(_hand_body(robot, f)).id for _, f in welds},
+        wheel_limit=float(effort[wheels].min()) if wheels else math.inf,
     )  # fmt: skip
 
 
@@ -280,6 +285,11 @@ def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> bool:
     return True
 
 
+def _wheel_dofs(robot: Robot) -> list[int]:
+    """The velocity index of each wheel joint of the robot's base."""
+    return [robot.model.joints[robot.model.getJointId(w)].idx_v for w in robot.base.wheel_joints]
+
+
 def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
     """The limit of each Pinocchio velocity (N m, N): the URDF's effort times
     ``effort_scale``; a planar root's from its wheels through the base matrix (``tau = B^T
@@ -290,9 +300,8 @@ def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
     root = robot.model.joints[1] if robot.model.njoints > 1 else None
     if root is not None and _kind(root) == "Planar":
         base = robot.base
-        if base.wheel_joints:
-            wheels = [robot.model.joints[robot.model.getJointId(w)].idx_v for w in
-                      base.wheel_joints]  # fmt: skip
+        wheels = _wheel_dofs(robot)
+        if wheels:
             gain = np.abs(base.matrix).max(axis=1)  # 0: a direction no wheel drives
             fallback = [settings.base_force, settings.base_force, settings.base_torque]
             limit[:3] = np.where(gain > 0, limit[wheels].min() / np.maximum(gain, 1e-300),

@@ -305,11 +305,11 @@ def _base(r: TomlReader, path: Path, head: dict) -> tuple[str | None, dict, dict
 
 
 def _scenario_file(r: TomlReader, path: Path, name: str) -> Path:
-    from wholebody.resources import tasks_dir
+    from wholebody.resources import bundled_file, tasks_dir
 
-    for candidate in (path.parent / name, tasks_dir() / name, tasks_dir() / f"{name}.toml"):
-        if candidate.is_file():
-            return candidate
+    found = bundled_file(name, path.parent) or bundled_file(name, tasks_dir())
+    if found is not None:
+        return found
     raise r.fail("campaign.scenario", f"no scenario file {name!r} beside the campaign nor a "
                  "bundled one (wholebody run --help lists them)")  # fmt: skip
 

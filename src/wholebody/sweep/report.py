@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from wholebody.files import save_figure, write_text
+from wholebody.scenarios.plots import _figure
 from wholebody.sweep.campaign import Campaign
 
 __all__ = ["best_cases", "write_report"]
@@ -82,15 +83,6 @@ def _best_markdown(campaign: Campaign, rows: Sequence[dict], keys: list[str]) ->
         cells += [f"{_value(r, m):.6g}" for m in (campaign.objective, *shown)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def _figure(**kw):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(**kw)
-    FigureCanvasAgg(fig)
-    return fig
 
 
 def _axes_figure(rows: Sequence[dict], campaign: Campaign):

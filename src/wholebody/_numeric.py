@@ -4,15 +4,11 @@ On arrays of a few dozen entries numpy's Python-level wrappers (``ndarray.all()`
 ``np.count_nonzero``, ``np.ones``) cost more than the work; the helpers here are the C-level
 equivalents: ``count_nonzero`` is numpy's C function without its wrapper (numpy >= 2), or
 the public one on older numpy, and the others are built on it or on a dot product.
-
-The solvers' linear algebra (``normal_solve``, ``NORMAL_KAPPA``, ``REFINE_KAPPA``) lives in
-:mod:`wholebody.solvers.linalg`; it is still importable from here.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
@@ -32,19 +28,6 @@ __all__ = [
     "float_array",
     "ones",
 ]
-
-_MOVED = ("NORMAL_KAPPA", "REFINE_KAPPA", "normal_solve")  # now in wholebody.solvers.linalg
-
-
-def __getattr__(name: str) -> Any:
-    """The names moved to :mod:`wholebody.solvers.linalg`, imported on first use (a
-    module-level import would be circular: the solvers import this module)."""
-    if name in _MOVED:
-        from wholebody.solvers import linalg
-
-        return getattr(linalg, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
 
 def float_array(value: object, what: str) -> np.ndarray:
     """``value`` as a float array (itself when it already is one); strings and other

@@ -38,9 +38,14 @@ class ConstantStiffness(StiffnessModel):
     def __init__(self, k: float) -> None:
         if not np.isfinite(k) or k < 0:
             raise DimensionError(f"stiffness must be a finite number >= 0 N m/rad, got {k}")
-        self.k = float(k)
+        self._k = float(k)
         self._zero = np.zeros(3)
         self._zero.setflags(write=False)
+
+    @property
+    def k(self) -> float:
+        """The stiffness (N m/rad), fixed at construction (an arm energy copies it)."""
+        return self._k
 
     def evaluate(self, wrist: np.ndarray) -> tuple[float, np.ndarray]:
         return self.k, self._zero

@@ -1,12 +1,13 @@
-"""A whole stack's rows in one kernel: what :meth:`wholebody.solvers.Stack.evaluate` computes
-entry by entry, for every built-in entry at once, from Pinocchio's data.
+"""A whole stack's rows in one kernel, from Pinocchio's data: what every solver kernel starts
+with.
 
-In order: the frames' Jacobians and placements and the joint positions; every pose and
-posture task's rows, every half-space's row; every objective's value and gradient, summed per
-level into its descent rows ``I u~ = -k D grad H / (1 + k dt D^2 diag(hess H))``; the box
-of the position, velocity and Python-written limits; the rows scaled by ``sqrt(w) D`` into the
-coordinates ``u~ = W^(1/2) u`` the solvers work in (:mod:`wholebody.solvers.stack`). Rows and
-bounds of entries written in Python are already in the arena when it runs.
+In order: the frames' Jacobians and placements and the joint positions; every entry of the
+entry table by its kind (a pose or posture task's rows, a half-space's row, an objective's
+value and gradient, a limit's box; entries written in Python are already in place); each
+level's objectives summed into its descent rows ``I u~ = -k D grad H / (1 + k dt D^2 diag(hess
+H))``; the rows scaled by ``sqrt(w) D`` into the coordinates ``u~ = W^(1/2) u`` the solvers
+work in (:mod:`wholebody.solvers.stack`); the intersection of the limits' boxes; the anchor
+(the acceleration limits' last velocity, which the projection's saturation scales around).
 """
 
 from __future__ import annotations
@@ -19,25 +20,48 @@ from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
 from wholebody.kernels.kinematics import frame_kinematics, joint_positions
 from wholebody.kernels.layout import fmat, ften, fvec, imat, ivec
-from wholebody.kernels.objectives import arm_energy, joint_limit_avoidance, manipulability
+from wholebody.kernels.limits import acceleration_box, position_box, velocity_box
+from wholebody.kernels.objectives import (
+    AE_WIDTH,
+    ARM_PARTS,
+    arm_energy,
+    joint_limit_avoidance,
+    manipulability,
+)
 from wholebody.kernels.rows import (
+    POSE_FA,
+    POSE_FB,
+    POSE_HAS,
+    POSE_NROWS,
+    POSE_SEL,
+    POSE_STAMP,
+    POSE_TARGET,
+    TARGET_SET,
     half_space_row,
     pose_rows,
-    position_box,
     posture_rows,
     relative_pose,
 )
 
 __all__ = ["evaluate"]
 
+REF_WIDTH = 22  # a reference sample: target pose (4x4, row-major), then twist (6), laid out as
+# a pose task's target and twist
+
 
 @kernel
 def evaluate(
-    f: np.ndarray, i: np.ndarray, h: np.ndarray, J: np.ndarray, oMf: np.ndarray, q: np.ndarray
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    J: np.ndarray,
+    oMf: np.ndarray,
+    q: np.ndarray,
+    refs: np.ndarray,
 ) -> None:
-    """Fill the stack's scaled rows ``F_A, F_B, F_C, F_CB`` and box ``F_BOX`` (and the
-    kinematics, errors, objective values on the way) from ``data.J``, ``data.oMf`` and
-    ``q`` (see the module docstring)."""
+    """Fill the stack's scaled rows ``F_A, F_B, F_C, F_CB``, box ``F_BOX`` and anchor (and
+    the kinematics, errors, objective values on the way) from ``data.J``, ``data.oMf``, ``q``
+    and the references' samples ``refs`` (one row of ``REF_WIDTH`` per reference)."""
     dt = fvec(f, h, lay.F_SCALARS)[0]
     act = imat(i, h, lay.I_ACT)
     pos = imat(i, h, lay.I_POS)
@@ -45,104 +69,112 @@ def evaluate(
                      act[1], fvec(f, h, lay.F_ACT_A), ften(f, h, lay.F_KIN_J),
                      fmat(f, h, lay.F_KIN_P), ften(f, h, lay.F_KIN_R))  # fmt: skip
     joint_positions(q, pos[0], pos[1], fvec(f, h, lay.F_JP))
-    _pose_tasks(f, i, h)
-    _posture_tasks(f, i, h)
-    _half_spaces(f, i, h, dt)
-    _objectives(f, i, h)
+    entries = imat(i, h, lay.I_ENTRY)
+    for e in range(entries.shape[0]):
+        cat = entries[e, lay.E_CAT]
+        if entries[e, lay.E_KIND] == lay.KIND_PYTHON:
+            continue
+        if cat == lay.CAT_TASK:
+            _task(f, i, h, entries[e], refs)
+        elif cat == lay.CAT_INEQUALITY:
+            _inequality(f, i, h, entries[e], dt)
+        elif cat == lay.CAT_OBJECTIVE:
+            _objective(f, i, h, entries[e])
+        else:
+            _limit(f, i, h, entries[e], dt)
     _objective_rows(f, i, h, dt)
     _scale_rows(f, i, h)
-    _box(f, i, h, dt)
+    _box(f, i, h)
 
 
 @kernel
-def _pose_tasks(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
-    """Rows of every pose task (a frame, or a frame relative to another)."""
-    tasks = imat(i, h, lay.I_POSE)
-    par = fmat(f, h, lay.F_POSE)
+def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
+          refs: np.ndarray) -> None:  # fmt: skip
+    """A compiled task's rows: a pose task (a frame, or a frame relative to another; its
+    target and twist from its reference if it follows one) or a posture task."""
+    par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
+    ints = ivec(i, h, lay.I_PAR)[entry[lay.E_I0] : entry[lay.E_I0] + entry[lay.E_IN]]
+    r0, n = entry[lay.E_ROW], entry[lay.E_ROWS]
+    A, b = fmat(f, h, lay.F_A)[r0 : r0 + n], fvec(f, h, lay.F_B)[r0 : r0 + n]
+    if entry[lay.E_KIND] == lay.KIND_POSTURE:
+        posture_rows(fvec(f, h, lay.F_JP), par, ints, A, b)
+        return
+    ref = entry[lay.E_REF]
+    if ref >= 0:
+        for k in range(REF_WIDTH):
+            par[POSE_TARGET + k] = refs[ref, k]
+        par[POSE_HAS] = TARGET_SET
     KJ, KP, KR = ften(f, h, lay.F_KIN_J), fmat(f, h, lay.F_KIN_P), ften(f, h, lay.F_KIN_R)
-    A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
-    nu = A.shape[1]
-    Jr = np.empty((6, nu))
-    pr = np.empty(3)
-    Rr = np.empty((3, 3))
-    for t in range(tasks.shape[0]):
-        fa, fb = tasks[t, lay.POSE_FA], tasks[t, lay.POSE_FB]
-        r0, n = tasks[t, lay.POSE_ROW], tasks[t, lay.POSE_NROWS]
-        rows = tasks[t, lay.POSE_SEL : lay.POSE_SEL + n]
-        if fa < 0:
-            Jt, pt, Rt = KJ[fb], KP[fb], KR[fb]
-        else:
-            relative_pose(KJ[fa], KP[fa], KR[fa], KJ[fb], KP[fb], KR[fb], Jr, pr, Rr)
-            Jt, pt, Rt = Jr, pr, Rr
-        p = par[t]
-        target = p[lay.POSE_TARGET : lay.POSE_TARGET + 16].reshape((4, 4))
-        pose_rows(Jt, pt, Rt, target, p[lay.POSE_TWIST : lay.POSE_TWIST + 6],
-                  p[lay.POSE_KP : lay.POSE_KP + 6], p[lay.POSE_KI : lay.POSE_KI + 6],
-                  p[lay.POSE_INTEGRAL : lay.POSE_INTEGRAL + 6], rows, A[r0 : r0 + n],
-                  b[r0 : r0 + n], p[lay.POSE_ERROR : lay.POSE_ERROR + 6])  # fmt: skip
+    fa, fb = ints[POSE_FA], ints[POSE_FB]
+    rows = ints[POSE_SEL : POSE_SEL + ints[POSE_NROWS]]
+    if fa < 0:
+        pose_rows(par, KJ[fb], KP[fb], KR[fb], rows, A, b)
+    else:
+        nu = A.shape[1]
+        Jr, pr, Rr = np.empty((6, nu)), np.empty(3), np.empty((3, 3))
+        relative_pose(KJ[fa], KP[fa], KR[fa], KJ[fb], KP[fb], KR[fb], Jr, pr, Rr)
+        pose_rows(par, Jr, pr, Rr, rows, A, b)
+    par[POSE_STAMP] = fvec(f, h, lay.F_SCALARS)[2]
 
 
 @kernel
-def _posture_tasks(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
-    """Rows of every posture task."""
-    tasks = imat(i, h, lay.I_POSTURE)
-    entry = imat(i, h, lay.I_POSTURE_ENTRY)
-    par = fmat(f, h, lay.F_POSTURE)
-    A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
-    jp = fvec(f, h, lay.F_JP)
-    for t in range(tasks.shape[0]):
-        r0, e0, n = tasks[t, 0], tasks[t, 1], tasks[t, 2]
-        posture_rows(jp, entry[0, e0 : e0 + n], par[0, e0 : e0 + n], par[1, e0 : e0 + n],
-                     entry[1, e0 : e0 + n], entry[2, e0 : e0 + n], A[r0 : r0 + n],
-                     b[r0 : r0 + n], par[2, e0 : e0 + n])  # fmt: skip
+def _inequality(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
+                dt: float) -> None:  # fmt: skip
+    """A compiled inequality task's rows and bounds (unscaled): a half-space."""
+    par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
+    frame = ivec(i, h, lay.I_PAR)[entry[lay.E_I0]]
+    row = entry[lay.E_ROW]
+    cb = fmat(f, h, lay.F_CB)
+    cb[0, row] = half_space_row(ften(f, h, lay.F_KIN_J)[frame], fmat(f, h, lay.F_KIN_P)[frame],
+                                par[0:3], par[3], par[4], dt,
+                                fmat(f, h, lay.F_C)[row])  # fmt: skip
+    cb[1, row] = np.inf
 
 
 @kernel
-def _half_spaces(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> None:
-    """The row and lower bound of every half-space (unscaled)."""
-    spaces = imat(i, h, lay.I_HALF)
-    par = fmat(f, h, lay.F_HALF)
-    KJ, KP = ften(f, h, lay.F_KIN_J), fmat(f, h, lay.F_KIN_P)
-    C, cb = fmat(f, h, lay.F_C), fmat(f, h, lay.F_CB)
-    for s in range(spaces.shape[0]):
-        fr, row = spaces[s, 0], spaces[s, 1]
-        cb[0, row] = half_space_row(KJ[fr], KP[fr], par[s, 0:3], par[s, 3], par[s, 4], dt,
-                                    C[row])  # fmt: skip
-        cb[1, row] = np.inf
-
-
-@kernel
-def _objectives(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
-    """Value, gradient and curvature of every built-in objective (unweighted)."""
-    objs = imat(i, h, lay.I_OBJ)
-    out = fmat(f, h, lay.F_OBJ)
-    grads, curvs = fmat(f, h, lay.F_OBJ_GRAD), fmat(f, h, lay.F_OBJ_CURV)
+def _objective(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray) -> None:
+    """A compiled objective's value, gradient and curvature (unweighted) into its slot."""
+    par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
+    ints = ivec(i, h, lay.I_PAR)[entry[lay.E_I0] : entry[lay.E_I0] + entry[lay.E_IN]]
+    slot, kind = entry[lay.E_SLOT], entry[lay.E_KIND]
+    out, grad = fmat(f, h, lay.F_OBJ)[slot], fmat(f, h, lay.F_OBJ_GRAD)[slot]
     KJ, KP, KR = ften(f, h, lay.F_KIN_J), fmat(f, h, lay.F_KIN_P), ften(f, h, lay.F_KIN_R)
-    arms, arm_par, parts = imat(i, h, lay.I_ARM), fmat(f, h, lay.F_ARM), fmat(f, h, lay.F_ARM_PARTS)
-    h1, h2, mask = ften(f, h, lay.F_H1), imat(i, h, lay.I_H2), imat(i, h, lay.I_H2_MASK)
-    nets, jp = fvec(f, h, lay.F_NETS), fvec(f, h, lay.F_JP)
-    nu = jp.shape[0]
-    P6 = np.zeros((6, 3))
-    R6 = np.zeros((6, 3, 3))
-    J6 = np.zeros((6, 6, nu))
-    for o in range(objs.shape[0]):
-        kind, k = objs[o, lay.OBJ_KIND], objs[o, lay.OBJ_INDEX]
-        if kind == lay.KIND_ARM:
-            for j in range(6):
-                fr = arms[k, j]
-                if fr >= 0:
-                    P6[j], R6[j], J6[j] = KP[fr], KR[fr], KJ[fr]
-            arm_energy(P6, R6, J6, arm_par[k], nets, grads[o], parts[k])
-            out[o, 1] = parts[k, 0]
-        elif kind == lay.KIND_H1:
-            out[o, 1] = joint_limit_avoidance(jp, h1[k, 0], h1[k, 1], h1[k, 2], grads[o],
-                                              curvs[o])  # fmt: skip
-        elif kind == lay.KIND_H2:
-            n = h2[k, 0]
-            Js = np.empty((n, 6, nu))
-            for j in range(n):
-                Js[j] = KJ[h2[k, 1 + j]]
-            out[o, 1] = manipulability(Js, mask, grads[o])
+    nu = grad.shape[0]
+    if kind == lay.KIND_ARM:
+        P6, R6, J6 = np.zeros((6, 3)), np.zeros((6, 3, 3)), np.zeros((6, 6, nu))
+        for j in range(6):
+            fr = ints[j]
+            if fr >= 0:
+                P6[j], R6[j], J6[j] = KP[fr], KR[fr], KJ[fr]
+        parts = par[AE_WIDTH : AE_WIDTH + ARM_PARTS]
+        arm_energy(P6, R6, J6, par[:AE_WIDTH], par[AE_WIDTH + ARM_PARTS :], grad, parts)
+        out[1] = parts[0]
+    elif kind == lay.KIND_H1:
+        out[1] = joint_limit_avoidance(fvec(f, h, lay.F_JP), par[:nu], par[nu : 2 * nu],
+                                       par[2 * nu :], grad,
+                                       fmat(f, h, lay.F_OBJ_CURV)[slot])  # fmt: skip
+    else:  # KIND_H2: ints = frame count, frames, then the (nu, nu) support mask
+        n = ints[0]
+        Js = np.empty((n, 6, nu))
+        for j in range(n):
+            Js[j] = KJ[ints[1 + j]]
+        mask = ints[1 + n : 1 + n + nu * nu].reshape((nu, nu))
+        out[1] = manipulability(Js, mask, grad)
+
+
+@kernel
+def _limit(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, dt: float) -> None:
+    """A compiled limit's box (rad/s, m/s) into its slot."""
+    par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
+    box = ften(f, h, lay.F_BOXES)[entry[lay.E_SLOT]]
+    kind = entry[lay.E_KIND]
+    if kind == lay.KIND_POSITION:
+        position_box(fvec(f, h, lay.F_JP), par, dt, box[0], box[1])
+    elif kind == lay.KIND_VELOCITY:
+        velocity_box(par, box[0], box[1])
+    else:
+        ints = ivec(i, h, lay.I_PAR)[entry[lay.E_I0] : entry[lay.E_I0] + entry[lay.E_IN]]
+        acceleration_box(fvec(f, h, lay.F_JP), par, ints, dt, box[0], box[1])
 
 
 @kernel
@@ -151,7 +183,8 @@ def _objective_rows(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> N
     ``sw = sqrt(objective weight)``, ``grad`` and ``curv`` the weighted sums over the level's
     objectives (curvatures of objectives with a positive weight only)."""
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
-    objs, out = imat(i, h, lay.I_OBJ), fmat(f, h, lay.F_OBJ)
+    entries = imat(i, h, lay.I_ENTRY)
+    out = fmat(f, h, lay.F_OBJ)
     grads, curvs = fmat(f, h, lay.F_OBJ_GRAD), fmat(f, h, lay.F_OBJ_CURV)
     metric = fmat(f, h, lay.F_METRIC)
     A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
@@ -164,13 +197,14 @@ def _objective_rows(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> N
             continue
         grad[:] = 0.0
         have_curv = False
-        for o in range(objs.shape[0]):
-            if objs[o, lay.OBJ_LEVEL] != k:
+        for e in range(entries.shape[0]):
+            if entries[e, lay.E_CAT] != lay.CAT_OBJECTIVE or entries[e, lay.E_LEVEL] != k:
                 continue
+            o = entries[e, lay.E_SLOT]
             w = out[o, 0]
             for j in range(nu):
                 grad[j] += w * grads[o, j]
-            if objs[o, lay.OBJ_HAS_CURV] and w > 0:
+            if entries[e, lay.E_FLAG] and w > 0:  # E_FLAG: it reports a curvature
                 for j in range(nu):
                     curv[j] = w * curvs[o, j] + curv[j] if have_curv else w * curvs[o, j]
                 have_curv = True
@@ -219,36 +253,28 @@ def _nan_min(a: float, b: float) -> float:
 
 
 @kernel
-def _box(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float) -> None:
-    """The intersection of every constraint's box, a crossed entry set to the bound that
-    moves the joint back (the velocity limit wins over position recovery), in scaled
-    coordinates."""
-    counts = ivec(i, h, lay.I_BOX)
-    pos, vel, py = ften(f, h, lay.F_POS_BOX), fmat(f, h, lay.F_VEL_BOX), ften(f, h, lay.F_PY_BOX)
-    jp, D = fvec(f, h, lay.F_JP), fmat(f, h, lay.F_METRIC)[0]
-    box = fmat(f, h, lay.F_BOX)
-    nu = jp.shape[0]
+def _box(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
+    """The intersection of every limit's box, a crossed entry set to the bound that moves the
+    joint back (the velocity limit wins over position recovery), in scaled coordinates; and
+    the anchor: the acceleration limits' last velocity (scaled; 0 without them)."""
+    boxes, D = ften(f, h, lay.F_BOXES), fmat(f, h, lay.F_METRIC)[0]
+    box, anchor = fmat(f, h, lay.F_BOX), fvec(f, h, lay.F_ANCHOR)
+    entries = imat(i, h, lay.I_ENTRY)
+    nu = D.shape[0]
     lo, hi = box[0], box[1]
     lo[:] = -np.inf
     hi[:] = np.inf
-    first = True
-    blo = np.empty(nu)
-    bhi = np.empty(nu)
-    for c in range(counts[0] + counts[1] + counts[2]):
-        if c < counts[0]:
-            position_box(jp, pos[c, 0], pos[c, 1], pos[c, 2, 0], dt, blo, bhi)
-        elif c < counts[0] + counts[1]:
-            for j in range(nu):
-                bhi[j] = vel[c - counts[0], j]
-                blo[j] = -bhi[j]
-        else:
-            for j in range(nu):
-                blo[j] = py[c - counts[0] - counts[1], 0, j]
-                bhi[j] = py[c - counts[0] - counts[1], 1, j]
+    anchor[:] = 0.0
+    par = fvec(f, h, lay.F_PAR)
+    for c in range(boxes.shape[0]):
         for j in range(nu):
-            lo[j] = blo[j] if first else _nan_max(lo[j], blo[j])
-            hi[j] = bhi[j] if first else _nan_min(hi[j], bhi[j])
-        first = False
+            lo[j] = boxes[c, 0, j] if c == 0 else _nan_max(lo[j], boxes[c, 0, j])
+            hi[j] = boxes[c, 1, j] if c == 0 else _nan_min(hi[j], boxes[c, 1, j])
+    for e in range(entries.shape[0]):
+        if entries[e, lay.E_KIND] == lay.KIND_ACCELERATION:
+            previous = par[entries[e, lay.E_F0] + 3 * nu : entries[e, lay.E_F0] + 4 * nu]
+            for j in range(nu):
+                anchor[j] = previous[j] / D[j]
     for j in range(nu):
         if lo[j] > hi[j]:
             mid = hi[j] if lo[j] > 0 else lo[j]

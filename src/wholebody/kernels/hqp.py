@@ -28,6 +28,7 @@ import math
 
 import numpy as np
 
+from wholebody.kernels import daqp as dk
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
 from wholebody.kernels.lapack import gels, geqp3, gesdd, orgqr, potrf, trtri, trtrs
@@ -94,8 +95,8 @@ W_LIMITED = 17  # (T + Pt,): per equality then inequality task: limited, violate
 N_WREGIONS = 18
 
 S_K, S_R, S_ZI, S_ANYQP, S_EXACT, S_NINH, S_NV, S_NROWS, S_HASBOX, S_RANK = range(10)
-S_NULL, S_M, S_P, S_PROX, S_BOXBAD, S_TIEFAIL, S_TIE = range(10, 17)
-S_WIDTH = 17
+S_NULL, S_M, S_P, S_PROX, S_BOXBAD, S_TIEFAIL, S_TIE, S_TIESTATUS = range(10, 18)
+S_WIDTH = 18
 C_SMAX, C_D, C_TOL, C_F, C_CLIP, C_RES = range(6)
 R_FREE, R_RANK, R_QP, R_FAILED, R_ITER, R_RETRIES, R_STATUS, R_FAIL, R_OBJBAD = range(9)
 R_WIDTH = 9
@@ -1557,3 +1558,83 @@ def finish(f, i, h, wf, wi, wh, par) -> None:  # fmt: skip
     else:
         status = 0
     out[lay.OUT_STATUS], out[lay.OUT_FAILED] = status, failures
+
+
+# ---------------------------------------------------------------------- daqp in the kernel
+# QP statuses as the engines report them (wholebody.solvers.qp.QPStatus)
+QP_SOLVED, QP_INACCURATE, QP_INFEASIBLE, QP_FAILED = 0, 1, 2, 3
+
+
+@kernel
+def _daqp(wf, wi, wh, settings) -> tuple[np.ndarray, bool, int, int]:  # fmt: skip
+    """The QP the cascade set up in the workspace, solved by daqp: ``(sol, ok, status,
+    iterations)`` with ``sol`` padded to the workspace's width (zeros where not ok) and the
+    status an engine's (``QP_*``). The box (where the QP has one) goes first, as daqp's
+    simple bounds; crossed bounds are infeasible without a call."""
+    st = ivec(wi, wh, W_STATE)
+    nv, rows, has_box = st[S_NV], st[S_NROWS], st[S_HASBOX] != 0
+    H = fvec(wf, wh, W_H)[: nv * nv].reshape((nv, nv))
+    g = fmat(wf, wh, W_G)[0, :nv]
+    Q = fvec(wf, wh, W_QC)[: rows * nv].reshape((rows, nv))
+    qb = fmat(wf, wh, W_QB)
+    ms = nv if has_box else 0
+    m = ms + rows
+    upper, lower = np.empty(m), np.empty(m)
+    if has_box:
+        upper[:nv], lower[:nv] = qb[3, :nv], qb[2, :nv]
+    upper[ms:], lower[ms:] = qb[1, :rows], qb[0, :rows]
+    sol = np.zeros(fmat(wf, wh, W_G).shape[1])
+    for j in range(m):
+        if not lower[j] <= upper[j]:
+            return sol, False, QP_INFEASIBLE, 0
+    x, lam = np.empty(nv), np.empty(m)
+    flag, iterations = dk.solve(H, g, Q, upper, lower, np.zeros(m, np.int32), settings, x, lam)
+    if flag == dk.OPTIMAL or flag == dk.SOFT_OPTIMAL:
+        status = QP_SOLVED
+    elif flag == dk.ITERLIMIT:
+        status = QP_INACCURATE
+    elif flag == dk.INFEASIBLE:
+        status = QP_INFEASIBLE
+    else:
+        status = QP_FAILED
+    ok = status <= QP_INACCURATE and _finite1(x)
+    if ok:
+        sol[:nv] = x
+    return sol, ok, status, iterations
+
+
+@kernel
+def cascade(f, i, h, wf, wi, wh, par, settings) -> None:  # fmt: skip
+    """The whole cascade on the evaluated stack with daqp for its QPs, in one call: the
+    stages of this module in the order their codes ask for, the engine's retries (the
+    Tikhonov term 100 and 10000 times larger after a failure), the proximal steps and the
+    tie-break; the outcome in the arena (:func:`finish`)."""
+    report = imat(wi, wh, W_REPORT)
+    st = ivec(wi, wh, W_STATE)
+    code = begin(f, i, h, wf, wi, wh, par)
+    while code != DONE:
+        if code == NEXT:
+            code = advance(f, i, h, wf, wi, wh, par)
+            continue
+        if code == NEED_TIE:
+            sol, ok, status, _ = _daqp(wf, wi, wh, settings)
+            st[S_TIESTATUS] = status
+            code = tie_done(wf, wi, wh, sol, ok)
+            continue
+        k = st[S_K]
+        if code == NEED_QP:
+            for attempt in range(3):
+                if attempt:  # ill-conditioned and degenerate: 100x more Tikhonov
+                    bump(wf, wi, wh, attempt)
+                    report[k, R_RETRIES] += 1
+                sol, ok, status, iterations = _daqp(wf, wi, wh, settings)
+                report[k, R_STATUS] = status
+                report[k, R_ITER] += iterations
+                if ok:
+                    break
+            code = after_qp(f, i, h, wf, wi, wh, par, sol, ok)
+        else:  # NEED_PROXIMAL
+            sol, ok, status, iterations = _daqp(wf, wi, wh, settings)
+            report[k, R_ITER] += iterations
+            code = proximal(f, i, h, wf, wi, wh, par, sol, ok)
+    finish(f, i, h, wf, wi, wh, par)

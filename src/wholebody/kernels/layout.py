@@ -7,8 +7,15 @@ and its shape, so a kernel takes ``(f, i, h)`` and three Pinocchio arrays instea
 arguments (numba's call overhead grows by about 70 ns per array argument), and reads a region
 as a view: ``fmat(f, h, F_A)`` is the (K, nu) matrix of task rows.
 
-The Python side writes a region through the same views (:meth:`Plan.view`); nothing is copied
-between the two.
+Every task, inequality task, objective and limit of the stack is one row of the **entry
+table** ``I_ENTRY``: its category, its kind (which kernel computes it, or ``KIND_PYTHON``:
+written by Python before the kernel runs), its level, its first row and row count (in ``F_A`` for a task, in
+``F_C`` for an inequality task), its slot (an objective's row of ``F_OBJ*``, a limit's box in
+``F_BOXES``, a task's index in ``I_TASK``), the reference it follows, and where its own
+numbers lie in the parameter regions ``F_PAR`` and ``I_PAR``: what the entry packed there
+itself (:meth:`wholebody.tasks.Task.pack`), and a flag (an objective's gradient comes with a
+curvature). The Python side writes a region through the same
+views (:meth:`Plan.view`); nothing is copied between the two.
 """
 
 from __future__ import annotations
@@ -18,72 +25,63 @@ import numpy as np
 from wholebody.kernels import kernel
 
 # ------------------------------------------------------------------ float regions
-F_SCALARS = 0  # (4,): dt (s), then scratch
+F_SCALARS = 0  # (4,): dt (s), whether an anchor is set, then scratch
 F_ACT_A = 1  # (E,): values of the actuation matrix's non-zero entries
 F_KIN_J = 2  # (F, 6, nu): frame Jacobians, actuated coordinates
 F_KIN_P = 3  # (F, 3): frame positions (m)
 F_KIN_R = 4  # (F, 3, 3): frame rotations
 F_JP = 5  # (nu,): joint positions (rad, m)
-F_POSE = 6  # (nP, POSE_WIDTH): pose tasks' gains, targets, integrals, errors
-F_POSTURE = 7  # (3, nE): posture entries' target (rad, m), gain (1/s), error (out)
-F_HALF = 8  # (nH, 5): half-spaces' normal (3), offset (m), gain
-F_ARM = 9  # (nA, AE_WIDTH): arm energies' parameters (kernels.objectives)
-F_ARM_PARTS = 10  # (nA, ARM_PARTS): arm energies' parts (out)
-F_NETS = 11  # (n,): packed stiffness networks
-F_H1 = 12  # (nB, 3, nu): joint-limit avoidance's lo, hi, c
-F_OBJ = 13  # (nO, 2): objectives' weight, value (out)
-F_OBJ_GRAD = 14  # (nO, nu): objectives' gradients
-F_OBJ_CURV = 15  # (nO, nu): objectives' Hessian diagonals
-F_POS_BOX = 16  # (nJ, 3, nu): position limits' lower + margin, upper - margin, gain
-F_VEL_BOX = 17  # (nV, nu): velocity limits' upper bound (the lower is its negative)
-F_PY_BOX = 18  # (nC, 2, nu): boxes of constraints written in Python
-F_METRIC = 19  # (2, nu): D = W^-1/2 and D^2
-F_ROW = 20  # (2, K): per row, sqrt(w) and its inverse (0 where w = 0; objective rows: 0)
-F_LEVEL = 21  # (L, 4): gain, objective weight, identity scale (out), reference scale
-F_A = 22  # (K, nu): equality rows, scaled (out)
-F_B = 23  # (K,): right-hand sides, scaled (out)
-F_C = 24  # (P, nu): inequality rows, scaled (out)
-F_CB = 25  # (2, P): inequality rows' lower and upper bounds
-F_BOX = 26  # (2, nu): the box in scaled coordinates (out)
-F_U = 27  # (2, nu): the solution, in scaled and in actuated coordinates (out)
-F_LEVEL_OUT = 28  # (L, 2): per level, residual and scale factor (out)
-F_TASK_RES = 29  # (T, 3): per equality task, weighted, unweighted residual and |b| (out)
-N_FLOAT = 30
+F_PAR = 6  # (n,): every compiled entry's parameters and state (its own layout)
+F_OBJ = 7  # (nO, 2): objectives' weight, value (out)
+F_OBJ_GRAD = 8  # (nO, nu): objectives' gradients
+F_OBJ_CURV = 9  # (nO, nu): objectives' Hessian diagonals
+F_BOXES = 10  # (nC, 2, nu): every limit's box, lower and upper (rad/s, m/s)
+F_METRIC = 11  # (2, nu): D = W^-1/2 and D^2
+F_ROW = 12  # (2, K): per row, sqrt(w) and its inverse (0 where w = 0; objective rows: 0)
+F_LEVEL = 13  # (L, 4): gain, objective weight, identity scale (out), reference scale
+F_A = 14  # (K, nu): equality rows, scaled (out)
+F_B = 15  # (K,): right-hand sides, scaled (out)
+F_C = 16  # (P, nu): inequality rows, scaled (out)
+F_CB = 17  # (2, P): inequality rows' lower and upper bounds
+F_BOX = 18  # (2, nu): the box in scaled coordinates (out)
+F_ANCHOR = 19  # (nu,): the velocity SNS scales around (scaled; acceleration limits' memory)
+F_U = 20  # (2, nu): the solution, in scaled and in actuated coordinates (out)
+F_LEVEL_OUT = 21  # (L, 2): per level, residual and scale factor (out)
+F_TASK_RES = 22  # (T, 3): per equality task, weighted, unweighted residual and |b| (out)
+N_FLOAT = 23
 
 # ------------------------------------------------------------------ int regions
 I_FRAME = N_FLOAT + 0  # (F,): frame indices into data.oMf
 I_SUPPORT = N_FLOAT + 1  # (F, nv): 1 where the velocity coordinate moves the frame
 I_ACT = N_FLOAT + 2  # (2, E): the actuation matrix's non-zero entries (column k, row j)
 I_POS = N_FLOAT + 3  # (2, nu): joint positions: index into q, (cos, sin) pair
-I_POSE = N_FLOAT + 4  # (nP, POSE_INTS): frames, rows, row selection
-I_POSTURE = N_FLOAT + 5  # (nQ, 3): posture tasks' first row, first entry, entries
-I_POSTURE_ENTRY = N_FLOAT + 6  # (3, nE): index into u, tracked, wrapped
-I_HALF = N_FLOAT + 7  # (nH, 2): half-spaces' frame and inequality row
-I_ARM = N_FLOAT + 8  # (nA, 6): arm energies' frames
-I_H2 = N_FLOAT + 9  # (nM, 1 + Fmax): manipulabilities' frame count and frames
-I_H2_MASK = N_FLOAT + 10  # (nu, nu): 1 where column l supports column k
-I_OBJ = N_FLOAT + 11  # (nO, 4): objectives' kind, index in its table, level, curvature
-I_LEVEL = N_FLOAT + 12  # (L, LEVEL_INTS): rows of each level
-I_TASK = N_FLOAT + 13  # (T, 3): equality tasks' level, first and last row
-I_BOX = N_FLOAT + 14  # (3,): number of position, velocity and Python boxes
-I_OUT = N_FLOAT + 15  # (OUT_INTS,): solver outcome codes (out)
-I_ACTIVE = N_FLOAT + 16  # (nu,): 1 where u is on a bound (out)
-I_INFEASIBLE = N_FLOAT + 17  # (T,): 1 where a task is not met (out)
-I_INEQ = N_FLOAT + 18  # (Pt, 3): inequality tasks' level, first and last row
-N_REGIONS = N_FLOAT + 19
+I_ENTRY = N_FLOAT + 4  # (nE, ENTRY_INTS): the entry table (see the module docstring)
+I_PAR = N_FLOAT + 5  # (n,): every compiled entry's integer parameters
+I_LEVEL = N_FLOAT + 6  # (L, LEVEL_INTS): rows of each level
+I_TASK = N_FLOAT + 7  # (T, 3): equality tasks' level, first and last row
+I_OUT = N_FLOAT + 8  # (OUT_INTS,): solver outcome codes (out)
+I_ACTIVE = N_FLOAT + 9  # (nu,): 1 where u is on a bound (out)
+I_INFEASIBLE = N_FLOAT + 10  # (T,): 1 where a task is not met (out)
+I_SATURATED = N_FLOAT + 11  # (T,): 1 where the bounds limited a task (anti-windup; out)
+I_INEQ = N_FLOAT + 12  # (Pt, 3): inequality tasks' level, first and last row
+I_HELD = N_FLOAT + 13  # (P,): projection: inequality rows held, HELD_MET or HELD_UNMET (out)
+I_UNMET0 = N_FLOAT + 14  # (T,): projection: tasks unmet before any row was held (out)
+N_REGIONS = N_FLOAT + 15
 
 HEADER_WIDTH = 5  # offset, size, d0, d1, d2
 
-# pose tasks: I_POSE columns
-POSE_FA, POSE_FB, POSE_ROW, POSE_NROWS, POSE_SEL = 0, 1, 2, 3, 4  # rows selected: 4..9
-POSE_INTS = 10
-# F_POSE columns
-POSE_KP, POSE_KI, POSE_TARGET, POSE_TWIST, POSE_INTEGRAL, POSE_ERROR = 0, 6, 12, 28, 34, 40
-POSE_WIDTH = 46
-
-# objectives: I_OBJ columns and kinds
-OBJ_KIND, OBJ_INDEX, OBJ_LEVEL, OBJ_HAS_CURV = 0, 1, 2, 3
-KIND_PYTHON, KIND_ARM, KIND_H1, KIND_H2 = 0, 1, 2, 3
+# the entry table: I_ENTRY columns
+E_CAT, E_KIND, E_LEVEL, E_ROW, E_ROWS, E_SLOT, E_REF, E_F0, E_FN, E_I0, E_IN, E_FLAG = range(12)
+ENTRY_INTS = 12  # E_FLAG: an objective's gradient comes with a curvature
+# categories: what an entry is
+CAT_TASK, CAT_INEQUALITY, CAT_OBJECTIVE, CAT_LIMIT = 0, 1, 2, 3
+# kinds: which kernel computes it; KIND_PYTHON entries are written by Python before the
+# kernel runs
+KIND_PYTHON = 0
+KIND_POSE, KIND_POSTURE = 1, 2  # tasks
+KIND_HALF_SPACE, KIND_COLLISION = 3, 4  # inequality tasks
+KIND_ARM, KIND_H1, KIND_H2 = 5, 6, 7  # objectives
+KIND_POSITION, KIND_VELOCITY, KIND_ACCELERATION = 8, 9, 10  # limits
 
 # levels: I_LEVEL columns
 LEVEL_ROW0, LEVEL_TASKS_END, LEVEL_ROW_END, LEVEL_INEQ0, LEVEL_INEQ_END = 0, 1, 2, 3, 4
@@ -92,8 +90,11 @@ LEVEL_INTS = 6
 # F_LEVEL columns
 LEVEL_GAIN, LEVEL_OBJECTIVE_WEIGHT, LEVEL_IDENTITY, LEVEL_REFERENCE = 0, 1, 2, 3
 
+# I_HELD values: not held, held at its bound, held but the box kept it from its bound
+HELD_NOT, HELD_MET, HELD_UNMET = 0, 1, 2
+
 # I_OUT entries
-OUT_STATUS, OUT_FAILED, OUT_MESSAGE = 0, 1, 2
+OUT_STATUS, OUT_FAILED, OUT_MESSAGE, OUT_EXTRA = 0, 1, 2, 3
 OUT_INTS = 4
 
 
@@ -132,8 +133,9 @@ def imat(i: np.ndarray, h: np.ndarray, r: int) -> np.ndarray:
     return i[o : o + h[r, 1]].reshape((h[r, 2], h[r, 3]))
 
 
-def build(shapes: dict[int, tuple[int, ...]], n_float: int = N_FLOAT,
-          n_regions: int = N_REGIONS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def build(
+    shapes: dict[int, tuple[int, ...]], n_float: int = N_FLOAT, n_regions: int = N_REGIONS
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The arenas ``(f, i)`` and header ``h`` for regions of the given shapes (every region
     id below ``n_regions`` must be given; float ids below ``n_float``); zeroed."""
     h = np.zeros((n_regions, HEADER_WIDTH), dtype=np.int64)

@@ -1,11 +1,11 @@
-"""Task rows in kernels: pose tracking (a frame, or one frame relative to another), posture,
-half-spaces, and the boxes of the joint position and velocity limits.
+"""Task rows in kernels: pose tracking (a frame, or one frame relative to another) with its
+PI integral, posture, half-spaces.
 
 The maths is documented where the tasks are (:mod:`wholebody.tasks.frame`,
 :mod:`wholebody.tasks.relative`, :mod:`wholebody.tasks.posture`,
-:mod:`wholebody.tasks.inequality`, :mod:`wholebody.tasks.limits`); the task classes call these
-kernels for their own rows, and the compiled plan calls them for every built-in task of a
-stack in one pass.
+:mod:`wholebody.tasks.inequality`). Each task keeps its numbers in a parameter block laid out
+here (``POSE_*``); the task classes call these kernels on it for their own rows, and the
+compiled stack calls them on the same block, adopted into its arena, for every task at once.
 """
 
 from __future__ import annotations
@@ -22,10 +22,11 @@ __all__ = [
     "POSE_LAST_ROW",
     "POSE_NON_FINITE",
     "POSE_NOT_ROTATION",
+    "POSE_WIDTH",
+    "advance_integral",
     "half_space_row",
     "pose_defect",
     "pose_rows",
-    "position_box",
     "posture_rows",
     "relative_pose",
 ]
@@ -58,25 +59,43 @@ def pose_defect(T: np.ndarray) -> int:
     return POSE_FINE
 
 
+# pose tasks' parameter block (floats): gains (1/s, 1/s^2), target (4x4, row-major), target
+# twist, integral of the error (m s, rad s), error of the last rows (m, rad), the integral's
+# clamp, whether a target is set (TARGET_NONE, _SET, or _HELD: captured at first use), and the
+# stamp of the state the last rows were computed at
+POSE_KP, POSE_KI, POSE_TARGET, POSE_TWIST, POSE_INTEGRAL, POSE_ERROR = 0, 6, 12, 28, 34, 40
+POSE_LIMIT, POSE_HAS, POSE_STAMP = 46, 47, 48
+POSE_WIDTH = 49
+TARGET_NONE, TARGET_SET, TARGET_HELD = 0.0, 1.0, 2.0
+# pose tasks' integer parameters: frame a (-1: the world) and b, rows, the rows kept (<= 6)
+POSE_FA, POSE_FB, POSE_NROWS, POSE_SEL = 0, 1, 2, 3
+POSE_INTS = 9
+
+
 @kernel
 def pose_rows(
+    par: np.ndarray,
     J: np.ndarray,
     p: np.ndarray,
     R: np.ndarray,
-    target: np.ndarray,
-    twist: np.ndarray,
-    kp: np.ndarray,
-    ki: np.ndarray,
-    integral: np.ndarray,
     rows: np.ndarray,
     A: np.ndarray,
     v: np.ndarray,
-    e: np.ndarray,
 ) -> None:
-    """The rows of a pose task at its current pose ``(p, R)`` (with Jacobian ``J``, 6 x nu)
-    and target (4x4, and twist ``[v_d; w_d]``), all in one frame's axes: ``A = (K J)[rows]``
-    and ``v = (K [v_d; E^T w_d] + kp e + ki I)[rows]`` with ``E = R_d R^T``,
-    ``K = diag(I, Jlog3(E))``, ``e = [p_d - p; log3(E)]`` (written into ``e``, all 6)."""
+    """The rows of a pose task at its current pose ``(p, R)`` (with Jacobian ``J``, 6 x nu),
+    all in one frame's axes, from its parameter block ``par`` (``POSE_*``):
+    ``A = (K J)[rows]`` and ``v = (K [v_d; E^T w_d] + kp e + ki I)[rows]`` with
+    ``E = R_d R^T``, ``K = diag(I, Jlog3(E))``, ``e = [p_d - p; log3(E)]`` (written into
+    the block, all 6). Without a target the current pose is captured and held."""
+    target = par[POSE_TARGET : POSE_TARGET + 16].reshape((4, 4))
+    if par[POSE_HAS] == TARGET_NONE:
+        target[:, :] = 0.0
+        target[:3, :3] = R
+        target[:3, 3] = p
+        target[3, 3] = 1.0
+        par[POSE_HAS] = TARGET_HELD
+    twist = par[POSE_TWIST : POSE_TWIST + 6]
+    e = par[POSE_ERROR : POSE_ERROR + 6]
     E = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -90,17 +109,15 @@ def pose_rows(
         e[i] = target[i, 3] - p[i]
         e[3 + i] = eo[i]
         full[i] = twist[i]
-    for i in range(3):  # E^T w_d, then Jlog3 of it
-        full[3 + i] = twist[3] * E[0, i] + twist[4] * E[1, i] + twist[5] * E[2, i]
-    ff = np.empty(3)
-    for i in range(3):
-        ff[i] = Jl[i, 0] * full[3] + Jl[i, 1] * full[4] + Jl[i, 2] * full[5]
-    for i in range(3):
-        full[3 + i] = ff[i]
+    for i in range(3):  # Jlog3 E^T w_d
+        t = 0.0
+        for k in range(3):
+            t += Jl[i, k] * (twist[3] * E[0, k] + twist[4] * E[1, k] + twist[5] * E[2, k])
+        full[3 + i] = t
     nu = J.shape[1]
     for r in range(rows.shape[0]):
         i = rows[r]
-        v[r] = full[i] + kp[i] * e[i] + ki[i] * integral[i]
+        v[r] = full[i] + par[POSE_KP + i] * e[i] + par[POSE_KI + i] * par[POSE_INTEGRAL + i]
         if i < 3:
             for c in range(nu):
                 A[r, c] = J[i, c]
@@ -108,6 +125,26 @@ def pose_rows(
             a, b, d = Jl[i - 3, 0], Jl[i - 3, 1], Jl[i - 3, 2]
             for c in range(nu):
                 A[r, c] = a * J[3, c] + b * J[4, c] + d * J[5, c]
+
+
+@kernel
+def advance_integral(par: np.ndarray, saturated: bool, dt: float) -> None:
+    """One step of a pose task's integral from the error of its last rows: ``I += e dt``
+    clamped to ``+-limit``; while ``saturated`` (the bounds limited the task) it may only
+    shrink towards 0 (a step against it stops at 0, a step along it is dropped)."""
+    some = False
+    for i in range(6):
+        some = some or par[POSE_KI + i] != 0.0
+    if not some:  # no integral action: the integral stays 0
+        return
+    limit = par[POSE_LIMIT]
+    for i in range(6):
+        integral = par[POSE_INTEGRAL + i]
+        step = par[POSE_ERROR + i] * dt
+        if saturated:
+            size = abs(integral)
+            step = min(max(step, -size), size) if step * integral < 0 else 0.0
+        par[POSE_INTEGRAL + i] = min(max(integral + step, -limit), limit)
 
 
 @kernel
@@ -146,30 +183,25 @@ def relative_pose(
 
 @kernel
 def posture_rows(
-    positions: np.ndarray,
-    indices: np.ndarray,
-    target: np.ndarray,
-    kp: np.ndarray,
-    tracked: np.ndarray,
-    wrapped: np.ndarray,
-    A: np.ndarray,
-    v: np.ndarray,
-    e: np.ndarray,
+    positions: np.ndarray, par: np.ndarray, ints: np.ndarray, A: np.ndarray, v: np.ndarray
 ) -> None:
-    """Posture rows: ``A`` the unit rows of ``indices`` and ``v = kp e`` with the error
-    ``e = target - positions[indices]`` (into ``e``), wrapped into ``[-pi, pi)`` where
-    ``wrapped`` and 0 where not ``tracked`` (wheels and a planar base's actuators)."""
+    """Posture rows of ``n`` joints from the parameter blocks (floats: target (rad, m), gain
+    (1/s), error (out), n each; ints: index into ``u``, tracked, wrapped): ``A`` the unit rows
+    of the indices and ``v = kp e`` with ``e = target - positions[index]`` wrapped into
+    ``[-pi, pi)`` where ``wrapped`` and 0 where not ``tracked`` (wheels and a planar base's
+    actuators)."""
+    n = A.shape[0]
     A[:, :] = 0.0
-    for r in range(indices.shape[0]):
-        k = indices[r]
+    for r in range(n):
+        k = ints[r]
         A[r, k] = 1.0
-        err = target[r] - positions[k]
-        if wrapped[r]:
+        err = par[r] - positions[k]
+        if ints[2 * n + r]:
             err = (err + math.pi) % (2.0 * math.pi) - math.pi
-        if not tracked[r]:
+        if not ints[n + r]:
             err = 0.0
-        e[r] = err
-        v[r] = kp[r] * err
+        par[2 * n + r] = err
+        v[r] = par[n + r] * err
 
 
 @kernel
@@ -188,21 +220,3 @@ def half_space_row(
         C[c] = normal[0] * J[0, c] + normal[1] * J[1, c] + normal[2] * J[2, c]
     distance = normal[0] * p[0] + normal[1] * p[1] + normal[2] * p[2] - offset
     return -gain * distance / dt
-
-
-@kernel
-def position_box(
-    positions: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    gain: float,
-    dt: float,
-    lo: np.ndarray,
-    hi: np.ndarray,
-) -> None:
-    """Joint position limits as velocity bounds: ``lo = gain (lower - q) / dt`` and
-    ``hi = gain (upper - q) / dt`` (infinite where the limit is)."""
-    k = gain / dt
-    for i in range(positions.shape[0]):
-        lo[i] = (lower[i] - positions[i]) * k
-        hi[i] = (upper[i] - positions[i]) * k

@@ -19,6 +19,7 @@ is ``J_model A``: its wheel columns go through the base's actuation map.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from typing import TypeVar
 
@@ -44,6 +45,7 @@ from wholebody.robot.wheels import check_base_geometry
 __all__ = ["ArmChain", "Body", "Frame", "JointGroup", "Robot", "RobotState"]
 
 T = TypeVar("T")
+_STAMPS = itertools.count(1)  # state versions, unique over every robot of the process
 
 _FRAME_PREFERENCE = (
     pin.FrameType.BODY,
@@ -213,7 +215,7 @@ class Robot(Configurations):
         q = self._accept(q)
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
-        self._version += 1
+        self._version = next(_STAMPS)
         return RobotState(self, q, self._version)
 
     def frame_pose(self, q: np.ndarray, frame: str | Frame) -> np.ndarray:

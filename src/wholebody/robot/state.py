@@ -62,6 +62,18 @@ class RobotState:
         self._rows: dict[int, int] = {}  # frame index -> its first position in _block
         self._order: list[int] = []  # the frame index at each position of _block
 
+    @property
+    def stamp(self) -> float:
+        """A number no other state of any robot has (what the kernels mark the rows they
+        computed at this state with)."""
+        return float(self._version)
+
+    @property
+    def valid(self) -> bool:
+        """Whether this is the robot's newest state (a newer :meth:`Robot.update` makes it
+        stale)."""
+        return self._version == self.robot._version
+
     def _data(self) -> pin.Data:
         """The robot's Pinocchio data, or a :class:`WholebodyError` if this state is stale."""
         if self._version != self.robot._version:

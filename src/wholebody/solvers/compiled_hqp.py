@@ -1,11 +1,11 @@
-"""The compiled cascade's Python side: its workspace, the QP engine's solves between the
-kernel stages (:mod:`wholebody.kernels.hqp`), and the result.
+"""The cascade's Python side: its workspace, its two drivers and the result.
 
-The kernels run the cascade until a level needs a QP and say so; here the level's engine
-solves it (with the reference's retries: 100 and 10000 times the Tikhonov term after a
-failure, the engine reset), the answer goes back to the kernels, and so on until the
-tie-break and the result (:class:`~wholebody.solvers.hqp.HierarchicalQPSolver` documents
-the method).
+With daqp the whole cascade is one kernel call (:func:`wholebody.kernels.hqp.cascade`, daqp
+called from the kernel). With another engine the kernels run the cascade until a level needs
+a QP and say so; here the level's engine solves it (with the same retries: 100 and 10000
+times the Tikhonov term after a failure, the engine reset), the answer goes back to the
+kernels, and so on until the tie-break and the result
+(:class:`~wholebody.solvers.hqp.HierarchicalQPSolver` documents the method).
 """
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ import numpy as np
 from wholebody import kernels
 from wholebody.kernels import hqp as kernel
 from wholebody.kernels import layout as lay
+from wholebody.solvers.level_report import LevelReport
 from wholebody.solvers.plan import Arena, first_call
 from wholebody.solvers.qp import QPStatus
 from wholebody.solvers.result import SolverResult
 
 if TYPE_CHECKING:
     from wholebody.solvers.hqp import HierarchicalQPSolver
-    from wholebody.solvers.level_report import LevelReport
 
 __all__ = ["Workspace", "run"]
 
@@ -98,10 +98,15 @@ def _solve(engine, ws: Workspace) -> tuple[object, bool]:
 def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     """The cascade on the evaluated ``arena`` (see the module docstring); its outcome is in
     the arena and the workspace."""
-    if _READY:
+    if solver.in_kernel:
+        first_call("hqp", "the hierarchical QP kernels", kernel.cascade, arena.f, arena.i,
+                   arena.h, ws.f, ws.i, ws.h, solver.parameters(),
+                   solver._daqp_settings)  # fmt: skip
+    elif _READY:
         _cascade(solver, arena, ws)
     else:
-        first_call("hqp", "the hierarchical QP kernels", _compile_then, solver, arena, ws)
+        first_call("hqp stages", "the hierarchical QP kernels", _compile_then, solver, arena,
+                   ws)  # fmt: skip
 
 
 _READY = False  # whether every stage is compiled in this process
@@ -112,7 +117,7 @@ def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> 
     first, so that no later step pays for a stage this one did not need."""
     global _READY
     if not kernels.DISABLED:
-        a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver._par)
+        a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver.parameters())
         sol, w = ws.padded(None), (ws.f, ws.i, ws.h)
         stages = ((kernel.begin, a), (kernel.advance, a), (kernel.finish, a),
                   (kernel.after_qp, (*a, sol, True)), (kernel.proximal, (*a, sol, True)),
@@ -124,7 +129,8 @@ def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> 
 
 
 def _cascade(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
-    a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver._par)
+    """The cascade's stages driven from Python, the QPs solved by the solver's engine."""
+    a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver.parameters())
     code = kernel.begin(*a)
     report = ws.report
     L = report.shape[0]
@@ -134,11 +140,11 @@ def _cascade(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
             continue
         k = int(ws.state[kernel.S_K])
         if code == kernel.NEED_TIE:
-            sol, ok = _solve(solver._engine(L), ws)
-            solver._tie_status = sol.status
+            sol, ok = _solve(solver.engine(L), ws)
+            ws.state[kernel.S_TIESTATUS] = int(sol.status)
             code = kernel.tie_done(ws.f, ws.i, ws.h, ws.padded(sol.x if ok else None), ok)
             continue
-        engine = solver._engine(k)
+        engine = solver.engine(k)
         if code == kernel.NEED_QP:
             for attempt in range(3):
                 if attempt:  # ill-conditioned and degenerate: retry cold, 100x more Tikhonov
@@ -158,10 +164,10 @@ def _cascade(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     kernel.finish(*a)
 
 
-def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace,
-           solve_time: float) -> SolverResult:  # fmt: skip
-    """The outcome as a :class:`SolverResult`, with the reference's message."""
-    out = arena.result(solve_time, scale=False)
+def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> SolverResult:
+    """The outcome as a :class:`SolverResult`, with the engine's iterations, failures,
+    infeasible tasks and a clip beyond the relaxation in the message."""
+    out = arena.result(0.0, scale=False)
     failures = _failures(solver, arena, ws)
     extra = _inequality_infeasible(arena, ws)
     out.infeasible += extra
@@ -224,13 +230,13 @@ def _failures(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> list
         elif code:
             out.append(f"{level}: {_FAILURE[code]}")
     if st[kernel.S_TIEFAIL]:
-        status = QPStatus(int(solver._tie_status)).name.lower()
+        status = QPStatus(int(st[kernel.S_TIESTATUS])).name.lower()
         out.append(f"minimum-norm tie-break: {status} ({solver.engine_name}); kept the last "
                    "level's answer")  # fmt: skip
     return out
 
 
-def reports(arena: Arena, ws: Workspace, cls: type[LevelReport]) -> list[LevelReport]:
+def reports(arena: Arena, ws: Workspace) -> list[LevelReport]:
     """The per-level reports of the last solve."""
     report = ws.report
     residuals = arena.view(lay.F_LEVEL_OUT)[:, 0]
@@ -238,7 +244,7 @@ def reports(arena: Arena, ws: Workspace, cls: type[LevelReport]) -> list[LevelRe
     for k, name in enumerate(arena.level_names):
         row = report[k].tolist()
         qp = bool(row[kernel.R_QP])
-        out.append(cls(
+        out.append(LevelReport(
             name, free=row[kernel.R_FREE], rank=row[kernel.R_RANK], qp=qp,
             engine_status=QPStatus(row[kernel.R_STATUS]) if qp else None,
             iterations=row[kernel.R_ITER], residual=float(residuals[k]),

@@ -29,24 +29,26 @@ higher level's residual, and every level, including the first, respects the box.
 
 How it is solved
 ----------------
-Level by level, in the null space of the levels above (:mod:`wholebody.solvers.cascade`):
-each level's unconstrained least-squares candidate, exact, by a complete orthogonal
-decomposition (:mod:`wholebody.solvers.linalg`; rank-deficient levels, such as two hands plus
-the closed chain between them, solve without error); where the candidate leaves the box or
-an inequality row, one QP for that level (:mod:`wholebody.solvers.level_qp`), made exact by
-a polish on the active face and proximal steps; at the end the exact minimum-norm point. With
-no bound active this is the recursive pseudo-inverse, so it equals the projection backend's
-``J+ v + (I - J+ J) u0``. The compiled kernels (:mod:`wholebody.kernels.hqp`, the default,
-driven by :mod:`wholebody.solvers.compiled_hqp`) run the same cascade; ``compiled=False``
-runs the Python reference they are tested against.
+Level by level, in the null space of the levels above (:mod:`wholebody.kernels.hqp`): each
+level's unconstrained least-squares candidate, exact, by a complete orthogonal decomposition
+(rank-deficient levels, such as two hands plus the closed chain between them, solve without
+error); where the candidate leaves the box or an inequality row, one QP for that level
+(``min 1/2 ||M y - c||^2 + d/2 ||y||^2 + 1/2 ||s||^2`` in the free coordinates ``y``, with a
+Tikhonov term ``d = regularization * sigma_max^2`` and slacks ``s`` of the level's inequality
+rows), made exact by a polish on the active face (the level's least squares solved on the face
+of the constraints active at the QP's answer; where only the box bounds the level, the exact
+bounded least squares, BVLS), a check of the level's optimality conditions and proximal steps
+where it fails; the constraints the level's optimum presses on are then fixed for the levels
+below; at the end the exact minimum-norm point (one more QP where the box binds it). With no
+bound active this is the recursive pseudo-inverse, so it equals the projection backend's
+``J+ v + (I - J+ J) u0``.
 
-``method="native"`` (daqp only, opt-in) hands the rest of the stack, from the first level
-whose candidate leaves the box, to one call of daqp's own hierarchical mode
-(:mod:`wholebody.solvers.native`). Its answer is checked at that level only: the cascade,
-checked at every level, is the default.
+With daqp (the default engine) the whole cascade is one kernel call: daqp's C entry point is
+called from the kernel (:mod:`wholebody.kernels.daqp`). Another engine solves the QPs in
+Python between the cascade's kernel stages (:mod:`wholebody.solvers.compiled_hqp`).
 
 **Tolerance of the priorities.** A level never sees the levels below it (they are solved
-after it, in the null space of its rows or, natively, with its slacks fixed), so a lower level
+after it, in the null space of its rows), so a lower level
 changes a higher level's residual only through the directions dropped by the rank threshold,
 the engine's primal tolerance and the final clip (``x`` is clipped to the exact box: it can
 only be outside by the relaxation and engine tolerances; ``message`` says so if the clip moved
@@ -62,8 +64,7 @@ level.
 residual exceeds ``tolerance * (1 + ||v||)`` (weighted), the objectives' rows excepted, plus
 inequality tasks left violated and the tasks of a skipped level. The status is INFEASIBLE when
 the first level is not met or when the box cost some level part of its box-free optimum
-(:attr:`LevelReport.limited`: computed at every QP level by the cascade; by the native method
-for the level where the box first bites and for inequality rows); FAILED after an engine
+(:attr:`LevelReport.limited`, computed at every QP level); FAILED after an engine
 failure or non-finite rows (the level is skipped, named, and the rest is solved);
 BOUNDS_ACTIVE when some entry of ``u`` sits on the box. The projection backend gives the status
 the same meaning (:class:`~wholebody.solvers.SolverStatus`).
@@ -87,11 +88,11 @@ only reported); put posture regulation in the same level as the objectives, or a
 Engines (``engine=``, see :mod:`wholebody.solvers.qp`)
 -----------------------------------------------------
 ``"daqp"`` (default: a dual active-set method, exact up to round-off on these strictly
-convex problems), ``"proxsuite"``, ``"osqp"``: each level keeps its own engine workspace
+convex problems; called from the kernel, each QP from a cold start: the answers do not depend
+on the previous steps), ``"proxsuite"``, ``"osqp"``: each level keeps its own engine workspace
 across control steps (warm start), re-created only when its number of free directions
-changes; the native method keeps one daqp workspace for the whole stack.
-``"qpsolvers:<solver>"`` lets any QP solver installed for :mod:`qpsolvers` serve the levels
-(:mod:`wholebody.solvers.qpsolvers_engine`; no workspace is kept between calls).
+changes. ``"qpsolvers:<solver>"`` lets any QP solver installed for :mod:`qpsolvers` serve the
+levels (:mod:`wholebody.solvers.qpsolvers_engine`; no workspace is kept between calls).
 """
 
 from __future__ import annotations
@@ -101,20 +102,17 @@ from typing import Any
 
 import numpy as np
 
-from wholebody._numeric import ones
-from wholebody.errors import DimensionError, SolverError
+from wholebody.errors import SolverError
+from wholebody.kernels import daqp as dk
 from wholebody.kernels import hqp as hqp_kernel
 from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Solver
-from wholebody.solvers.cascade import Cascade
 from wholebody.solvers.level_report import LevelReport
-from wholebody.solvers.native import NativeHierarchy
-from wholebody.solvers.optimality import Bounds as Bounds  # (its former home: a re-export)
-from wholebody.solvers.plan import Arena, ProblemArena, first_call
-from wholebody.solvers.qp import QPEngine, QPStatus, make_engine
-from wholebody.solvers.result import SolverResult, SolverStatus
+from wholebody.solvers.plan import NO_REFERENCES, Arena, ProblemArena, first_call
+from wholebody.solvers.qp import QPEngine, make_engine
+from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
 
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
@@ -135,31 +133,17 @@ class HierarchicalQPSolver(Solver):
     rank_tolerance
         Singular values below ``rank_tolerance * sigma_max`` of a level count as zero.
     regularization
-        Relative Tikhonov term ``d = regularization * sigma_max^2`` of the cascade's level QPs
-        (its bias is polished away; see :mod:`wholebody.solvers.level_qp`).
+        Relative Tikhonov term ``d = regularization * sigma_max^2`` of the level QPs (its
+        bias is polished away).
     bound_relaxation
         The box and inherited inequality rows are relaxed by this much at the levels below the
         first (round-off of the engine must not make a later level infeasible).
     warm_start
-        Keep each level's engine workspace and warm-start it at the next control step.
+        Keep each level's engine workspace and warm-start it at the next control step
+        (engines other than daqp).
     engine_settings
-        Passed to the engine (see :func:`wholebody.solvers.qp.make_engine`).
-    method
-        ``"cascade"``: the null-space cascade with one QP per level that needs one (any
-        engine). ``"native"`` (daqp only): the same exact unconstrained candidates level by
-        level, and at the first level whose candidate leaves the box, **one** call of daqp's
-        own hierarchical mode for the whole stack (:mod:`wholebody.solvers.native`); if daqp
-        fails, the cascade. The default is the cascade, because native's answer is not
-        checked below the level it starts at (``"auto"`` is the default too).
-    rho_soft
-        daqp's soft-constraint weight in native mode (uniform on every row, so that each level
-        minimises its true least squares): a level's optimum is exact up to about
-        ``rho_soft |x|^2`` in its objective.
-    compiled
-        Run the cascade's arithmetic in the compiled kernels (:mod:`wholebody.kernels.hqp`,
-        the default), or, with False, in Python (:mod:`wholebody.solvers.cascade`), the
-        reference the kernels are tested against (same decisions, to rounding). The native
-        method always runs in Python.
+        Passed to the engine (see :func:`wholebody.solvers.qp.make_engine`; daqp: the fields
+        of :data:`wholebody.kernels.daqp.SETTING_NAMES`).
     """
 
     name = "hqp"
@@ -174,14 +158,10 @@ class HierarchicalQPSolver(Solver):
         bound_relaxation: float = 1e-9,
         warm_start: bool = True,
         engine_settings: dict[str, Any] | None = None,
-        method: str = "cascade",
-        rho_soft: float = 1e-7,
-        compiled: bool = True,
     ) -> None:
         for label, value in (("tolerance", tolerance), ("rank_tolerance", rank_tolerance),
                              ("regularization", regularization),
-                             ("bound_relaxation", bound_relaxation),
-                             ("rho_soft", rho_soft)):  # fmt: skip
+                             ("bound_relaxation", bound_relaxation)):  # fmt: skip
             if not (np.isfinite(value) and value > 0):
                 raise SolverError(f"HierarchicalQPSolver: {label} must be finite and > 0, "
                                   f"got {value!r}")  # fmt: skip
@@ -189,63 +169,68 @@ class HierarchicalQPSolver(Solver):
         self.engine_settings = dict(engine_settings or {})
         self.warm_start = bool(warm_start)
         make_engine(self.engine_name, warm_start=self.warm_start, **self.engine_settings)
-        method = str(method).lower()
-        if method == "auto":  # the default, by its former name
-            method = "cascade"
-        if method not in ("cascade", "native") or (method == "native"
-                                                    and self.engine_name != "daqp"):  # fmt: skip
-            raise SolverError(
-                "HierarchicalQPSolver: method must be 'cascade', or 'native' with engine "
-                f"'daqp'; got {method!r} with {self.engine_name!r}"
-            )
-        self.method = method
-        self.rho_soft = float(rho_soft)
-        self._native = NativeHierarchy()
+        self.in_kernel = self.engine_name == "daqp"
+        """Whether the QPs are solved inside the kernel (daqp), not in Python."""
+        self._daqp_settings = self._settings() if self.in_kernel else np.zeros(0)
         self.tolerance = float(tolerance)
         self.rank_tolerance = float(rank_tolerance)
         self.regularization = float(regularization)
         self.bound_relaxation = float(bound_relaxation)
         self.proximal_steps = 3
         """Most proximal-point QPs after a level's QP whose answer fails the level's
-        optimality conditions (see :mod:`wholebody.solvers.level_qp`)."""
+        optimality conditions."""
         self.active_tolerance = 1e-7
         """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
         self._engines: list[QPEngine] = []
-        self.levels = []
         self.qp_time = 0.0
         """Wall time (s) of the last solve without the stack evaluation."""
-        self.compiled = bool(compiled)
         self._par = np.zeros(hqp_kernel.PAR_WIDTH)
         self._workspace: compiled_hqp.Workspace | None = None
-        self._tie_status = QPStatus.SOLVED
+        self._levels: list[LevelReport] | None = []
+
+    def _settings(self) -> np.ndarray:
+        """daqp's settings: a primal tolerance far below its default 1e-6 (the cascade
+        inherits the box into the next level, where a 1e-6 violation would show), at most
+        2000 iterations, then the user's ``engine_settings``."""
+        values = {"primal_tol": 1e-9, "iter_limit": 2000, **self.engine_settings}
+        return dk.settings(**values)
 
     @property
     def levels(self) -> list[LevelReport]:
         """Per-level report of the last solve."""
-        if self._pending is not None:
-            self._levels = compiled_hqp.reports(*self._pending, LevelReport)
-            self._pending = None
+        if self._levels is None:
+            ws = self._workspace
+            self._levels = compiled_hqp.reports(ws.arena, ws)  # type: ignore[union-attr]
         return self._levels
 
-    @levels.setter
-    def levels(self, value: list[LevelReport]) -> None:
-        self._levels, self._pending = value, None
-
     def __repr__(self) -> str:
-        return f"HierarchicalQPSolver(engine={self.engine_name!r}, method={self.method!r})"
+        return f"HierarchicalQPSolver(engine={self.engine_name!r})"
 
     def reset(self) -> None:
         """Drop the engine workspaces (the next solve starts cold)."""
         self._engines.clear()
-        self._native.reset()
 
-    def _engine(self, k: int) -> QPEngine:
-        """The engine workspace of level ``k`` (the last one, ``k`` = the number of levels,
-        serves the final tie-break)."""
+    def engine(self, k: int) -> QPEngine:
+        """The Python engine workspace of level ``k`` (the last one, ``k`` = the number of
+        levels, serves the final tie-break)."""
         while len(self._engines) <= k:
             self._engines.append(make_engine(self.engine_name, warm_start=self.warm_start,
                                              **self.engine_settings))  # fmt: skip
         return self._engines[k]
+
+    def parameters(self) -> np.ndarray:
+        """The settings as the kernels read them."""
+        self._par[:] = (self.tolerance, self.rank_tolerance, self.regularization,
+                        self.bound_relaxation, self.active_tolerance,
+                        self.proximal_steps)  # fmt: skip
+        return self._par
+
+    def workspace(self, arena: Arena) -> compiled_hqp.Workspace:
+        """The cascade's workspace for ``arena`` (made again for a new arena)."""
+        ws = self._workspace
+        if ws is None or ws.arena is not arena:
+            ws = self._workspace = compiled_hqp.Workspace(arena)
+        return ws
 
     # ------------------------------------------------------------------ public
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
@@ -254,105 +239,25 @@ class HierarchicalQPSolver(Solver):
         ``solve_time`` covers the evaluation and the solve; :attr:`qp_time` the solve only.
         """
         t0 = time.perf_counter()
-        if self.compiled and self.method == "cascade":
-            if not dt > 0:
-                raise DimensionError(f"control step dt must be > 0 s, got {dt}")
-            plan = stack.plan()
-            plan.sync(state, dt)
-            if plan.stale:  # an arm energy's stiffness was replaced: lay the stack out anew
-                plan = stack.plan()
-                plan.sync(state, dt)
-            first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state))
-            plan.written(state)
-            result = self._solve_arena(plan)
-        else:
-            problem = stack.evaluate(state, dt, compiled=self.compiled)
-            result = self.solve_problem(problem)
+        plan = stack.synced_plan(state, dt)
+        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state),
+                   NO_REFERENCES)  # fmt: skip
+        plan.evaluated = state.stamp
+        result = self._solve_arena(plan)
         result.solve_time = time.perf_counter() - t0
+        plan.last_result = result
         return result
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
-        """Solve an evaluated stack (rows in scaled coordinates): with the kernels, or with
-        ``compiled=False`` (and with the native method) in Python, the reference."""
-        if self.compiled and self.method == "cascade":
-            return self._solve_arena(ProblemArena(problem))
-        return self._solve_reference(problem)
+        """Solve an evaluated stack (rows in scaled coordinates)."""
+        return self._solve_arena(ProblemArena(problem))
 
     def _solve_arena(self, arena: Arena) -> SolverResult:
-        """The compiled cascade on an evaluated arena (:mod:`.compiled_hqp`)."""
+        """The cascade on an evaluated arena."""
         t0 = time.perf_counter()
-        ws = self._workspace
-        if ws is None or ws.arena is not arena:
-            ws = self._workspace = compiled_hqp.Workspace(arena)
-        self._par[:] = (self.tolerance, self.rank_tolerance, self.regularization,
-                        self.bound_relaxation, self.active_tolerance,
-                        self.proximal_steps)  # fmt: skip
+        ws = self.workspace(arena)
         compiled_hqp.run(self, arena, ws)
-        self._pending = (arena, ws)
-        result = compiled_hqp.result(self, arena, ws, 0.0)
+        self._levels = None
+        result = compiled_hqp.result(self, arena, ws)
         self.qp_time = result.solve_time = time.perf_counter() - t0
         return result
-
-    def _solve_reference(self, problem: StackProblem) -> SolverResult:
-        """The Python implementation (:class:`~wholebody.solvers.cascade.Cascade`), the
-        reference of the kernels."""
-        t0 = time.perf_counter()
-        run = Cascade(self, problem)
-        self.levels = run.reports
-        x, clip = run.run()
-        result = self._result(problem, x, run, clip)
-        self.qp_time = result.solve_time = time.perf_counter() - t0
-        return result
-
-    # ------------------------------------------------------------------ the result
-    def _result(self, problem: StackProblem, x: np.ndarray, run: Cascade,
-                clip: float) -> SolverResult:  # fmt: skip
-        """The reference's answer ``x`` (scaled coordinates) as a :class:`SolverResult`."""
-        reports = run.reports
-        failed = [k for k, rep in enumerate(reports) if rep.failed]
-        level_res, task_res, infeasible = problem.residuals(x, self.tolerance, failed)
-        for k, lev in enumerate(problem.levels):
-            report = reports[k]
-            report.residual = float(level_res[k])
-            if report.failed:  # a skipped level: all its tasks, inequalities included
-                infeasible += [(lev.name, t) for t in lev.inequality_rows
-                               if t not in report.limited]  # fmt: skip
-            if report.limited:
-                infeasible += [(lev.name, t) for t in report.limited if t in lev.inequality_rows]
-        act = self.active_tolerance
-        active = ((x <= problem.lower + act) | (x >= problem.upper - act)).nonzero()[0]
-        top = problem.levels[0].name if problem.levels else ""
-        if run.failures:
-            status = SolverStatus.FAILED
-        elif any([rep.limited for rep in reports]) or top in [lv for lv, _ in infeasible]:
-            status = SolverStatus.INFEASIBLE
-        elif active.size:
-            status = SolverStatus.BOUNDS_ACTIVE
-        else:
-            status = SolverStatus.OK
-        return SolverResult(
-            u=problem.to_u(x),
-            status=status,
-            level_residuals=level_res,
-            task_residuals=task_res,
-            active_bounds=active,
-            scale=ones(len(problem.levels)),
-            infeasible=infeasible,
-            message=self._message(run, infeasible, clip),
-        )
-
-    def _message(self, run: Cascade, infeasible: list[tuple[str, str]], clip: float) -> str:
-        """The result's message: QP iterations per level, notes, failures, infeasible tasks
-        and a clip to the box beyond the relaxation."""
-        if run.native_from is not None:
-            first = run.reports[run.native_from]
-            msg = [f"daqp hierarchy from {first.name}: {first.iterations} it"]
-        else:
-            qps = [f"{rep.name}: {rep.iterations} it" for rep in run.reports if rep.qp]
-            msg = [f"{self.engine_name}: " + ("; ".join(qps) if qps else "no QP needed")]
-        msg += run.notes + run.failures
-        if infeasible:
-            msg.append("infeasible: " + ", ".join(f"{lv}/{t}" for lv, t in infeasible))
-        if clip > 10 * self.bound_relaxation:
-            msg.append(f"clipped u by {clip:.2e} (scaled units) to the box")
-        return "; ".join(msg)

@@ -1,8 +1,7 @@
 """What the hierarchical QP did at one level of its last solve (for logs, tests and benchmarks).
 
 :attr:`HierarchicalQPSolver.levels <wholebody.solvers.hqp.HierarchicalQPSolver.levels>`
-holds one per level; the reference cascade (:mod:`wholebody.solvers.cascade`) fills them as
-it goes, the compiled one from its report rows (:mod:`wholebody.solvers.compiled_hqp`).
+holds one per level, read from the cascade's report rows (:mod:`wholebody.solvers.compiled_hqp`).
 """
 
 from __future__ import annotations

@@ -2,22 +2,17 @@
 
 At the first compiled solve a :class:`~wholebody.solvers.stack.Stack` builds a :class:`Plan`:
 every number the kernels read or write goes into the regions of two flat arenas
-(:mod:`wholebody.kernels.layout`), and the constant ones (frames, supports, row layout,
-limits, networks) are written there once. Each step, :meth:`Plan.sync` copies into the arena
-what may have changed since the last step (a new target, a new gain or weight, the
-integrals are shared in place) and lets every entry written in Python (a user's task,
-objective or constraint, or a built-in one the kernels do not know) write its rows, gradient
-or box into it; one kernel call (:func:`wholebody.kernels.evaluate.evaluate`, or a solver's,
-which starts with it) then does the rest.
+(:mod:`wholebody.kernels.layout`). Each entry of the stack (task, inequality task, objective,
+limit) is one row of the entry table: its level, rows, slot, and what it packed itself into
+(:meth:`wholebody.tasks.Task.pack`: its kernel and its parameter block, which the plan copies
+into the arena and the entry adopts, so both share one memory from then on). The plan never
+looks at an entry's type or private attributes.
 
-Built-in entries are compiled when their type is exactly the built-in class (a subclass may
-override a method): :class:`~wholebody.tasks.FrameTask`,
-:class:`~wholebody.tasks.RelativeFrameTask`, :class:`~wholebody.tasks.PostureTask`,
-:class:`~wholebody.tasks.FrameHalfSpace`, :class:`~wholebody.tasks.ArmPotentialEnergy` with a
-constant or network stiffness, :class:`~wholebody.tasks.JointLimitAvoidance`,
-:class:`~wholebody.tasks.Manipulability`, :class:`~wholebody.tasks.JointPositionLimits` and
-:class:`~wholebody.tasks.VelocityLimits`. Everything else takes the Python path: slower,
-never wrong.
+Each step, :meth:`Plan.sync` writes what Python owns: ``dt``, the metric, the levels' gains and
+the weights where they changed, the blocks of entries that another stack adopted in between,
+and the rows, gradients, inequality rows and boxes of the entries written in Python (a
+user's, or a built-in one whose subclass overrides what it computes). One kernel call does the
+rest.
 """
 
 from __future__ import annotations
@@ -28,30 +23,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wholebody import kernels
-from wholebody.arm.stiffness import ConstantStiffness
 from wholebody.errors import DimensionError
 from wholebody.kernels import layout as lay
-from wholebody.kernels.evaluate import evaluate
-from wholebody.kernels.objectives import AE_CONSTANT, AE_K, AE_NET, AE_WIDTH, ARM_PARTS
+from wholebody.kernels.evaluate import REF_WIDTH, evaluate
+from wholebody.kernels.objectives import AE_WIDTH, ARM_PARTS
 from wholebody.robot import Frame, RobotState
-from wholebody.robot.hessian import actuated_support_mask
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
-from wholebody.tasks.frame import FrameTask
-from wholebody.tasks.inequality import FrameHalfSpace
-from wholebody.tasks.limits import JointPositionLimits, VelocityLimits
-from wholebody.tasks.objectives import JointLimitAvoidance, Manipulability
-from wholebody.tasks.posture import PostureTask
-from wholebody.tasks.relative import RelativeFrameTask
 
 if TYPE_CHECKING:
-    from wholebody.solvers.stack import Level, LevelProblem, Stack, StackProblem
+    from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 
 __all__ = ["Arena", "Plan", "ProblemArena", "is_compiled", "sqrt_weights"]
 
-_POSE_TYPES = (FrameTask, RelativeFrameTask)
-_WARM = {"evaluate": False}  # whether a kernel entry point ran in this process
+Entry = Task | InequalityTask | Objective | Constraint
+_WARM: dict[str, bool] = {}  # whether a kernel entry point ran in this process
+NO_REFERENCES = np.zeros((0, REF_WIDTH))
 
 
 def sqrt_weights(task: Task, w: object) -> np.ndarray:
@@ -75,100 +63,6 @@ def first_call(name: str, what: str, call: Callable[..., Any], *args: Any) -> An
         out = call(*args)
     _WARM[name] = True
     return out
-
-
-class _Rows:
-    """An equality task's rows ``[start, stop)`` and the weight they were scaled with."""
-
-    __slots__ = ("key", "level", "start", "stop", "task")
-
-    def __init__(self, task: Task, level: int, start: int) -> None:
-        self.task, self.level, self.start, self.stop = task, level, start, start + task.dim
-        self.key: object = None
-
-
-class _Pose:
-    """A compiled pose task's row of ``F_POSE``: what was copied there last."""
-
-    __slots__ = ("error", "integral", "ki", "kp", "par", "target", "task", "twist")
-
-    def __init__(self, task: FrameTask | RelativeFrameTask, par: np.ndarray) -> None:
-        self.task, self.par = task, par
-        self.target = self.twist = self.kp = self.ki = None
-        self.integral = par[lay.POSE_INTEGRAL : lay.POSE_INTEGRAL + 6]
-        self.error = par[lay.POSE_ERROR : lay.POSE_ERROR + 6]
-
-    def sync(self, state: RobotState) -> None:
-        t, par = self.task, self.par
-        target = t.current_target(state)
-        if target is not self.target:
-            par[lay.POSE_TARGET : lay.POSE_TARGET + 16] = target.ravel()
-            self.target = target
-        if t._twist is not self.twist:
-            self.twist = par[lay.POSE_TWIST : lay.POSE_TWIST + 6] = t._twist
-        if t._kp is not self.kp:
-            self.kp = par[lay.POSE_KP : lay.POSE_KP + 6] = t._kp
-        if t._ki is not self.ki:
-            self.ki = par[lay.POSE_KI : lay.POSE_KI + 6] = t._ki
-        if t.integral is not self.integral:  # share it: advance() updates it in place
-            self.integral[:] = t.integral
-            t.integral = self.integral
-        if t._error is not self.error:
-            t._error = self.error
-
-    def written(self, state: RobotState) -> None:
-        self.task._error_key = (state, self.target)
-
-
-class _Posture:
-    """A compiled posture task's entries of ``F_POSTURE``."""
-
-    __slots__ = ("kp", "par", "target", "task")
-
-    def __init__(self, task: PostureTask, par: np.ndarray) -> None:
-        self.task, self.par = task, par
-        self.target = self.kp = None
-
-    def sync(self) -> None:
-        t = self.task
-        if t._target is not self.target:
-            self.target = self.par[0] = t._target
-        if t._kp is not self.kp:
-            self.kp = self.par[1] = t._kp
-
-
-class _Arm:
-    """A compiled arm energy's row of ``F_ARM``: the settings it was written from."""
-
-    __slots__ = ("objective", "par", "settings", "stiffness")
-
-    def __init__(self, objective: ArmPotentialEnergy, par: np.ndarray) -> None:
-        self.objective, self.par = objective, par
-        self.settings = (objective.smoothing, objective.fade, objective.reference, objective.g)
-        self.stiffness = objective.stiffness
-
-    def sync(self) -> bool:
-        """Copy what changed; False when the stiffness is no longer the one laid out."""
-        o = self.objective
-        if o.stiffness is not self.stiffness:
-            return False
-        settings = (o.smoothing, o.fade, o.reference, o.g)
-        if settings != self.settings:
-            net, k = self.par[AE_NET], self.par[AE_K]
-            self.par[:] = o.parameters()
-            self.par[AE_NET], self.par[AE_K] = net, k
-            self.settings = settings
-        if self.par[AE_NET] == AE_CONSTANT:
-            self.par[AE_K] = o.stiffness.k
-        return True
-
-
-def _compiled_objective(o: Objective) -> bool:
-    if type(o) is ArmPotentialEnergy:  # (links beyond one per segment: evaluated in Python)
-        return not o.extra_bodies and (
-            type(o.stiffness) is ConstantStiffness or o.network() is not None
-        )
-    return type(o) in (JointLimitAvoidance, Manipulability)
 
 
 class Arena:
@@ -218,6 +112,23 @@ class Arena:
             message=message,
         )
 
+    def write_result(self, result: SolverResult) -> None:
+        """A result (of another solve, or changed by its user) into the outcome regions, for
+        what reads them after a solve (the anti-windup of :meth:`Plan.advance`)."""
+        v = self.view
+        D = v(lay.F_METRIC)[0]
+        U = v(lay.F_U)
+        U[1] = result.u
+        U[0] = result.u / D
+        active = v(lay.I_ACTIVE)
+        active[:] = 0
+        active[np.asarray(result.active_bounds, dtype=np.intp)] = 1
+        scale = np.asarray(result.scale, dtype=float)
+        levels = v(lay.F_LEVEL_OUT)
+        levels[:, 1] = scale if scale.size == levels.shape[0] else 1.0
+        unmet = {name for _, name in result.infeasible}
+        v(lay.I_INFEASIBLE)[:] = [name in unmet for name in self.task_names]
+
 
 class ProblemArena(Arena):
     """An evaluated :class:`~wholebody.solvers.stack.StackProblem` (rows in scaled
@@ -242,10 +153,12 @@ class ProblemArena(Arena):
         super().__init__({
             lay.F_METRIC: (2, n), lay.F_ROW: (2, K), lay.F_LEVEL: (L, 4), lay.F_A: (K, n),
             lay.F_B: (K,), lay.F_C: (P, n), lay.F_CB: (2, P), lay.F_BOX: (2, n),
-            lay.F_U: (2, n), lay.F_LEVEL_OUT: (L, 2), lay.F_TASK_RES: (len(tasks), 3),
-            lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (len(tasks), 3),
-            lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (n,), lay.I_INFEASIBLE: (len(tasks),),
-            lay.I_INEQ: (sum(len(lp.inequality_rows) for lp in levels), 3),
+            lay.F_ANCHOR: (n,), lay.F_U: (2, n), lay.F_LEVEL_OUT: (L, 2),
+            lay.F_TASK_RES: (len(tasks), 3), lay.I_LEVEL: (L, lay.LEVEL_INTS),
+            lay.I_TASK: (len(tasks), 3), lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (n,),
+            lay.I_INFEASIBLE: (len(tasks),), lay.I_SATURATED: (len(tasks),),
+            lay.I_INEQ: (sum(len(lp.inequality_rows) for lp in levels), 3), lay.I_HELD: (P,),
+            lay.I_UNMET0: (len(tasks),),
         })  # fmt: skip
         v = self.view
         metric = v(lay.F_METRIC)
@@ -253,6 +166,8 @@ class ProblemArena(Arena):
         metric[1] = problem.scale**2
         box = v(lay.F_BOX)
         box[0], box[1] = problem.lower, problem.upper
+        if problem.anchor is not None:
+            v(lay.F_ANCHOR)[:] = problem.anchor
         A, b, C, CB = v(lay.F_A), v(lay.F_B), v(lay.F_C), v(lay.F_CB)
         rw, lf, li_ = v(lay.F_ROW), v(lay.F_LEVEL), v(lay.I_LEVEL)
         k = p = 0
@@ -279,31 +194,50 @@ class ProblemArena(Arena):
             v(lay.I_INEQ)[:] = [row[:3] for row in self.inequality_rows]
 
 
+class _Record:
+    """An entry of the plan: where it lies, what it packed, and (Python entries) what its
+    rows were last weighted with."""
+
+    __slots__ = ("block", "cat", "entry", "key", "level", "packed", "row", "rows", "slot")
+
+    def __init__(self, entry: Entry, cat: int, level: int, row: int, rows: int,
+                 slot: int) -> None:  # fmt: skip
+        self.entry, self.cat, self.level = entry, cat, level
+        self.row, self.rows, self.slot = row, rows, slot
+        self.packed = None
+        self.block: np.ndarray | None = None
+        self.key: object = None
+
+
 class Plan(Arena):
     """The compiled layout of one stack (see the module docstring). Built by the stack."""
 
     def __init__(self, stack: Stack) -> None:
         self.stack = stack
         self.robot = stack.robot
-        self.levels: list[Level] = list(stack.levels)
+        self.levels = list(stack.levels)
         self.entries = [lv.entries for lv in self.levels]
-        self._frames: dict[int, int] = {}  # frame index -> its row in the frames table
+        self.constraints = list(stack.constraints)
+        self._frames: dict[int, int] = {}  # frame index -> its row in the frame table
         self._frame_list: list[Frame] = []
         self._collect()
         super().__init__(self._shapes())
-        self.inequality_rows = self._inequality_rows
-        self._fill_constants()
-        self.reported = [(t, r.task.name, self.levels[r.level].name)
-                         for t, r in enumerate(self.rows) if r.stop > r.start]  # fmt: skip
-        self.task_names = [r.task.name for r in self.rows]
+        self._fill()
+        self.reported = [(t, r.entry.name, self.levels[r.level].name)
+                         for t, r in enumerate(self.tasks) if r.rows]  # fmt: skip
+        self.task_names = [r.entry.name for r in self.tasks]
         self.level_names = [lv.name for lv in self.levels]
         self._problem: StackProblem | None = None
+        self._python_values: dict[str, ObjectiveValue] = {}
         self.metric_version = -1
         self.stale = False
-        self.evaluated: RobotState | None = None  # the state of the last kernel evaluation
+        self.evaluated = -1.0  # the stamp of the state of the last kernel evaluation
+        self.last_result: SolverResult | None = None
+        """The result a solver made of this plan's last solve (its outcome is in the arena)."""
 
     # ------------------------------------------------------------------ layout
-    def _frame(self, frame: Frame) -> int:
+    def frame(self, frame: Frame) -> int:
+        """The row of ``frame`` in the frame table (:class:`~wholebody.tasks.base.Packer`)."""
         k = self._frames.get(frame.index)
         if k is None:
             k = self._frames[frame.index] = len(self._frame_list)
@@ -311,194 +245,132 @@ class Plan(Arena):
         return k
 
     def _collect(self) -> None:
-        """Sort the entries into the tables and lay out the rows of every level."""
+        """One record per entry, rows and slots assigned, and what each entry packed."""
         nu = self.robot.nu
-        self.rows: list[_Rows] = []  # every equality task, in order
-        self.pose_tasks, self.posture_tasks, self.python_tasks = [], [], []
-        self.half_spaces, self.python_inequalities = [], []
-        self._inequality_rows: list[tuple[int, int, int, str]] = []  # level, rows, name
-        self.objectives: list[tuple[Objective, int]] = []  # (objective, level)
+        self.records: list[_Record] = []
+        self.tasks: list[_Record] = []
+        self.objectives: list[_Record] = []
         self.level_rows: list[tuple[int, int, int, int, int]] = []
+        self._inequality_rows: list[tuple[int, int, int, str]] = []
         k = p = 0
         for li, level in enumerate(self.levels):
             row0 = k
             for t in level.tasks:
-                self.rows.append(_Rows(t, li, k))
-                if type(t) in _POSE_TYPES:
-                    self.pose_tasks.append(len(self.rows) - 1)
-                elif type(t) is PostureTask:
-                    self.posture_tasks.append(len(self.rows) - 1)
-                else:
-                    self.python_tasks.append(len(self.rows) - 1)
+                self.tasks.append(self._add(t, lay.CAT_TASK, li, k, t.dim, len(self.tasks)))
                 k += t.dim
             tasks_end = k
             if level.objectives:
                 k += nu
-                self.objectives += [(o, li) for o in level.objectives]
             ineq0 = p
             for t in level.inequalities:
-                kind = self.half_spaces if type(t) is FrameHalfSpace else self.python_inequalities
-                kind.append((t, p))
+                self._add(t, lay.CAT_INEQUALITY, li, p, t.dim, -1)
                 self._inequality_rows.append((li, p, p + t.dim, t.name))
                 p += t.dim
+            for o in level.objectives:
+                self.objectives.append(
+                    self._add(o, lay.CAT_OBJECTIVE, li, 0, 0, len(self.objectives))
+                )
             self.level_rows.append((row0, tasks_end, k, ineq0, p))
+        for j, c in enumerate(self.constraints):
+            self._add(c, lay.CAT_LIMIT, -1, 0, 0, j)
         self.K, self.P = k, p
-        for r in self.pose_tasks:
-            t = self.rows[r].task
-            if type(t) is RelativeFrameTask:
-                self._frame(t.frame_a)
-            self._frame(t.frame_b if type(t) is RelativeFrameTask else t.frame)
-        for t, _ in self.half_spaces:
-            self._frame(t.frame)
-        self.arms = [o for o, _ in self.objectives
-                     if type(o) is ArmPotentialEnergy and _compiled_objective(o)]  # fmt: skip
-        self.h1 = [o for o, _ in self.objectives if type(o) is JointLimitAvoidance]
-        self.h2 = [o for o, _ in self.objectives if type(o) is Manipulability]
-        for o in self.arms:
-            for fr in o._frames_base if o.network() is not None else o._frames:
-                self._frame(fr)
-        for o in self.h2:
-            for fr in o.frames:
-                self._frame(fr)
-        self.python_objectives = [j for j, (o, _) in enumerate(self.objectives)
-                                  if not _compiled_objective(o)]  # fmt: skip
-        cons = self.stack.constraints
-        self.pos_limits = [c for c in cons if type(c) is JointPositionLimits]
-        self.vel_limits = [c for c in cons if type(c) is VelocityLimits]
-        builtin = (JointPositionLimits, VelocityLimits)
-        self.python_constraints = [c for c in cons if type(c) not in builtin]
+        for rec in self.records:
+            rec.packed = rec.entry.pack(self)
+        self.compiled = [r for r in self.records if r.packed is not None]
+        self.python = [r for r in self.records if r.packed is None]
+
+    def _add(self, entry: Entry, cat: int, level: int, row: int, rows: int,
+             slot: int) -> _Record:  # fmt: skip
+        rec = _Record(entry, cat, level, row, rows, slot)
+        self.records.append(rec)
+        return rec
 
     def _shapes(self) -> dict[int, tuple[int, ...]]:
         robot = self.robot
         nu, nv, F = robot.nu, robot.nv, len(self._frame_list)
         E = robot.kinematics.act_k.size
-        nE = sum(self.rows[r].task.dim for r in self.posture_tasks)
-        nets = sum(o.network().size for o in self.arms if o.network() is not None)
-        fmax = max((len(o.frames) for o in self.h2), default=0)
-        L, T, nO = len(self.levels), len(self.rows), len(self.objectives)
+        L, T, nO = len(self.levels), len(self.tasks), len(self.objectives)
+        nF = sum(r.packed.floats.size for r in self.compiled)
+        nI = sum(r.packed.ints.size for r in self.compiled)
         return {
             lay.F_SCALARS: (4,), lay.F_ACT_A: (E,), lay.F_KIN_J: (F, 6, nu),
-            lay.F_KIN_P: (F, 3), lay.F_KIN_R: (F, 3, 3), lay.F_JP: (nu,),
-            lay.F_POSE: (len(self.pose_tasks), lay.POSE_WIDTH), lay.F_POSTURE: (3, nE),
-            lay.F_HALF: (len(self.half_spaces), 5), lay.F_ARM: (len(self.arms), AE_WIDTH),
-            lay.F_ARM_PARTS: (len(self.arms), ARM_PARTS), lay.F_NETS: (max(nets, 1),),
-            lay.F_H1: (len(self.h1), 3, nu), lay.F_OBJ: (nO, 2), lay.F_OBJ_GRAD: (nO, nu),
-            lay.F_OBJ_CURV: (nO, nu), lay.F_POS_BOX: (len(self.pos_limits), 3, nu),
-            lay.F_VEL_BOX: (len(self.vel_limits), nu),
-            lay.F_PY_BOX: (len(self.python_constraints), 2, nu), lay.F_METRIC: (2, nu),
+            lay.F_KIN_P: (F, 3), lay.F_KIN_R: (F, 3, 3), lay.F_JP: (nu,), lay.F_PAR: (nF,),
+            lay.F_OBJ: (nO, 2), lay.F_OBJ_GRAD: (nO, nu), lay.F_OBJ_CURV: (nO, nu),
+            lay.F_BOXES: (len(self.constraints), 2, nu), lay.F_METRIC: (2, nu),
             lay.F_ROW: (2, self.K), lay.F_LEVEL: (L, 4), lay.F_A: (self.K, nu),
             lay.F_B: (self.K,), lay.F_C: (self.P, nu), lay.F_CB: (2, self.P),
-            lay.F_BOX: (2, nu), lay.F_U: (2, nu), lay.F_LEVEL_OUT: (L, 2), lay.F_TASK_RES: (T, 3),
-            lay.I_FRAME: (F,), lay.I_SUPPORT: (F, nv), lay.I_ACT: (2, E), lay.I_POS: (2, nu),
-            lay.I_POSE: (len(self.pose_tasks), lay.POSE_INTS),
-            lay.I_POSTURE: (len(self.posture_tasks), 3), lay.I_POSTURE_ENTRY: (3, nE),
-            lay.I_HALF: (len(self.half_spaces), 2), lay.I_ARM: (len(self.arms), 6),
-            lay.I_H2: (len(self.h2), 1 + fmax), lay.I_H2_MASK: (nu, nu) if self.h2 else (0, 0),
-            lay.I_OBJ: (nO, 4), lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (T, 3),
-            lay.I_BOX: (3,), lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (nu,),
-            lay.I_INFEASIBLE: (T,), lay.I_INEQ: (len(self._inequality_rows), 3),
+            lay.F_BOX: (2, nu), lay.F_ANCHOR: (nu,), lay.F_U: (2, nu), lay.F_LEVEL_OUT: (L, 2),
+            lay.F_TASK_RES: (T, 3), lay.I_FRAME: (F,), lay.I_SUPPORT: (F, nv),
+            lay.I_ACT: (2, E), lay.I_POS: (2, nu),
+            lay.I_ENTRY: (len(self.records), lay.ENTRY_INTS), lay.I_PAR: (nI,),
+            lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (T, 3), lay.I_OUT: (lay.OUT_INTS,),
+            lay.I_ACTIVE: (nu,), lay.I_INFEASIBLE: (T,), lay.I_SATURATED: (T,),
+            lay.I_INEQ: (len(self._inequality_rows), 3), lay.I_HELD: (self.P,),
+            lay.I_UNMET0: (T,),
         }  # fmt: skip
 
-    def _fill_constants(self) -> None:
-        robot, kin, v = self.robot, self.robot.kinematics, self.view
+    def _fill(self) -> None:
+        """The constants: frames, kinematics tables, the entry table, levels, tasks; every
+        compiled entry's block copied in and adopted."""
+        kin, v = self.robot.kinematics, self.view
         frames = self._frame_list
         v(lay.I_FRAME)[:] = [fr.index for fr in frames]
         v(lay.I_SUPPORT)[:] = kin.support(frames)
         v(lay.I_ACT)[:] = (kin.act_k, kin.act_j)
         v(lay.F_ACT_A)[:] = kin.act_a
         v(lay.I_POS)[:] = (kin.position_index, kin.position_pair)
-        self._fill_tasks()
-        self._fill_objectives()
+        table, fpar, ipar = v(lay.I_ENTRY), v(lay.F_PAR), v(lay.I_PAR)
+        f0 = i0 = 0
+        for e, rec in enumerate(self.records):
+            row = table[e]
+            row[:] = (rec.cat, lay.KIND_PYTHON, rec.level, rec.row, rec.rows, rec.slot, -1,
+                      0, 0, 0, 0, 0)  # fmt: skip
+            packed = rec.packed
+            if packed is None:
+                continue
+            nf, ni = packed.floats.size, packed.ints.size
+            row[lay.E_KIND], row[lay.E_FLAG] = packed.kind, packed.curvature
+            row[lay.E_F0], row[lay.E_FN], row[lay.E_I0], row[lay.E_IN] = f0, nf, i0, ni
+            rec.block = fpar[f0 : f0 + nf]
+            rec.block[:] = packed.floats
+            ipar[i0 : i0 + ni] = packed.ints
+            rec.entry.adopt(rec.block)
+            f0, i0 = f0 + nf, i0 + ni
         levels = v(lay.I_LEVEL)
         for li, (row0, tasks_end, row_end, ineq0, ineq_end) in enumerate(self.level_rows):
             levels[li] = (row0, tasks_end, row_end, ineq0, ineq_end,
                           bool(self.levels[li].tasks))  # fmt: skip
-        v(lay.I_TASK)[:] = [(r.level, r.start, r.stop) for r in self.rows] or np.zeros((0, 3))
+        v(lay.I_TASK)[:] = [(r.level, r.row, r.row + r.rows) for r in self.tasks] or np.zeros(
+            (0, 3)
+        )
         v(lay.I_INEQ)[:] = [row[:3] for row in self._inequality_rows] or np.zeros((0, 3))
-        for j, c in enumerate(self.pos_limits):
-            v(lay.F_POS_BOX)[j] = (*c.limits, np.full(robot.nu, c.gain))
-        for j, c in enumerate(self.vel_limits):
-            v(lay.F_VEL_BOX)[j] = c.upper
-        v(lay.I_BOX)[:] = (len(self.pos_limits), len(self.vel_limits), len(self.python_constraints))
         v(lay.F_LEVEL)[:, lay.LEVEL_REFERENCE] = 1.0
-        self._Fpose = v(lay.F_POSE)
+        self._table = table
         self._A, self._b = v(lay.F_A), v(lay.F_B)
         self._C, self._CB = v(lay.F_C), v(lay.F_CB)
         self._row_weights = v(lay.F_ROW)
         self._level_f = v(lay.F_LEVEL)
         self._obj = v(lay.F_OBJ)
+        self._boxes = v(lay.F_BOXES)
         self._scalars = v(lay.F_SCALARS)
 
-    def _fill_tasks(self) -> None:
-        v = self.view
-        ints, par = v(lay.I_POSE), v(lay.F_POSE)
-        self._pose: list[_Pose] = []
-        for k, r in enumerate(self.pose_tasks):
-            rows, t = self.rows[r], self.rows[r].task
-            if type(t) is RelativeFrameTask:
-                fa, fb = self._frames[t.frame_a.index], self._frames[t.frame_b.index]
-            else:
-                fa, fb = -1, self._frames[t.frame.index]
-            ints[k, : lay.POSE_SEL] = (fa, fb, rows.start, t.dim)
-            ints[k, lay.POSE_SEL : lay.POSE_SEL + t.dim] = t.rows
-            self._pose.append(_Pose(t, par[k]))
-        tasks, entries, ppar = v(lay.I_POSTURE), v(lay.I_POSTURE_ENTRY), v(lay.F_POSTURE)
-        self._posture: list[_Posture] = []
-        e = 0
-        for k, r in enumerate(self.posture_tasks):
-            t = self.rows[r].task
-            n = t.dim
-            tasks[k] = (self.rows[r].start, e, n)
-            entries[:, e : e + n] = (t.indices, t.tracked, t.wrapped)
-            self._posture.append(_Posture(t, ppar[:2, e : e + n]))
-            e += n
-        ints, par = v(lay.I_HALF), v(lay.F_HALF)
-        for k, (t, row) in enumerate(self.half_spaces):
-            ints[k] = (self._frames[t.frame.index], row)
-            par[k] = (*t.normal, t.offset, t.gain)
-
-    def _fill_objectives(self) -> None:
-        v = self.view
-        table = v(lay.I_OBJ)
-        arm_ints, arm_par, nets = v(lay.I_ARM), v(lay.F_ARM), v(lay.F_NETS)
-        self._arms: list[_Arm] = []
-        offset = 0
-        for k, o in enumerate(self.arms):
-            frames = o._frames_base if o.network() is not None else o._frames
-            arm_ints[k] = [self._frames[fr.index] for fr in frames] + [-1] * (6 - len(frames))
-            arm_par[k] = o.parameters()
-            network = o.network()
-            if network is None:
-                arm_par[k, AE_NET] = AE_CONSTANT
-            else:
-                nets[offset : offset + network.size] = network
-                arm_par[k, AE_NET] = offset
-                offset += network.size
-            self._arms.append(_Arm(o, arm_par[k]))
-        for k, o in enumerate(self.h1):
-            v(lay.F_H1)[k] = o.ranges
-        h2 = v(lay.I_H2)
-        for k, o in enumerate(self.h2):
-            frames = [self._frames[fr.index] for fr in o.frames]
-            h2[k, : 1 + len(frames)] = [len(frames), *frames]
-        if self.h2:
-            v(lay.I_H2_MASK)[:] = actuated_support_mask(self.robot)
-        kinds = {ArmPotentialEnergy: (lay.KIND_ARM, self.arms), JointLimitAvoidance:
-                 (lay.KIND_H1, self.h1), Manipulability: (lay.KIND_H2, self.h2)}  # fmt: skip
-        for j, (o, level) in enumerate(self.objectives):
-            kind, members = kinds.get(type(o), (lay.KIND_PYTHON, ()))
-            if kind != lay.KIND_PYTHON and o not in members:
-                kind = lay.KIND_PYTHON  # an arm energy with a stiffness evaluated in Python
-            index = next(i for i, m in enumerate(members) if m is o) if kind else j
-            table[j] = (kind, index, level, kind == lay.KIND_H1)
+    def follow(self, task: Task, reference: int) -> None:
+        """Let the compiled pose task ``task`` take its target and twist from row
+        ``reference`` of the references' samples each step (-1: no longer)."""
+        for e, rec in enumerate(self.records):
+            if rec.entry is task and rec.packed is not None and rec.packed.kind == lay.KIND_POSE:
+                self._table[e, lay.E_REF] = reference
+                return
+        raise DimensionError(f"{task.name}: not a compiled pose task of this stack")
 
     # ------------------------------------------------------------------ each step
     def sync(self, state: RobotState, dt: float) -> None:
-        """Copy into the arena what changed since the last step and let the Python entries
-        write their rows, gradients and boxes (unscaled); sets :attr:`stale` when the stack
-        must be laid out anew (an arm energy's stiffness was replaced)."""
+        """Write into the arena what Python owns (see the module docstring); sets
+        :attr:`stale` when the stack must be laid out anew (an entry's block changed
+        shape)."""
         stack = self.stack
-        self._scalars[0] = dt
+        scalars = self._scalars
+        scalars[0], scalars[2] = dt, state.stamp
         if stack._scale_version != self.metric_version:
             metric = self.view(lay.F_METRIC)
             metric[0], metric[1] = stack.scale, stack._scale_sq
@@ -507,113 +379,124 @@ class Plan(Arena):
         for li, level in enumerate(self.levels):
             lf[li, lay.LEVEL_GAIN] = level.gain
             lf[li, lay.LEVEL_OBJECTIVE_WEIGHT] = level.objective_weight
-        for pose in self._pose:
-            pose.sync(state)
-        for posture in self._posture:
-            posture.sync()
-        A, b = self._A, self._b
-        for r in self.python_tasks:
-            rows = self.rows[r]
-            w = rows.task.write_rows(state, A[rows.start : rows.stop], b[rows.start : rows.stop])
-            self._weigh(rows, w)
-        for r in self.pose_tasks:
-            self._weigh(self.rows[r], self.rows[r].task.weight)
-        for r in self.posture_tasks:
-            self._weigh(self.rows[r], self.rows[r].task.weight)
-        self._sync_objectives(state)
-        self._sync_python_boxes(state, dt)
+        for rec in self.compiled:
+            if rec.entry._params is not rec.block:
+                self._readopt(rec)
+        for rec in self.tasks:
+            if rec.packed is not None and rec.entry.weight is not rec.key:
+                self._weigh(rec, rec.entry.weight)
+        obj = self._obj
+        for rec in self.objectives:
+            obj[rec.slot, 0] = rec.entry.weight
+        if self.python:
+            self._sync_python(state, dt)
 
-    def _weigh(self, rows: _Rows, w: object) -> None:
+    def _readopt(self, rec: _Record) -> None:
+        """An entry whose block is no longer the plan's (another stack adopted it, or it
+        made a new one): copy it back in, or lay the stack out anew if it changed shape."""
+        params = rec.entry._params
+        packed = rec.entry.pack(_Probe(self._frames))
+        if (packed is None or packed.kind != rec.packed.kind or params.size != rec.block.size
+                or not np.array_equal(packed.ints, rec.packed.ints)):  # fmt: skip
+            self.stale = True
+            return
+        rec.block[:] = params
+        rec.entry.adopt(rec.block)
+
+    def _weigh(self, rec: _Record, w: object) -> None:
         """The rows' weight (a number or one per row): rescale them where it changed."""
-        key = rows.key
+        key = rec.key
         if isinstance(w, (float, int)):
             if key.__class__ is float and w == key:
+                rec.key = w
                 return
         elif key.__class__ is np.ndarray and np.array_equal(w, key):
+            rec.key = w
             return
-        sw = sqrt_weights(rows.task, w)
-        rows.key = float(w) if isinstance(w, (float, int)) else np.array(w, float)
+        sw = sqrt_weights(rec.entry, w)
+        rec.key = w if rec.packed is not None else (
+            float(w) if isinstance(w, (float, int)) else np.array(w, float)
+        )
         rw = self._row_weights
-        rw[0, rows.start : rows.stop] = sw
-        rw[1, rows.start : rows.stop] = np.divide(1.0, sw, out=np.zeros_like(sw), where=sw > 0)
-        row0, tasks_end = self.level_rows[rows.level][:2]
+        rw[0, rec.row : rec.row + rec.rows] = sw
+        rw[1, rec.row : rec.row + rec.rows] = np.divide(1.0, sw, out=np.zeros_like(sw),
+                                                        where=sw > 0)  # fmt: skip
+        row0, tasks_end = self.level_rows[rec.level][:2]
         weighted = rw[0, row0:tasks_end]
         weighted = weighted[weighted > 0.0]
-        self._level_f[rows.level, lay.LEVEL_REFERENCE] = (
+        self._level_f[rec.level, lay.LEVEL_REFERENCE] = (
             float(weighted.min()) if weighted.size else 1.0
         )
 
-    def _sync_objectives(self, state: RobotState) -> None:
-        obj = self._obj
-        for j, (o, _) in enumerate(self.objectives):
-            obj[j, 0] = o.weight
-        for arm in self._arms:
-            if not arm.sync():
-                self.stale = True
-        if self.python_objectives:
-            grads, curvs = self.view(lay.F_OBJ_GRAD), self.view(lay.F_OBJ_CURV)
-            table = self.view(lay.I_OBJ)
-            self._python_values: dict[str, ObjectiveValue] = {}
-            for j in self.python_objectives:
-                o = self.objectives[j][0]
-                val = o.evaluate(state)
-                self._python_values[o.name] = val
-                grads[j] = val.gradient
+    def _sync_python(self, state: RobotState, dt: float) -> None:
+        """The rows, gradients, inequality rows and boxes of the entries written in Python
+        (unscaled: the kernel scales them)."""
+        A, b, C, CB = self._A, self._b, self._C, self._CB
+        grads, curvs = self.view(lay.F_OBJ_GRAD), self.view(lay.F_OBJ_CURV)
+        table = self._table
+        self._python_values = {}
+        for e, rec in enumerate(self.records):
+            if rec.packed is not None:
+                continue
+            entry, r0, r1 = rec.entry, rec.row, rec.row + rec.rows
+            if rec.cat == lay.CAT_TASK:
+                self._weigh(rec, entry.write_rows(state, A[r0:r1], b[r0:r1]))
+            elif rec.cat == lay.CAT_INEQUALITY:
+                rows = entry.compute(state, dt)
+                C[r0:r1], CB[0, r0:r1], CB[1, r0:r1] = rows.C, rows.lower, rows.upper
+            elif rec.cat == lay.CAT_OBJECTIVE:
+                val = entry.evaluate(state)
+                self._python_values[entry.name] = val
+                grads[rec.slot] = val.gradient
                 if val.curvature is not None:
-                    curvs[j] = val.curvature
-                table[j, lay.OBJ_HAS_CURV] = val.curvature is not None
-                obj[j, 1] = val.value
-
-    def _sync_python_boxes(self, state: RobotState, dt: float) -> None:
-        if self.python_constraints:
-            boxes = self.view(lay.F_PY_BOX)
-            for j, c in enumerate(self.python_constraints):
-                bounds = c.bounds(state, dt)
-                boxes[j, 0], boxes[j, 1] = bounds.lower, bounds.upper
-        C, CB = self._C, self._CB
-        for t, row in self.python_inequalities:
-            r = t.compute(state, dt)
-            C[row : row + t.dim] = r.C
-            CB[0, row : row + t.dim] = r.lower
-            CB[1, row : row + t.dim] = r.upper
+                    curvs[rec.slot] = val.curvature
+                table[e, lay.E_FLAG] = val.curvature is not None
+                self._obj[rec.slot, 1] = val.value
+            else:
+                box = entry.bounds(state, dt)
+                self._boxes[rec.slot, 0], self._boxes[rec.slot, 1] = box.lower, box.upper
 
     def kernel_args(self, state: RobotState) -> tuple[np.ndarray, ...]:
-        """``(f, i, h, J, oMf, q)``: what every kernel entry point takes."""
+        """``(f, i, h, J, oMf, q)``: what every kernel entry point takes first."""
         J, oMf = self.robot.kinematics.views()
         return self.f, self.i, self.h, J, oMf, state.q
-
-    def written(self, state: RobotState) -> None:
-        """After a kernel evaluated the rows at ``state``: the pose tasks' errors are theirs."""
-        for pose in self._pose:
-            pose.written(state)
-        self.evaluated = state
 
     def evaluate(self, state: RobotState, dt: float) -> None:
         """Sync and evaluate every row and the box at ``state`` (scaled, in the arena)."""
         self.sync(state, dt)
-        first_call("evaluate", "the control kernels", evaluate, *self.kernel_args(state))
-        self.written(state)
+        first_call("evaluate", "the control kernels", evaluate, *self.kernel_args(state),
+                   NO_REFERENCES)  # fmt: skip
+        self.evaluated = state.stamp
+
+    # ------------------------------------------------------------------ after a solve
+    def advance_python(self, state: RobotState, dt: float, u: np.ndarray | None) -> None:
+        """The Python entries' own step: tasks' integrators with the anti-windup flags the
+        kernel computed, limits' memories (when ``u`` is given)."""
+        flags = self.view(lay.I_SATURATED)
+        for rec in self.python:
+            if rec.cat == lay.CAT_TASK:
+                rec.entry.advance(state, dt, bool(flags[rec.slot]))
+            elif rec.cat == lay.CAT_LIMIT and u is not None:
+                rec.entry.advance(u, dt)
 
     # ------------------------------------------------------------------ the evaluated problem
     def problem(self) -> StackProblem:
         """The arena's rows as a :class:`~wholebody.solvers.stack.StackProblem` of views
-        (overwritten by the next evaluation), for the reference solvers and for users."""
-        from wholebody.solvers.stack import LevelProblem, StackProblem
+        (overwritten by the next evaluation), for users and tests."""
+        from wholebody.solvers.stack import OBJECTIVES, LevelProblem, StackProblem
 
         if self._problem is None:
             levels: list[LevelProblem] = []
             rw = self._row_weights
-            for li, (level, (row0, _, row_end, ineq0, ineq_end)) in enumerate(
+            for li, (level, (row0, tasks_end, row_end, ineq0, ineq_end)) in enumerate(
                 zip(self.levels, self.level_rows, strict=True)
             ):
-                rows = {r.task.name: slice(r.start - row0, r.stop - row0)
-                        for r in self.rows if r.level == li}  # fmt: skip
+                rows = {r.entry.name: slice(r.row - row0, r.row + r.rows - row0)
+                        for r in self.tasks if r.level == li}  # fmt: skip
                 if level.objectives:
-                    rows["objectives"] = slice(self.level_rows[li][1] - row0, row_end - row0)
-                irows, p = {}, 0
-                for t in level.inequalities:
-                    irows[t.name] = slice(p, p + t.dim)
-                    p += t.dim
+                    rows[OBJECTIVES] = slice(tasks_end - row0, row_end - row0)
+                irows = {name: slice(a - ineq0, z - ineq0)
+                         for lv, a, z, name in self._inequality_rows if lv == li}  # fmt: skip
                 levels.append(LevelProblem(level.name, self._A[row0:row_end],
                                            self._b[row0:row_end], self._C[ineq0:ineq_end],
                                            self._CB[0, ineq0:ineq_end],
@@ -627,42 +510,61 @@ class Plan(Arena):
         for li, lp in enumerate(problem.levels):
             lp.identity_scale = float(lf[li, lay.LEVEL_IDENTITY])
             lp.reference_scale = float(lf[li, lay.LEVEL_REFERENCE])
+        problem.anchor = self.view(lay.F_ANCHOR) if self._has_anchor() else None
         return problem
+
+    def _has_anchor(self) -> bool:
+        """Whether a compiled acceleration limit sets the anchor."""
+        return any(r.packed.kind == lay.KIND_ACCELERATION for r in self.compiled)
 
     def objective_values(self) -> dict[str, ObjectiveValue]:
         """Every objective's value, gradient and curvature at the last evaluation."""
         out: dict[str, ObjectiveValue] = {}
         grads, curvs = self.view(lay.F_OBJ_GRAD), self.view(lay.F_OBJ_CURV)
-        table = self.view(lay.I_OBJ)
-        parts = self.view(lay.F_ARM_PARTS)
-        for j, (o, _) in enumerate(self.objectives):
-            kind, k, _, has_curv = table[j].tolist()
-            if kind == lay.KIND_PYTHON:
+        for rec in self.objectives:
+            o, j = rec.entry, rec.slot
+            if rec.packed is None:
                 out[o.name] = self._python_values[o.name]
-            elif kind == lay.KIND_ARM:
-                value, gravity, spring, alpha, stiff, rho = parts[k].tolist()
+            elif rec.packed.kind == lay.KIND_ARM:
+                parts = rec.block[AE_WIDTH : AE_WIDTH + ARM_PARTS]
+                value, gravity, spring, alpha, stiff, rho = parts.tolist()
                 out[o.name] = ArmEnergyValue(value, grads[j].copy(), None, gravity, spring,
                                              alpha, stiff, rho)  # fmt: skip
             else:
-                curv = curvs[j].copy() if has_curv else None
+                curv = curvs[j].copy() if rec.packed.curvature else None
                 out[o.name] = ObjectiveValue(float(self._obj[j, 1]), grads[j].copy(), curv)
         return out
 
     def arm_parts(self, energy: ArmPotentialEnergy, state: RobotState) -> np.ndarray | None:
         """``energy``'s parts (:meth:`ArmPotentialEnergy.parts`) as the last kernel evaluation
-        computed them for an arm energy of the stack with the same value, if that evaluation
-        was at ``state``; else None."""
-        if state is not self.evaluated:
+        computed them for a compiled arm energy of the stack with the same value, if that
+        evaluation was at ``state``; else None."""
+        if state.stamp != self.evaluated:
             return None
-        for k, arm in enumerate(self.arms):
-            if arm.same_energy(energy):
-                return self.view(lay.F_ARM_PARTS)[k]
+        for rec in self.objectives:
+            kind = lay.KIND_PYTHON if rec.packed is None else rec.packed.kind
+            if kind == lay.KIND_ARM and rec.entry.same_energy(energy):
+                return rec.block[AE_WIDTH : AE_WIDTH + ARM_PARTS]
         return None
 
 
-def is_compiled(entry: Task | InequalityTask | Objective | Constraint) -> bool:
+class _Probe:
+    """A packer that only knows the frames already laid out (an entry repacking itself must
+    not add one: the stack is then laid out anew)."""
+
+    def __init__(self, frames: dict[int, int]) -> None:
+        self._frames = frames
+
+    def frame(self, frame: Frame) -> int:
+        return self._frames.get(frame.index, -2)
+
+
+def is_compiled(entry: Entry) -> bool:
     """Whether the kernels compute ``entry`` themselves (else it runs in Python)."""
-    if isinstance(entry, Objective):
-        return _compiled_objective(entry)
-    return type(entry) in (*_POSE_TYPES, PostureTask, FrameHalfSpace, JointPositionLimits,
-                           VelocityLimits)  # fmt: skip
+    frames: dict[int, int] = {}
+
+    class _Any:
+        def frame(self, frame: Frame) -> int:
+            return frames.setdefault(frame.index, len(frames))
+
+    return entry.pack(_Any()) is not None

@@ -21,30 +21,26 @@ move more. Internally solvers work in ``u~ = W^(1/2) u``; :meth:`Stack.evaluate`
 rows already in those coordinates (:class:`StackProblem`) and ``u = D u~`` with
 ``D = W^(-1/2)``.
 
-Evaluation cost: the stack computes the Jacobians of every frame its entries declare
-(``jacobian_frames()``) in one batch, laid out so that each entry's frames are consecutive (an
-entry's stacked Jacobians are then a view of the batch), lets each task write its rows
-straight into the level's buffer (:meth:`~wholebody.tasks.Task.write_rows`) and scales them in
-one product with a cached factor ``sqrt(w_i) D_j``, rebuilt only when a weight or the metric
-changes.
+Evaluation: the stack is compiled for the kernels (:mod:`wholebody.solvers.plan`): every
+entry packs itself into one arena, and one kernel call computes every row, gradient and box.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.kernels import layout as lay
-from wholebody.robot import Frame, Robot, RobotState
-from wholebody.solvers.plan import Plan, sqrt_weights
+from wholebody.kernels.advance import ADVANCE_FLAGS, ADVANCE_MEMORY, ADVANCE_TASKS, advance
+from wholebody.kernels.evaluate import evaluate
+from wholebody.robot import Robot, RobotState
+from wholebody.solvers.plan import NO_REFERENCES, Plan, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
-from wholebody.tasks.limits import AccelerationLimits
 
 __all__ = ["OBJECTIVES", "Level", "LevelProblem", "Stack", "StackProblem"]
 
@@ -52,11 +48,6 @@ Entry = Task | InequalityTask | Objective
 
 OBJECTIVES = "objectives"
 """The name of a level's objective rows in :attr:`LevelProblem.task_rows`."""
-
-_ZERO_COLUMN = 1e-12
-"""A column of a task's rows whose entries are all below this fraction of the rows' largest
-entry does not move the task (round-off of a joint outside its chain, which is exactly 0)."""
-
 
 @dataclass
 class Level:
@@ -264,7 +255,6 @@ class Stack:
         self.metric = np.ones(robot.nu) if metric is None else metric
         self._plan: Plan | None = None
         self._check_entries()
-        self._allocate()
 
     @property
     def metric(self) -> np.ndarray:
@@ -325,17 +315,23 @@ class Stack:
 
     def _relayout(self) -> None:
         self._check_entries()
-        self._allocate()
         self._plan = None
 
     def _check_layout(self) -> None:
-        """Lay the buffers out anew where levels or their entries were replaced."""
-        plans = self._plans
-        if len(plans) != len(self.levels):
+        """Lay the stack out anew where levels, their entries or the limits were replaced."""
+        plan = self._plan
+        if plan is None:
+            return
+        levels, limits = self.levels, self.constraints
+        if len(levels) != len(plan.levels) or len(limits) != len(plan.constraints):
             self._relayout()
             return
-        for level, plan in zip(self.levels, plans, strict=True):
-            if level is not plan.level or level.entries is not plan.entries:
+        for level, old, entries in zip(levels, plan.levels, plan.entries, strict=True):
+            if level is not old or level.entries is not entries:
+                self._relayout()
+                return
+        for c, old in zip(limits, plan.constraints, strict=True):
+            if c is not old:
                 self._relayout()
                 return
 
@@ -346,43 +342,24 @@ class Stack:
 
     def plan(self) -> Plan:
         """The stack compiled for the kernels (:mod:`wholebody.solvers.plan`), laid out at the
-        first use and again whenever levels or entries were replaced."""
+        first use and again whenever levels, entries or limits were replaced."""
         self._check_layout()
         plan = self._plan
         if plan is None or plan.stale:
             plan = self._plan = Plan(self)
         return plan
 
-    def _allocate(self) -> None:
-        nu = self.robot.nu
-        self._buffers: list[LevelProblem] = []
-        self._plans: list[_LevelPlan] = []
-        frames: list[Frame] = []  # each entry's frames as one run (see _add_run)
-        for level in self.levels:
-            tasks, inequalities, objectives = level.tasks, level.inequalities, level.objectives
-            rows, k = {}, 0
-            for t in tasks:
-                rows[t.name] = slice(k, k + t.dim)
-                k += t.dim
-            if objectives:
-                rows[OBJECTIVES] = slice(k, k + nu)
-                k += nu
-            irows, p = {}, 0
-            for t in inequalities:
-                irows[t.name] = slice(p, p + t.dim)
-                p += t.dim
-            buf = LevelProblem(level.name, np.zeros((k, nu)), np.zeros(k), np.zeros((p, nu)),
-                               np.zeros(p), np.zeros(p), rows, irows,
-                               unweight=np.zeros(k))  # fmt: skip
-            self._buffers.append(buf)
-            self._plans.append(_LevelPlan(level, buf, tasks, inequalities, objectives))
-            for e in level.entries:
-                _add_run(frames, tuple(e.jacobian_frames()))
-        self._frames = tuple(frames)
-        self._all_tasks = [t for plan in self._plans for t in plan.tasks]
-        self._lower = np.empty(nu)
-        self._upper = np.empty(nu)
-        self._evaluated: RobotState | None = None  # the state of the buffers' rows
+    def synced_plan(self, state: RobotState, dt: float) -> Plan:
+        """The plan with everything Python owns written for a step of ``dt`` s at ``state``
+        (laid out anew first where an entry changed shape)."""
+        if not dt > 0:
+            raise DimensionError(f"control step dt must be > 0 s, got {dt}")
+        plan = self.plan()
+        plan.sync(state, dt)
+        if plan.stale:
+            plan = self.plan()
+            plan.sync(state, dt)
+        return plan
 
     # ------------------------------------------------------------------ use
     @property
@@ -394,110 +371,17 @@ class Stack:
     def objectives(self) -> list[Objective]:
         return [o for level in self.levels for o in level.objectives]
 
-    def evaluate(self, state: RobotState, dt: float, *, compiled: bool = True) -> StackProblem:
+    def evaluate(self, state: RobotState, dt: float) -> StackProblem:
         """Rows of every level and the box at ``state`` for a step of ``dt`` s (scaled
-        coordinates, see the module docstring): by the compiled plan, or with
-        ``compiled=False`` entry by entry in Python (the reference). The arrays are buffers
-        that the next evaluation overwrites."""
-        if not dt > 0:
-            raise DimensionError(f"control step dt must be > 0 s, got {dt}")
-        if compiled:
-            plan = self.plan()
-            plan.evaluate(state, dt)
-            if plan.stale:  # an arm energy's stiffness was replaced: lay out anew
-                plan = self.plan()
-                plan.evaluate(state, dt)
-            problem = plan.problem()
-            problem.objective_values = plan.objective_values()
-            problem.anchor = self.anchor
-            return problem
-        self._check_layout()
-        D = self._scale
-        state.prefetch(self._frames)
-        values: dict[str, ObjectiveValue] = {}
-        for plan in self._plans:
-            if plan.tasks:
-                self._task_rows(plan, state)
-            if plan.objectives:
-                self._objective_rows(plan, state, dt, values)
-            for t in plan.inequalities:
-                r = t.compute(state, dt)
-                sl = plan.buffer.inequality_rows[t.name]
-                np.multiply(r.C, D, out=plan.buffer.C[sl])
-                plan.buffer.lower[sl] = r.lower
-                plan.buffer.upper[sl] = r.upper
-        lower, upper = self._box(state, dt)
-        self._evaluated = state
-        return StackProblem(self._buffers, lower / D, upper / D, D, values, self.anchor)
-
-    def _task_rows(self, plan: _LevelPlan, state: RobotState) -> None:
-        """A level's task rows, weighted and scaled into its buffer (the reference path)."""
-        D = self._scale
-        if plan.scale_version != self._scale_version:
-            plan.rescale(D, self._scale_version)
-        keys = plan.weight_keys
-        for i, t in enumerate(plan.tasks):
-            Ji, vi = plan.views[i]
-            w = t.write_rows(state, Ji, vi)
-            key = keys[i]
-            if isinstance(w, (float, int)):
-                if key.__class__ is not float or w != key:
-                    plan.set_weight(i, w, D)
-            elif not (key.__class__ is np.ndarray and np.array_equal(w, key)):
-                plan.set_weight(i, w, D)
-        np.multiply(plan.task_A, plan.factor, out=plan.task_A)
-        np.multiply(plan.task_b, plan.row_scale, out=plan.task_b)
-
-    def _objective_rows(self, plan: _LevelPlan, state: RobotState, dt: float,
-                        values: dict[str, ObjectiveValue]) -> None:  # fmt: skip
-        """A level's objectives as the descent rows ``s I x = s D^-1 u0`` with
-        ``u0 = -k W^-1 grad / (1 + k dt W^-1 curv)`` (the reference path)."""
-        level, buf, D = plan.level, plan.buffer, self._scale
-        grad = np.zeros(D.size)
-        curv = None
-        for o in plan.objectives:
-            val = o.evaluate(state)
-            values[o.name] = val
-            w = o.weight
-            grad += w * val.gradient
-            if val.curvature is not None and w > 0:
-                curv = w * val.curvature if curv is None else w * val.curvature + curv
-        sw = math.sqrt(level.objective_weight)
-        if sw != plan.objective_scale:
-            np.fill_diagonal(plan.objective_A, sw)
-            plan.objective_scale = sw
-        if not plan.tasks:
-            buf.identity_scale = sw
-        # rows in u~: D^-1 u0 = -k D grad / ...
-        step = np.multiply(-level.gain * sw * D, grad, out=plan.objective_b)
-        if curv is not None:
-            curv *= level.gain * dt * self._scale_sq
-            curv += 1.0
-            step /= curv
-
-    def _box(self, state: RobotState, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """The intersection of the limits' boxes (rad/s, m/s). Where position recovery and
-        velocity limits disagree (a state outside its limits asks for more than the joint's
-        speed), the velocity limit wins: move back at full speed rather than declare the box
-        empty."""
-        lower, upper = self._lower, self._upper
-        for k, c in enumerate(self.constraints):
-            b = c.bounds(state, dt)
-            if k == 0:  # max(-inf, l) = l, min(inf, u) = u
-                lower[:] = b.lower
-                upper[:] = b.upper
-            else:
-                np.maximum(lower, b.lower, out=lower)
-                np.minimum(upper, b.upper, out=upper)
-        if not self.constraints:
-            lower.fill(-np.inf)
-            upper.fill(np.inf)
-        crossed = lower > upper
-        if _count_nonzero(crossed):
-            mid = np.where(lower[crossed] > 0, upper[crossed], lower[crossed])
-            lower[crossed] = mid
-            upper[crossed] = mid
-        return lower, upper
+        coordinates, see the module docstring), by the compiled plan. The arrays are views of
+        the plan's arena that the next evaluation overwrites."""
+        plan = self.synced_plan(state, dt)
+        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state),
+                   NO_REFERENCES)  # fmt: skip
+        plan.evaluated = state.stamp
+        problem = plan.problem()
+        problem.objective_values = plan.objective_values()
+        return problem
 
     def advance(
         self,
@@ -519,21 +403,45 @@ class Stack:
         a bound, e.g. a joint resting at 0 on its limit that no task uses). Give one or the
         other.
         """
+        if result is not None and saturated is not None:
+            raise WholebodyError("Stack.advance: give result= (per-task anti-windup) or "
+                                 "saturated= (one flag for every task), not both")  # fmt: skip
+        plan = self._evaluated_plan(state, dt)
+        what = ADVANCE_TASKS
         if result is not None:
-            if saturated is not None:
-                raise WholebodyError("Stack.advance: give result= (per-task anti-windup) or "
-                                     "saturated= (one flag for every task), not both")  # fmt: skip
-            flags = self.saturated_tasks(state, result)
-            for t in self._all_tasks:
-                t.advance(state, dt, flags[t.name])
+            self._outcome(plan, result)
+            what |= ADVANCE_FLAGS
             if u is None:
                 u = result.u
         else:
-            flag = bool(saturated)
-            for t in self._all_tasks:
-                t.advance(state, dt, flag)
+            plan.view(lay.I_SATURATED)[:] = bool(saturated)
         if u is not None:
-            self.set_velocity(u, dt)
+            plan.view(lay.F_U)[1] = u
+            what |= ADVANCE_MEMORY
+        first_call("advance", "the control kernels", advance, plan.f, plan.i, plan.h,
+                   float(dt), what)  # fmt: skip
+        plan.advance_python(state, dt, u)
+
+    def _evaluated_plan(self, state: RobotState, dt: float) -> Plan:
+        """The plan, its rows evaluated at ``state`` (evaluated now if they are not)."""
+        plan = self._plan
+        if plan is None or plan.evaluated != state.stamp:
+            self.evaluate(state, dt)
+            plan = self._plan
+        return plan  # type: ignore[return-value]
+
+    def _last_dt(self) -> float:
+        """The step (s) of the last evaluation; 0.01 s before any (what it changes, the
+        limits' boxes, does not enter the flags)."""
+        plan = self._plan
+        dt = 0.0 if plan is None else float(plan.view(lay.F_SCALARS)[0])
+        return dt if dt > 0 else 0.01
+
+    @staticmethod
+    def _outcome(plan: Plan, result: SolverResult) -> None:
+        """``result`` into the plan's outcome regions unless it is the plan's own last."""
+        if plan.last_result is not result:
+            plan.write_result(result)
 
     def saturated_tasks(self, state: RobotState, result: SolverResult) -> dict[str, bool]:
         """Per equality task (by name), whether the hard constraints limited it in the solve
@@ -541,47 +449,18 @@ class Stack:
         scaled (``result.scale[level] < 1``, projection), or an active bound
         (``result.active_bounds``) is on an entry of ``u`` that the task's rows move (a
         column of its rows not 0: a joint no task row uses may rest on its limit without
-        stopping any integral), or the task is reported unmet (``result.infeasible``).
-
-        The rows are those of the stack's last evaluation at ``state`` (compiled or not);
-        without one, the tasks' own rows at ``state``."""
-        flags = dict.fromkeys((t.name for t in self._all_tasks), False)
-        unmet = {name for _, name in result.infeasible}
-        scale = np.asarray(result.scale)
-        per_level = scale.size == len(self.levels)  # (a result of another stack: not read)
-        scaled = set(np.flatnonzero(scale < 1.0).tolist()) if per_level else set()
-        active = np.asarray(result.active_bounds, dtype=np.intp)
-        if not (unmet or scaled or active.size):
-            return flags
-        for task, level, rows in self._evaluated_rows(state):
-            if level in scaled or task.name in unmet:
-                flags[task.name] = True
-            elif active.size and rows.size:
-                size = np.abs(rows).max()
-                flags[task.name] = bool(np.abs(rows[:, active]).max() > _ZERO_COLUMN * size)
-        return flags
-
-    def _evaluated_rows(self, state: RobotState) -> Iterator[tuple[Task, int, np.ndarray]]:
-        """``(task, level index, rows)`` of every equality task: the rows of the last
-        evaluation at ``state`` (scaled and weighted: the same zero columns as ``J``), else
-        computed now."""
-        plan = self._plan
-        if plan is not None and plan.evaluated is state:
-            A = plan.view(lay.F_A)
-            for r in plan.rows:
-                yield r.task, r.level, A[r.start : r.stop]
-        elif self._evaluated is state:
-            for li, lp in enumerate(self._plans):
-                for t, (A, _) in zip(lp.tasks, lp.views, strict=True):
-                    yield t, li, A
-        else:
-            for li, level in enumerate(self.levels):
-                for t in level.tasks:
-                    yield t, li, t.compute(state).J
+        stopping any integral), or the task is reported unmet (``result.infeasible``)
+        (:mod:`wholebody.kernels.advance`)."""
+        plan = self._evaluated_plan(state, self._last_dt())
+        self._outcome(plan, result)
+        first_call("advance", "the control kernels", advance, plan.f, plan.i, plan.h, 1.0,
+                   ADVANCE_FLAGS)  # fmt: skip
+        flags = plan.view(lay.I_SATURATED).tolist()
+        return {r.entry.name: bool(flags[r.slot]) for r in plan.tasks}
 
     def set_velocity(self, u: np.ndarray, dt: float) -> None:
         """The velocity the robot moves at (applied for the last ``dt`` s): the constraints
-        with a memory and the projection's anchor (:attr:`StackProblem.anchor`) use it."""
+        with a memory (acceleration limits) keep it."""
         for c in self.constraints:
             c.advance(u, dt)
 
@@ -592,80 +471,6 @@ class Stack:
         for c in self.constraints:
             c.reset()
 
-    @property
-    def anchor(self) -> np.ndarray | None:
-        """With acceleration limits in the stack, the velocity they remember (scaled), else
-        None."""
-        for c in self.constraints:
-            if isinstance(c, AccelerationLimits):
-                return c.previous / self._scale
-        return None
-
     def __repr__(self) -> str:
         parts = [f"{lv.name}: [{', '.join(e.name for e in lv.entries)}]" for lv in self.levels]
         return f"Stack({'; '.join(parts)}; constraints: {[c.name for c in self.constraints]})"
-
-
-def _add_run(layout: list[Frame], frames: tuple[Frame, ...]) -> None:
-    """Lay out the frames to prefetch so that an entry's frames are consecutive (then
-    :meth:`RobotState.jacobians` of them is a view of the batch): append ``frames`` unless
-    they already form a run of ``layout`` (a single frame: unless it is in ``layout``)."""
-    n = len(frames)
-    if n == 0:
-        return
-    ids = [f.index for f in frames]
-    have = [f.index for f in layout]
-    if any(have[k : k + n] == ids for k in range(len(have) - n + 1)):
-        return
-    layout.extend(frames)
-
-
-class _LevelPlan:
-    """A level's fixed layout and cached row scaling (internal to :class:`Stack`).
-
-    ``factor[i, j] = sqrt(w_i) D_j`` over the task rows and ``row_scale[i] = sqrt(w_i)``,
-    rebuilt per task when its weight changes (``weight_keys`` hold the weights they were
-    built from) and entirely when the metric changes.
-    """
-
-    def __init__(
-        self,
-        level: Level,
-        buf: LevelProblem,
-        tasks: list[Task],
-        inequalities: list[InequalityTask],
-        objectives: list[Objective],
-    ) -> None:
-        self.level, self.buffer, self.entries = level, buf, level.entries
-        self.tasks, self.inequalities, self.objectives = tasks, inequalities, objectives
-        nt = sum(t.dim for t in tasks)
-        self.slices = [buf.task_rows[t.name] for t in tasks]
-        self.views = [(buf.A[sl], buf.b[sl]) for sl in self.slices]
-        self.task_A, self.task_b = buf.A[:nt], buf.b[:nt]
-        self.factor = np.zeros((nt, buf.A.shape[1]))
-        self.row_scale = np.zeros(nt)
-        self.sqrt_weights = [np.zeros(t.dim) for t in tasks]
-        self.weight_keys: list[object] = [None] * len(tasks)
-        self.scale_version = -1
-        if objectives:
-            sl = buf.task_rows[OBJECTIVES]
-            self.objective_A, self.objective_b = buf.A[sl], buf.b[sl]
-        self.objective_scale: float | None = None
-
-    def set_weight(self, i: int, w: object, D: np.ndarray) -> None:
-        """Task i's rows now have weight(s) ``w``."""
-        sw = sqrt_weights(self.tasks[i], w)
-        self.sqrt_weights[i] = sw
-        self.weight_keys[i] = float(w) if isinstance(w, (float, int)) else np.array(w, float)
-        sl = self.slices[i]
-        np.multiply(sw[:, None], D, out=self.factor[sl])
-        self.row_scale[sl] = sw
-        self.buffer.unweight[sl] = np.divide(1.0, sw, out=np.zeros_like(sw), where=sw > 0)
-        weighted = self.row_scale[self.row_scale > 0.0]
-        self.buffer.reference_scale = float(weighted.min()) if weighted.size else 1.0
-
-    def rescale(self, D: np.ndarray, version: int) -> None:
-        """The metric changed: rebuild the factor from the cached sqrt-weights."""
-        for sl, sw in zip(self.slices, self.sqrt_weights, strict=True):
-            np.multiply(sw[:, None], D, out=self.factor[sl])
-        self.scale_version = version

@@ -49,6 +49,7 @@ import numpy as np
 
 from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.errors import DimensionError
+from wholebody.kernels.layout import KIND_ARM
 from wholebody.kernels.objectives import (
     AE_COM1,
     AE_COM2,
@@ -69,7 +70,7 @@ from wholebody.kernels.objectives import (
     arm_energy,
 )
 from wholebody.robot import ArmChain, Body, Frame, Robot, RobotState
-from wholebody.tasks.base import Objective, ObjectiveValue
+from wholebody.tasks.base import Objective, ObjectiveValue, Packed, Packer
 
 __all__ = ["ArmEnergyValue", "ArmPotentialEnergy"]
 
@@ -119,44 +120,67 @@ class ArmPotentialEnergy(Objective):
         self.robot = robot
         self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(name or f"{self.arm.name}_arm_energy", weight)
-        if isinstance(stiffness, StiffnessModel):
-            self.stiffness = stiffness
+        if not smoothing > 0 or not fade > 0:
+            raise DimensionError(f"{self.name}: smoothing and fade must be > 0")
+        if reference not in ("shoulder", "world"):
+            raise DimensionError(f"{self.name}: reference must be 'shoulder' or 'world', "
+                                 f"got {reference!r}")  # fmt: skip
+        self.side = 1.0 if self.arm.side == "left" else -1.0
+        self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
+        arm = self.arm
+        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
+                        arm.forearm.frame)  # fmt: skip
+        self._frames_base = (*self._frames, robot.base_frame)
+        self._settings = (float(smoothing), float(fade), reference)
+        self.stiffness = stiffness  # (lays out the parameter block)
+
+    @property
+    def stiffness(self) -> StiffnessModel:
+        """``k``: a :class:`ConstantStiffness` or a model of the wrist position (assigning a
+        number makes a constant one)."""
+        return self._stiffness
+
+    @stiffness.setter
+    def stiffness(self, value: float | StiffnessModel) -> None:
+        if isinstance(value, StiffnessModel):
+            self._stiffness = value
         else:
             try:  # a number, a numpy scalar or 0-d array; not a string such as "learned"
-                k = float(stiffness) if not isinstance(stiffness, str) else None
+                k = float(value) if not isinstance(value, str) else None
             except (TypeError, ValueError):
                 k = None
             if k is None:
                 raise DimensionError(
                     f"{self.name}: stiffness must be a number (N m/rad) or a StiffnessModel "
                     "(the learned one: wholebody.humanlike.default_stiffness(robot)), got "
-                    f"{stiffness!r}"
+                    f"{value!r}"
                 )
-            self.stiffness = ConstantStiffness(k)
-        if not smoothing > 0 or not fade > 0:
-            raise DimensionError(f"{self.name}: smoothing and fade must be > 0")
-        self.smoothing, self.fade = float(smoothing), float(fade)
-        if reference not in ("shoulder", "world"):
-            raise DimensionError(f"{self.name}: reference must be 'shoulder' or 'world', "
-                                 f"got {reference!r}")  # fmt: skip
-        self.reference = reference
-        self.side = 1.0 if self.arm.side == "left" else -1.0
-        self.g = float(np.linalg.norm(robot.model.gravity.linear))
-        self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
-        self._constant = isinstance(self.stiffness, ConstantStiffness)
-        arm = self.arm
-        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
-                        arm.forearm.frame)  # fmt: skip
-        self._frames_base = (*self._frames, robot.base_frame)
+            self._stiffness = ConstantStiffness(k)
+        self._params = self._block()  # a new block: a stack lays it out again
 
-    def jacobian_frames(self) -> tuple[Frame, ...]:
-        """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
-        stiffness depends on the wrist position."""
-        return self._frames if self._constant else self._frames_base
+    @property
+    def smoothing(self) -> float:
+        """``delta`` of the smoothed |alpha| (rad)."""
+        return self._settings[0]
 
-    def parameters(self) -> np.ndarray:
-        """The kernel's parameter row (``AE_*`` of :mod:`wholebody.kernels.objectives`)
-        without the stiffness entries (a fresh array)."""
+    @property
+    def fade(self) -> float:
+        """``eps`` of the spring's fade-out where alpha is undefined (m)."""
+        return self._settings[1]
+
+    @property
+    def reference(self) -> str:
+        """What the gravity term's heights are measured from: ``"shoulder"`` or ``"world"``."""
+        return self._settings[2]
+
+    @property
+    def g(self) -> float:
+        """Gravity (m/s^2), from the robot model."""
+        return float(np.linalg.norm(self.robot.model.gravity.linear))
+
+    def _block(self) -> np.ndarray:
+        """The kernel's parameter block: ``AE_*`` parameters, ``ARM_PARTS`` outputs, then the
+        packed stiffness network if the kernels evaluate it."""
         arm = self.arm
         par = np.zeros(AE_WIDTH)
         par[AE_G], par[AE_M1], par[AE_M2] = self.g, arm.upper_arm.mass, arm.forearm.mass
@@ -164,13 +188,36 @@ class ArmPotentialEnergy(Objective):
         par[AE_COM2 : AE_COM2 + 3] = arm.forearm.com
         par[AE_SIDE], par[AE_FADE], par[AE_SMOOTH] = self.side, self.fade, self.smoothing
         par[AE_SHOULDER] = self.reference == "shoulder"
-        return par
+        net = self.network()
+        stiffness = self._stiffness
+        if type(stiffness) is ConstantStiffness:  # k does not depend on the wrist
+            par[AE_K], par[AE_NET] = stiffness.k, AE_CONSTANT
+        elif net is not None:
+            par[AE_NET] = 0
+        else:  # evaluated in Python at each call (_kernel_energy)
+            par[AE_NET] = AE_GIVEN
+        return np.concatenate([par, np.zeros(ARM_PARTS), np.zeros(0) if net is None else net])
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
+        stiffness depends on the wrist position."""
+        return self._frames if isinstance(self._stiffness, ConstantStiffness) else self._frames_base
 
     def network(self) -> np.ndarray | None:
         """The stiffness as a packed network the kernels evaluate themselves, or None (a
         constant, or a model evaluated in Python)."""
-        packed = getattr(self.stiffness, "packed", None)
+        packed = getattr(self._stiffness, "packed", None)
         return packed() if callable(packed) else None
+
+    def pack(self, packer: Packer) -> Packed | None:
+        """Compiled where the kernels evaluate the stiffness (a constant or a packed network)
+        and each segment is one link (see the module docstring)."""
+        if (self.extra_bodies or self._params[AE_NET] == AE_GIVEN
+                or not self.compiled_as(ArmPotentialEnergy, "evaluate", "_energy")):  # fmt: skip
+            return None
+        frames = self._frames_base if self.network() is not None else self._frames
+        ints = [packer.frame(f) for f in frames] + [-1] * (6 - len(frames))
+        return Packed(KIND_ARM, self._params, np.array(ints, dtype=np.int64))
 
     def evaluate(self, state: RobotState) -> ArmEnergyValue:
         grad = np.empty(self.robot.nu)
@@ -217,24 +264,14 @@ class ArmPotentialEnergy(Objective):
         R = np.empty((6, 3, 3))
         for i, f in enumerate(self._frames_base):
             R[i], P[i] = state.rotation_translation(f)
-        par = self.parameters()
-        nets = self.network()
-        stiffness = self.stiffness
-        if type(stiffness) is ConstantStiffness:  # k does not depend on the wrist
-            par[AE_K], par[AE_NET] = stiffness.k, AE_CONSTANT
-        elif nets is not None:
-            par[AE_NET] = 0
-        else:  # a model evaluated here, at the canonical wrist Mirror R_b^T (W - S)
+        par = self._params[:AE_WIDTH]
+        if par[AE_NET] == AE_GIVEN:  # a model evaluated here, at Mirror R_b^T (W - S)
+            par = par.copy()
             wrist = self._mirror * R[5].T.dot(P[2] - P[0])
-            k, dk = stiffness.evaluate(wrist)
-            par[AE_K] = k
-            if self._constant:
-                par[AE_NET] = AE_CONSTANT
-            else:
-                par[AE_NET], par[AE_DK : AE_DK + 3] = AE_GIVEN, dk
-        parts = np.empty(ARM_PARTS)
-        arm_energy(P, R, J, par, _NO_NETWORK if nets is None else nets, grad, parts)
-        return parts
+            par[AE_K], par[AE_DK : AE_DK + 3] = self._stiffness.evaluate(wrist)
+        parts = self._params[AE_WIDTH : AE_WIDTH + ARM_PARTS]
+        arm_energy(P, R, J, par, self._params[AE_WIDTH + ARM_PARTS :], grad, parts)
+        return parts.copy()
 
     def same_energy(self, other: object) -> bool:
         """Whether ``other`` is an arm energy with the same value as this one at every state
@@ -244,11 +281,8 @@ class ArmPotentialEnergy(Objective):
         a, b = self.stiffness, other.stiffness
         same_k = a is b or (type(a) is type(b) is ConstantStiffness and a.k == b.k)
         return (same_k and self.arm is other.arm and self.robot is other.robot
-                and (self.smoothing, self.fade, self.reference, self.g)
-                == (other.smoothing, other.fade, other.reference, other.g))  # fmt: skip
+                and self._settings == other._settings)  # fmt: skip
 
 
-_NO_NETWORK = np.zeros(1)
-_NO_NETWORK.setflags(write=False)
 _NO_JACOBIAN = np.zeros((6, 6, 0))  # parts(): the gradient has no columns
 _NO_GRADIENT = np.zeros(0)

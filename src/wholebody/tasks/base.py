@@ -17,6 +17,14 @@ Two optional hooks serve the control loop's speed, never its results: ``jacobian
 lists the frames whose Jacobians an entry reads (a :class:`~wholebody.solvers.Stack` computes
 them in one batch before evaluating its entries), and :meth:`Task.write_rows` writes a task's
 rows into a caller's buffer instead of allocating them.
+
+**Compiled entries.** The built-in entries are computed by the compiled core: each one packs
+itself (:meth:`Task.pack`) into what its kernel reads, a parameter block of floats laid out by
+that kernel (:class:`Packed`), which holds the entry's settings and state (a pose task's
+gains, target, integral and last error). The stack copies the block into its arena and the
+entry :meth:`~Task.adopt` s the copy, so that the entry and the kernels share one memory: a
+new target set in Python is what the next step reads, an integral advanced by the kernel is
+what the task reports. An entry of your own runs in Python (``pack`` returns None).
 """
 
 from __future__ import annotations
@@ -24,7 +32,8 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -39,6 +48,8 @@ __all__ = [
     "Limit",
     "Objective",
     "ObjectiveValue",
+    "Packed",
+    "Packer",
     "Task",
     "TaskRows",
 ]
@@ -84,6 +95,58 @@ class ObjectiveValue:
     curvature: np.ndarray | None = None  # (nu,) >= 0, or None when not available
 
 
+_NO_INTS = np.zeros(0, dtype=np.int64)
+_NO_INTS.setflags(write=False)
+
+
+@dataclass(frozen=True)
+class Packed:
+    """How the compiled core computes an entry (:meth:`Task.pack`).
+
+    ``kind`` names its kernel (``KIND_*`` of :mod:`wholebody.kernels.layout`); ``floats`` is
+    the entry's own parameter block, laid out by that kernel (the stack copies it into its
+    arena and hands the copy back through :meth:`Task.adopt`); ``ints`` are its integer
+    parameters, frames given as rows of the stack's frame table (:meth:`Packer.frame`);
+    ``curvature`` (objectives) says that its gradient comes with a Hessian diagonal.
+    """
+
+    kind: int
+    floats: np.ndarray
+    ints: np.ndarray = field(default_factory=lambda: _NO_INTS)
+    curvature: bool = False
+
+
+class Packer(Protocol):
+    """What an entry may ask the stack for while it packs itself."""
+
+    def frame(self, frame: Frame) -> int:
+        """The row of ``frame`` in the stack's frame table (its kinematics are computed
+        each step: position, rotation, Jacobian in actuated coordinates)."""
+        ...
+
+
+class Compiled:
+    """The part of the entry contract the compiled core uses (see the module docstring):
+    :meth:`pack` and :meth:`adopt`. An entry that keeps its numbers in ``self._params`` (a
+    float array laid out by its kernel) needs only :meth:`pack`."""
+
+    _params: np.ndarray
+
+    def pack(self, packer: Packer) -> Packed | None:
+        """How the kernels compute this entry, or None: it is evaluated in Python (the
+        default, and what an entry of your own gets)."""
+        return None
+
+    def adopt(self, block: np.ndarray) -> None:
+        """From now on keep the parameter block in ``block``, a stack's copy of it."""
+        self._params = block
+
+    def compiled_as(self, cls: type, *methods: str) -> bool:
+        """Whether ``type(self)`` keeps ``cls``'s ``methods`` (a subclass that overrides one
+        of them changes what the entry computes: it is evaluated in Python)."""
+        return all(getattr(type(self), m) is getattr(cls, m) for m in methods)
+
+
 def check_name(name: object, kind: str) -> str:
     """A task's, objective's or limit's name: a non-empty string, or DimensionError."""
     if not (isinstance(name, str) and name):
@@ -114,7 +177,7 @@ def check_weight(weight: object, name: str) -> float | np.ndarray:
     return arr
 
 
-class Task(ABC):
+class Task(Compiled, ABC):
     """Equality rows ``J u = v`` at the velocity level.
 
     Subclasses call ``super().__init__(name, weight)`` (both checked), say their number of
@@ -183,18 +246,18 @@ class Task(ABC):
         that does not define one logs NaN (not a zero that would read as "met")."""
         return np.full(self.dim, np.nan)
 
-    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:  # noqa: B027
+    def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
         """Advance internal state (integrators) by one control step of ``dt`` seconds, after
         the step was solved at ``state``. ``saturated`` tells that the hard constraints kept
         the solver from realising this task's rows (a bound active on a joint they move, its
         level scaled, or the task unmet: :meth:`~wholebody.solvers.Stack.saturated_tasks`),
         for anti-windup."""
 
-    def reset(self) -> None:  # noqa: B027
+    def reset(self) -> None:
         """Forget internal state (integrators)."""
 
 
-class InequalityTask(ABC):
+class InequalityTask(Compiled, ABC):
     """Inequality rows ``lower <= C u <= upper`` at the velocity level."""
 
     name: str
@@ -213,7 +276,7 @@ class InequalityTask(ABC):
         return ()
 
 
-class Objective(ABC):
+class Objective(Compiled, ABC):
     """A scalar cost of the configuration with its analytic gradient.
 
     Attributes
@@ -242,7 +305,7 @@ class Objective(ABC):
         return ()
 
 
-class Limit(ABC):
+class Limit(Compiled, ABC):
     """A hard box on the actuated velocity for one control step (what pink and mink call a
     limit; ``Constraint`` is another name for it)."""
 
@@ -252,11 +315,11 @@ class Limit(ABC):
     def bounds(self, state: RobotState, dt: float) -> Bounds:
         """The box at ``state`` for a step of ``dt`` seconds."""
 
-    def advance(self, u: np.ndarray, dt: float) -> None:  # noqa: B027 - a hook
+    def advance(self, u: np.ndarray, dt: float) -> None:
         """After a step: the velocity ``u`` that was applied for ``dt`` s (a constraint with
         a memory, such as :class:`~wholebody.tasks.AccelerationLimits`, keeps it)."""
 
-    def reset(self) -> None:  # noqa: B027 - a hook
+    def reset(self) -> None:
         """Forget what :meth:`advance` kept (a new run starts at rest)."""
 
 

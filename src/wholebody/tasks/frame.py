@@ -32,20 +32,40 @@ from collections.abc import Sequence
 import numpy as np
 import pinocchio as pin
 
-from wholebody._numeric import count_nonzero as _count_nonzero
 from wholebody._numeric import float_array
 from wholebody._poses import check_pose
 from wholebody.errors import DimensionError
-from wholebody.kernels.rows import pose_rows
+from wholebody.kernels.layout import KIND_POSE
+from wholebody.kernels.rows import (
+    POSE_ERROR,
+    POSE_FA,
+    POSE_FB,
+    POSE_HAS,
+    POSE_INTEGRAL,
+    POSE_INTS,
+    POSE_KI,
+    POSE_KP,
+    POSE_LIMIT,
+    POSE_NROWS,
+    POSE_SEL,
+    POSE_STAMP,
+    POSE_TARGET,
+    POSE_TWIST,
+    POSE_WIDTH,
+    TARGET_HELD,
+    TARGET_NONE,
+    TARGET_SET,
+    advance_integral,
+    pose_rows,
+)
 from wholebody.robot import Frame, Robot, RobotState
-from wholebody.tasks.base import Task, TaskRows
+from wholebody.tasks.base import Packed, Packer, Task, TaskRows
 
 __all__ = [
     "FrameTask",
     "PoseTask",
     "check_pose",
     "check_twist",
-    "integrate_error",
     "pose_error",
 ]
 
@@ -65,14 +85,14 @@ def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
 
 
 def _gain(value: float | Sequence[float], what: str) -> np.ndarray:
-    """A read-only (6,) gain from a number or 6 numbers, finite and >= 0."""
+    """A (6,) gain from a number or 6 numbers, finite and >= 0."""
     try:
         g = np.broadcast_to(np.asarray(value, dtype=float), (6,)).copy()
     except (TypeError, ValueError) as exc:
         raise DimensionError(f"{what} must be a number or 6 numbers, got {value!r}") from exc
     if not np.all(np.isfinite(g)) or np.any(g < 0):
         raise DimensionError(f"{what} must be finite and >= 0, got {value!r}")
-    return _readonly(g)
+    return g
 
 
 def pose_error(p: np.ndarray, R: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -86,11 +106,13 @@ class PoseTask(Task):
     a pose tracked with the PI law, its target, gains, integral and the error of its last rows.
 
     Subclasses say what is tracked (:meth:`_measured`: the Jacobian, position and rotation in
-    the task's axes) and what a held target is (:meth:`_hold`). The rows come from the kernel
-    :func:`wholebody.kernels.rows.pose_rows`, the same one the compiled stack runs.
+    the task's axes; :meth:`pack`: the frames the kernels read). The rows come from the
+    kernel :func:`wholebody.kernels.rows.pose_rows`, the same one the compiled stack runs, on
+    the task's parameter block (``POSE_*`` of :mod:`wholebody.kernels.rows`): gains, target,
+    twist, integral and error live there, shared with the stack that runs the task.
 
-    Gains and targets are read-only arrays: change them by assignment or :meth:`set_target`
-    (so that a compiled stack sees every change); the integral is updated in place.
+    Gains and targets are read-only arrays: change them by assignment or :meth:`set_target`;
+    the integral is updated in place.
     """
 
     def __init__(
@@ -112,46 +134,63 @@ class PoseTask(Task):
         self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
         self.rows.setflags(write=False)
         super().__init__(name, weight)
+        self._params = np.zeros(POSE_WIDTH)
+        self._params[POSE_STAMP] = -1.0
         self.kp = kp
         self.ki = ki
-        if not integral_limit >= 0:
-            raise DimensionError(f"{self.name}: integral_limit must be >= 0")
-        self.integral_limit = float(integral_limit)
-        self._target: np.ndarray | None = None
-        self._twist = _readonly(np.zeros(6))
-        self.integral = np.zeros(6)
-        """The integral of the error (m s, rad s), advanced in place by :meth:`advance`."""
-        self._held = False  # the target is the pose captured at first use (reset forgets it)
-        self._error = np.zeros(6)  # the full error of the last rows, at _error_key
-        self._error_key: tuple[object, object] | None = None  # (state, target) of _error
+        self.integral_limit = integral_limit
+
+    def _view(self, start: int, size: int) -> np.ndarray:
+        """A read-only view of the parameter block."""
+        out = self._params[start : start + size]
+        out.setflags(write=False)
+        return out
 
     @property
     def kp(self) -> np.ndarray:
         """Proportional gain (1/s) per component [x, y, z, rx, ry, rz] (read-only)."""
-        return self._kp
+        return self._view(POSE_KP, 6)
 
     @kp.setter
     def kp(self, value: float | Sequence[float]) -> None:
-        self._kp = _gain(value, f"{self.name}: kp")
+        self._params[POSE_KP : POSE_KP + 6] = _gain(value, f"{self.name}: kp")
 
     @property
     def ki(self) -> np.ndarray:
         """Integral gain (1/s^2) per component (read-only)."""
-        return self._ki
+        return self._view(POSE_KI, 6)
 
     @ki.setter
     def ki(self, value: float | Sequence[float]) -> None:
-        self._ki = _gain(value, f"{self.name}: ki")
+        self._params[POSE_KI : POSE_KI + 6] = _gain(value, f"{self.name}: ki")
+
+    @property
+    def integral_limit(self) -> float:
+        """Anti-windup clamp of each integral component (m s, rad s)."""
+        return float(self._params[POSE_LIMIT])
+
+    @integral_limit.setter
+    def integral_limit(self, value: float) -> None:
+        if not (isinstance(value, (int, float, np.floating)) and value >= 0):
+            raise DimensionError(f"{self.name}: integral_limit must be >= 0, got {value!r}")
+        self._params[POSE_LIMIT] = float(value)
+
+    @property
+    def integral(self) -> np.ndarray:
+        """The integral of the error (m s, rad s), advanced in place each step."""
+        return self._params[POSE_INTEGRAL : POSE_INTEGRAL + 6]
 
     @property
     def target(self) -> np.ndarray | None:
         """The target pose (4x4, read-only), or None before it is set or captured."""
-        return self._target
+        if self._params[POSE_HAS] == TARGET_NONE:
+            return None
+        return self._view(POSE_TARGET, 16).reshape(4, 4)
 
     @property
     def target_twist(self) -> np.ndarray:
         """The target twist ``[v (m/s), w (rad/s)]`` (read-only)."""
-        return self._twist
+        return self._view(POSE_TWIST, 6)
 
     @property
     def dim(self) -> int:
@@ -160,24 +199,21 @@ class PoseTask(Task):
     def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
         """Target pose (4x4 or SE3) and twist ``[v (m/s), w (rad/s)]`` (zero when omitted), in
         the task's axes (see the subclass)."""
-        self._target = _readonly(check_pose(pose, f"{self.name}: target pose"))
-        self._twist = _readonly(check_twist(twist, f"{self.name}: target twist"))
-        self._held = False
+        par = self._params
+        par[POSE_TARGET : POSE_TARGET + 16] = check_pose(pose, f"{self.name}: target pose").ravel()
+        par[POSE_TWIST : POSE_TWIST + 6] = check_twist(twist, f"{self.name}: target twist")
+        par[POSE_HAS] = TARGET_SET
+        par[POSE_STAMP] = -1.0  # the last error was for another target
 
     def current_target(self, state: RobotState) -> np.ndarray:
         """The target, capturing the current pose when none is set (held until
         :meth:`reset`)."""
-        if self._target is None:
-            self._target = _readonly(self._hold(state))
-            self._held = True
-        return self._target
+        if self._params[POSE_HAS] == TARGET_NONE:
+            self._full_error(state)
+        return self.target  # type: ignore[return-value]
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The tracked pose's Jacobian (6 x nu), position and rotation at ``state``."""
-        raise NotImplementedError
-
-    def _hold(self, state: RobotState) -> np.ndarray:
-        """The pose (4x4) to hold when no target is set."""
         raise NotImplementedError
 
     def compute(self, state: RobotState) -> TaskRows:
@@ -188,36 +224,42 @@ class PoseTask(Task):
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         Jm, p, R = self._measured(state)
-        target = self.current_target(state)
-        pose_rows(Jm, p, R, target, self._twist, self._kp, self._ki, self.integral, self.rows,
-                  J, v, self._error)  # fmt: skip
-        self._error_key = (state, target)
+        pose_rows(self._params, Jm, p, R, self.rows, J, v)
+        self._params[POSE_STAMP] = state.stamp
         return self.weight
 
     def _full_error(self, state: RobotState) -> np.ndarray:
         """The (6,) error at ``state`` and the current target: that of the last rows when
-        they were written there (a task's advance after its solve), else computed."""
-        key = self._error_key
-        if key is None or key[0] is not state or key[1] is not self._target:
+        they were computed there (by a stack's kernel or by this task), else computed."""
+        if self._params[POSE_STAMP] != state.stamp or not state.valid:
             self.write_rows(state, np.empty((self.rows.size, self.robot.nu)),
                             np.empty(self.rows.size))  # fmt: skip
-        return self._error
+        return self._params[POSE_ERROR : POSE_ERROR + 6]
 
     def error(self, state: RobotState) -> np.ndarray:
         """(dim,) error: position error (m) and/or orientation error (rad)."""
         return self._full_error(state)[self.rows]
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:
-        if not _count_nonzero(self._ki):
-            return
-        integrate_error(self.integral, self._full_error(state), dt, saturated,
-                        self.integral_limit)  # fmt: skip
+        self._full_error(state)
+        advance_integral(self._params, bool(saturated), float(dt))
 
     def reset(self) -> None:
         """Zero the integral; a target captured at first use (none was set) is forgotten."""
-        self.integral[:] = 0.0
-        if self._held:
-            self._target, self._held = None, False
+        self._params[POSE_INTEGRAL : POSE_INTEGRAL + 6] = 0.0
+        if self._params[POSE_HAS] == TARGET_HELD:
+            self._params[POSE_HAS] = TARGET_NONE
+
+    def _pack(self, packer: Packer, fa: int, fb: int) -> Packed | None:
+        """The kernel's view of this task tracking frame ``fb`` (relative to ``fa``, -1: the
+        world), unless a subclass changed what it computes."""
+        if not self.compiled_as(PoseTask, "compute", "write_rows", "error", "advance",
+                                "_full_error"):  # fmt: skip
+            return None
+        ints = np.zeros(POSE_INTS, dtype=np.int64)
+        ints[POSE_FA], ints[POSE_FB], ints[POSE_NROWS] = fa, fb, self.rows.size
+        ints[POSE_SEL : POSE_SEL + self.rows.size] = self.rows
+        return Packed(KIND_POSE, self._params, ints)
 
 
 class FrameTask(PoseTask):
@@ -264,29 +306,13 @@ class FrameTask(PoseTask):
         R, p = state.rotation_translation(self.frame)
         return state.jacobian(self.frame), p, np.ascontiguousarray(R)
 
-    def _hold(self, state: RobotState) -> np.ndarray:
-        return state.pose(self.frame)
-
     def jacobian_frames(self) -> tuple[Frame, ...]:
         return (self.frame,)
 
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(FrameTask, "_measured"):
+            return None
+        return self._pack(packer, -1, packer.frame(self.frame))
+
     def __repr__(self) -> str:
         return f"FrameTask({self.name!r}, frame={self.frame.name!r}, rows={self.dim})"
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)
-    return a
-
-
-def integrate_error(integral: np.ndarray, e: np.ndarray, dt: float, saturated: bool,
-                    limit: float) -> None:  # fmt: skip
-    """``I += e dt`` clamped to ``+-limit``; while saturated the integral may only shrink
-    towards 0 (a step against it stops at 0, a step along it is dropped)."""
-    step = e * dt
-    if saturated:
-        size = np.abs(integral)
-        step = np.where(step * integral < 0, np.clip(step, -size, size), 0.0)
-    integral += step
-    np.minimum(integral, limit, out=integral)  # np.clip without its Python wrapper
-    np.maximum(integral, -limit, out=integral)

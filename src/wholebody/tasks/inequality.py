@@ -19,9 +19,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.layout import KIND_HALF_SPACE
 from wholebody.kernels.rows import half_space_row
 from wholebody.robot import Frame, Robot, RobotState
-from wholebody.tasks.base import InequalityRows, InequalityTask
+from wholebody.tasks.base import InequalityRows, InequalityTask, Packed, Packer
 
 __all__ = ["FrameHalfSpace"]
 
@@ -60,25 +61,23 @@ class FrameHalfSpace(InequalityTask):
         if not (np.isfinite(offset) and 0 < gain <= 1):
             raise DimensionError(f"{self.name}: offset must be finite and gain in (0, 1]")
         self.robot = robot
-        self._normal = nrm / length
-        self._normal.setflags(write=False)
-        self._offset = float(offset)
-        self._gain = float(gain)
+        self._params = np.array([*(nrm / length), offset, gain])  # the kernel's block
+        self._params.setflags(write=False)
 
     @property
     def normal(self) -> np.ndarray:
         """The unit normal (world axes), fixed at construction (read-only)."""
-        return self._normal
+        return self._params[:3]
 
     @property
     def offset(self) -> float:
         """``d`` (m), fixed at construction."""
-        return self._offset
+        return float(self._params[3])
 
     @property
     def gain(self) -> float:
         """Fraction of the remaining distance one step may cover, fixed at construction."""
-        return self._gain
+        return float(self._params[4])
 
     @property
     def dim(self) -> int:
@@ -94,6 +93,15 @@ class FrameHalfSpace(InequalityTask):
         lower = half_space_row(state.jacobian(self.frame), p, self.normal, self.offset,
                                self.gain, dt, C[0])  # fmt: skip
         return InequalityRows(C, np.array([lower]), np.array([np.inf]))
+
+    def jacobian_frames(self) -> tuple[Frame, ...]:
+        return (self.frame,)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(FrameHalfSpace, "compute"):
+            return None
+        return Packed(KIND_HALF_SPACE, self._params.copy(),
+                      np.array([packer.frame(self.frame)], dtype=np.int64))  # fmt: skip
 
     def __repr__(self) -> str:
         return f"FrameHalfSpace({self.name!r}, normal={self.normal}, offset={self.offset})"

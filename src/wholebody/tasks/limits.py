@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from wholebody.errors import DimensionError
-from wholebody.kernels.rows import position_box
+from wholebody.kernels.layout import KIND_ACCELERATION, KIND_POSITION, KIND_VELOCITY
+from wholebody.kernels.limits import acceleration_box, position_box, velocity_box
 from wholebody.robot import Robot, RobotState
-from wholebody.tasks.base import Bounds, Constraint
+from wholebody.tasks.base import Bounds, Constraint, Packed, Packer
 
 __all__ = ["AccelerationLimits", "JointPositionLimits", "VelocityLimits"]
 
@@ -38,16 +39,14 @@ class JointPositionLimits(Constraint):
             raise DimensionError(f"{name}: margin {margin} must be >= 0 and smaller than half "
                                  "of every joint range")  # fmt: skip
         self.robot, self.name = robot, name
-        self._gain, self._margin = float(gain), float(margin)
-        self._lower = lower + margin
-        self._upper = upper - margin
-        for a in (self._lower, self._upper):
-            a.setflags(write=False)
+        self._margin = float(margin)
+        # the kernel's block: lower + margin, upper - margin, gain
+        self._params = np.concatenate([lower + margin, upper - margin, [float(gain)]])
 
     @property
     def gain(self) -> float:
         """Fraction of the remaining distance one step may cover, fixed at construction."""
-        return self._gain
+        return float(self._params[-1])
 
     @property
     def margin(self) -> float:
@@ -56,14 +55,19 @@ class JointPositionLimits(Constraint):
 
     @property
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(q_min + margin, q_max - margin)`` per actuated velocity (read-only)."""
-        return self._lower, self._upper
+        """``(q_min + margin, q_max - margin)`` per actuated velocity (copies)."""
+        nu = self.robot.nu
+        return self._params[:nu].copy(), self._params[nu : 2 * nu].copy()
 
     def bounds(self, state: RobotState, dt: float) -> Bounds:
         lower, upper = np.empty(self.robot.nu), np.empty(self.robot.nu)
-        position_box(state.joint_positions(), self._lower, self._upper, self.gain, dt, lower,
-                     upper)  # fmt: skip
+        position_box(state.joint_positions(), self._params, dt, lower, upper)
         return Bounds(lower, upper)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(JointPositionLimits, "bounds"):
+            return None
+        return Packed(KIND_POSITION, self._params)
 
 
 class VelocityLimits(Constraint):
@@ -74,17 +78,22 @@ class VelocityLimits(Constraint):
         if not scale > 0:
             raise DimensionError(f"{name}: scale must be > 0, got {scale}")
         self.name = name
-        self._upper = scale * robot.velocity_limits
-        self._upper.setflags(write=False)
-        self._bounds = Bounds(-self._upper, self._upper)
+        self._params = scale * robot.velocity_limits  # the kernel's block: the upper bound
 
     @property
     def upper(self) -> np.ndarray:
-        """``scale * v_max`` per actuated velocity (rad/s, m/s; read-only)."""
-        return self._upper
+        """``scale * v_max`` per actuated velocity (rad/s, m/s; a copy)."""
+        return self._params.copy()
 
     def bounds(self, state: RobotState, dt: float) -> Bounds:
-        return self._bounds
+        lower, upper = np.empty(self._params.size), np.empty(self._params.size)
+        velocity_box(self._params, lower, upper)
+        return Bounds(lower, upper)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(VelocityLimits, "bounds"):
+            return None
+        return Packed(KIND_VELOCITY, self._params)
 
 
 class AccelerationLimits(Constraint):
@@ -112,44 +121,36 @@ class AccelerationLimits(Constraint):
         if not (isinstance(scale, (int, float)) and 0 < scale < np.inf):
             raise DimensionError(f"{name}: scale must be a finite number > 0, got {scale!r}")
         self.name = name
-        self._amax = scale * robot.acceleration_limits
-        self._amax.setflags(write=False)
-        self._previous = np.zeros(robot.nu)
         lower, upper = robot.position_limits
-        self._limited = np.flatnonzero(np.isfinite(lower) & np.isfinite(upper))
-        self._range = lower[self._limited], upper[self._limited]
+        self._limited = (np.isfinite(lower) & np.isfinite(upper)).astype(np.int64)
+        # the kernel's block: a_max, the position range, the last step's velocity
+        nu = robot.nu
+        self._params = np.zeros(4 * nu)
+        self._params[:nu] = scale * robot.acceleration_limits
+        self._params[nu : 3 * nu] = np.concatenate([lower, upper])
 
     @property
     def upper(self) -> np.ndarray:
-        """``scale * a_max`` per actuated velocity (rad/s^2, m/s^2; read-only)."""
-        return self._amax
+        """``scale * a_max`` per actuated velocity (rad/s^2, m/s^2; a copy)."""
+        return self._params[: self._limited.size].copy()
 
     @property
     def previous(self) -> np.ndarray:
         """The velocity of the last step (a copy)."""
-        return self._previous.copy()
+        return self._params[3 * self._limited.size :].copy()
 
     def bounds(self, state: RobotState, dt: float) -> Bounds:
-        step = self._amax * dt
-        lower, upper = self._previous - step, self._previous + step
-        k = self._limited
-        if k.size:
-            q = state.joint_positions()[k]
-            a, lo, hi = self._amax[k], *self._range
-            to_hi, to_lo = np.maximum(hi - q, 0.0), np.maximum(q - lo, 0.0)
-            upper[k] = np.minimum(upper[k], _braking(to_hi, a, dt))
-            lower[k] = np.maximum(lower[k], -_braking(to_lo, a, dt))
+        lower, upper = np.empty(self._limited.size), np.empty(self._limited.size)
+        acceleration_box(state.joint_positions(), self._params, self._limited, dt, lower, upper)
         return Bounds(lower, upper)
 
     def advance(self, u: np.ndarray, dt: float) -> None:
-        self._previous[:] = u
+        self._params[3 * self._limited.size :] = u
 
     def reset(self) -> None:
-        self._previous[:] = 0.0
+        self._params[3 * self._limited.size :] = 0.0
 
-
-def _braking(d: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
-    """The speed from which braking at ``a`` per step stops within ``d``:
-    ``a dt (sqrt(1 + 2 d / (a dt^2)) - 1)`` (rad/s, m/s)."""
-    adt = a * dt
-    return adt * (np.sqrt(1.0 + 2.0 * d / (adt * dt)) - 1.0)
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(AccelerationLimits, "bounds", "advance", "reset"):
+            return None
+        return Packed(KIND_ACCELERATION, self._params, self._limited)

@@ -13,10 +13,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from wholebody.errors import DimensionError, WholebodyError
+from wholebody.kernels.layout import KIND_H1, KIND_H2
 from wholebody.kernels.objectives import joint_limit_avoidance, manipulability
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.robot.hessian import actuated_support_mask, check_off_wheels
-from wholebody.tasks.base import Objective, ObjectiveValue
+from wholebody.tasks.base import Objective, ObjectiveValue, Packed, Packer
 
 __all__ = ["JointLimitAvoidance", "Manipulability"]
 
@@ -79,10 +80,15 @@ class JointLimitAvoidance(Objective):
         lo, hi, c = np.full(nu, -1.0), np.full(nu, 1.0), np.zeros(nu)
         lo[limited], hi[limited] = lower[limited], upper[limited]
         c[idx] = (upper[idx] - lower[idx]) ** 2 / 4
-        self.ranges = np.array([lo, hi, c])
+        self._params = np.concatenate([lo, hi, c])  # the kernel's block
+
+    @property
+    def ranges(self) -> np.ndarray:
         """(3, nu): the range ``[lo, hi]`` and coefficient ``c = range^2 / 4`` per actuated
         velocity (read-only; ``c = 0`` for the joints left out)."""
-        self.ranges.setflags(write=False)
+        out = self._params.reshape(3, -1)
+        out.setflags(write=False)
+        return out
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
         nu = self.robot.nu
@@ -90,6 +96,11 @@ class JointLimitAvoidance(Objective):
         lo, hi, c = self.ranges
         value = joint_limit_avoidance(state.joint_positions(), lo, hi, c, grad, curv)
         return ObjectiveValue(float(value), grad, curv)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(JointLimitAvoidance, "evaluate"):
+            return None
+        return Packed(KIND_H1, self._params, curvature=True)
 
 
 class Manipulability(Objective):
@@ -133,3 +144,10 @@ class Manipulability(Objective):
         grad = np.empty(self.robot.nu)
         h2 = manipulability(J, self.support, grad)
         return ObjectiveValue(float(h2), grad)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(Manipulability, "evaluate"):
+            return None
+        frames = [packer.frame(f) for f in self.frames]
+        ints = np.concatenate([[len(frames)], frames, self.support.ravel()]).astype(np.int64)
+        return Packed(KIND_H2, np.zeros(0), ints)

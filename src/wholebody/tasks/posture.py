@@ -14,9 +14,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.layout import KIND_POSTURE
 from wholebody.kernels.rows import posture_rows
 from wholebody.robot import Robot, RobotState
-from wholebody.tasks.base import Task, TaskRows
+from wholebody.tasks.base import Packed, Packer, Task, TaskRows
 
 __all__ = ["PostureTask"]
 
@@ -71,6 +72,9 @@ class PostureTask(Task):
         """Per joint, whether its error wraps into [-pi, pi) (endless joints)."""
         for a in (self.tracked, self.wrapped):
             a.setflags(write=False)
+        self._params = np.zeros(3 * self.dim)  # target, kp, error (the kernel's layout)
+        self._int_params = np.concatenate([self.indices, self.tracked, self.wrapped])
+        self._int_params = self._int_params.astype(np.int64)
         self.kp = kp
         self.set_target(robot.joint_positions(robot.home())[idx] if target is None else target)
 
@@ -78,55 +82,63 @@ class PostureTask(Task):
     def dim(self) -> int:
         return self.indices.size
 
+    def _view(self, k: int) -> np.ndarray:
+        """Part ``k`` of the parameter block (0: target, 1: kp, 2: error), read-only."""
+        n = self.dim
+        out = self._params[k * n : (k + 1) * n]
+        out.setflags(write=False)
+        return out
+
     @property
     def kp(self) -> np.ndarray:
         """Gain (1/s) per joint (read-only)."""
-        return self._kp
+        return self._view(1)
 
     @kp.setter
     def kp(self, value: float | Sequence[float]) -> None:
         try:
-            kp = np.broadcast_to(np.asarray(value, float), self.indices.shape).copy()
+            kp = np.broadcast_to(np.asarray(value, float), self.indices.shape)
         except (TypeError, ValueError) as exc:
             raise DimensionError(f"{self.name}: kp must be a number or {self.dim} numbers, "
                                  f"got {value!r}") from exc  # fmt: skip
         if not np.all(np.isfinite(kp)) or np.any(kp < 0):
             raise DimensionError(f"{self.name}: kp must be finite and >= 0")
-        kp.setflags(write=False)
-        self._kp = kp
+        self._params[self.dim : 2 * self.dim] = kp
 
     @property
     def target(self) -> np.ndarray:
         """Reference positions (rad, m), one per joint (read-only)."""
-        return self._target
+        return self._view(0)
 
     def set_target(self, target: np.ndarray | Sequence[float]) -> None:
         """Reference positions, one per joint of the task (rad, m)."""
-        t = np.array(target, dtype=float)
+        t = np.asarray(target, dtype=float)
         if t.shape != self.indices.shape or not np.all(np.isfinite(t)):
             raise DimensionError(f"{self.name}: target must be {self.indices.size} finite "
                                  f"values, got shape {t.shape}")  # fmt: skip
-        t.setflags(write=False)
-        self._target = t
+        self._params[: self.dim] = t
 
     def error(self, state: RobotState) -> np.ndarray:
-        e = np.empty(self.dim)
-        self._rows(state, np.empty((self.dim, self.robot.nu)), np.empty(self.dim), e)
-        return e
+        self._rows(state, np.empty((self.dim, self.robot.nu)), np.empty(self.dim))
+        return self._params[2 * self.dim :].copy()
 
-    def _rows(self, state: RobotState, J: np.ndarray, v: np.ndarray, e: np.ndarray) -> None:
-        posture_rows(state.joint_positions(), self.indices, self._target, self._kp,
-                     self.tracked, self.wrapped, J, v, e)  # fmt: skip
+    def _rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> None:
+        posture_rows(state.joint_positions(), self._params, self._int_params, J, v)
 
     def compute(self, state: RobotState) -> TaskRows:
         J = np.empty((self.dim, self.robot.nu))
         v = np.empty(self.dim)
-        self._rows(state, J, v, np.empty(self.dim))
+        self._rows(state, J, v)
         return TaskRows(J, v, self.weights)
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
-        self._rows(state, J, v, np.empty(self.dim))
+        self._rows(state, J, v)
         return self.weight
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(PostureTask, "compute", "write_rows", "error"):
+            return None
+        return Packed(KIND_POSTURE, self._params, self._int_params)
 
     def __repr__(self) -> str:
         return f"PostureTask({self.name!r}, joints={self.dim})"

@@ -26,6 +26,7 @@ import numpy as np
 
 from wholebody.kernels.rows import relative_pose
 from wholebody.robot import Frame, Robot, RobotState
+from wholebody.tasks.base import Packed, Packer
 from wholebody.tasks.frame import PoseTask
 
 __all__ = ["RelativeFrameTask", "RelativePositionTask"]
@@ -70,9 +71,6 @@ class RelativeFrameTask(PoseTask):
                       R)  # fmt: skip
         return J, p, R
 
-    def _hold(self, state: RobotState) -> np.ndarray:
-        return self.relative_pose(state)
-
     def relative_pose(self, state: RobotState) -> np.ndarray:
         """The current pose of b in a (4x4): ``[R_a^T R_b, R_a^T (p_b - p_a)]``."""
         _, p, R = self._measured(state)
@@ -87,6 +85,11 @@ class RelativeFrameTask(PoseTask):
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
         return (self.frame_a, self.frame_b)
+
+    def pack(self, packer: Packer) -> Packed | None:
+        if not self.compiled_as(RelativeFrameTask, "_measured"):
+            return None
+        return self._pack(packer, packer.frame(self.frame_a), packer.frame(self.frame_b))
 
     def __repr__(self) -> str:
         return f"RelativeFrameTask({self.name!r}, rows={self.dim})"
@@ -130,11 +133,6 @@ class RelativePositionTask(PoseTask):
         J[:3] = Rc.T @ (state.jacobian(self.frame_b)[:3] - state.jacobian(self.frame_a)[:3]
                         + skew @ state.jacobian(self.axes)[3:])  # fmt: skip
         return J, Rc.T @ r, np.eye(3)
-
-    def _hold(self, state: RobotState) -> np.ndarray:
-        T = np.eye(4)
-        T[:3, 3] = self.relative_position(state)
-        return T
 
     def relative_position(self, state: RobotState) -> np.ndarray:
         """``R_c^T (p_b - p_a)`` (m) at ``state``."""

@@ -1,0 +1,358 @@
+"""The damped pseudo-inverse of one level on its free directions, in kernels: the linear
+algebra of the projection backend (:mod:`wholebody.solvers.projection` documents the method).
+
+A level's rows ``A`` act on the free directions the levels above leave: the orthonormal basis
+``Zb`` of them is either the columns ``Z`` (``is_mask`` False) or the coordinate axes of the
+joints in ``mask`` (``is_mask``: while no direction but whole joints was removed).
+:func:`level_step` takes the least-squares step ``Zb M^+_damped R`` of ``M = A Zb`` by the
+cheapest route that is exact: a certified Cholesky of ``M M^T`` (no singular value below the
+damping threshold: no damping, every direction used), the normal equations of a tall
+well-conditioned ``M``, or else the eigen-decomposition of ``M M^T`` (the fast path) or the
+SVD (in saturation), where the directions below the threshold are damped one by one and
+those below the rank floor dropped. :func:`leftover` is the basis of what the level leaves
+free for the next.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from wholebody.kernels import kernel
+from wholebody.kernels.lapack import gesdd, potrf, syevd
+from wholebody.kernels.linalg import (
+    NORMAL_KAPPA,
+    cholesky_inverse,
+    fortran,
+    frobenius2,
+    mm,
+    mmt,
+    mtm,
+    mtv,
+    mv,
+    normal_solve,
+    null_basis,
+    scatter_rows,
+)
+
+__all__ = [
+    "Free",
+    "leftover",
+    "level_step",
+    "lift",
+    "project_free",
+    "free_rank",
+    "restrict",
+    "row_norm2",
+]
+
+_EPS = 2.220446049250313e-16
+FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free directions
+# par: the solver's settings
+PAR_DAMPING, PAR_THRESHOLD, PAR_RANK, PAR_TOLERANCE, PAR_SATURATE = 0, 1, 2, 3, 4
+PAR_WIDTH = 5
+ROUTE_WIDE, ROUTE_ALL, ROUTE_BASIS = 0, 1, 2  # what a step leaves free: see leftover
+
+Free = namedtuple("Free", ["Z", "is_mask", "mask"])
+"""The free directions the levels above leave: the columns of ``Z`` (n x r), or where
+``is_mask`` the coordinate axes of the joints in ``mask``."""
+
+
+@kernel
+def _damping(s: float, eps: float, lam: float) -> float:
+    """``mu = (1 - (s / eps)^2) lambda_max^2`` where ``s < eps``, else 0."""
+    x = s / eps
+    return max(1.0 - x * x, 0.0) * lam * lam
+
+
+@kernel
+def _damped_solve(Vt: np.ndarray, U: np.ndarray, s: np.ndarray, squared: bool, keep: np.ndarray,
+                  R: np.ndarray, eps: float, lam: float) -> np.ndarray:  # fmt: skip
+    """``V_k diag(g) U_k^T R`` over the kept indices ``k`` (``keep``): the damped
+    pseudo-inverse of ``M = U diag(sigma) V^T`` applied to ``R`` (m x c), with ``g = sigma /
+    (sigma^2 + mu(sigma))``, or from eigenvalues ``s = sigma^2`` of ``M M^T`` (``squared``,
+    ``Vt`` then holding ``M^T U`` transposed, so ``g = 1 / (s + mu(sqrt s))``)."""
+    m, c = R.shape
+    r = Vt.shape[1]
+    Y = np.zeros((r, c))
+    for k in range(s.shape[0]):
+        if not keep[k]:
+            continue
+        if squared:
+            g = 1.0 / (s[k] + _damping(math.sqrt(s[k]), eps, lam))
+        else:
+            g = s[k] / (s[k] * s[k] + _damping(s[k], eps, lam))
+        for col in range(c):
+            t = 0.0
+            for i in range(m):
+                t += U[i, k] * R[i, col]
+            t *= g
+            for j in range(r):
+                Y[j, col] += Vt[k, j] * t
+    return Y
+
+
+@kernel
+def _rows_not_kept(Vt: np.ndarray, keep: np.ndarray, count: int) -> np.ndarray:
+    """The rows of ``Vt`` not in ``keep`` (``count`` of them), transposed: r x count."""
+    out = np.zeros((Vt.shape[1], count))
+    c = 0
+    for k in range(Vt.shape[0]):
+        if k < keep.shape[0] and keep[k]:
+            continue
+        for j in range(Vt.shape[1]):
+            out[j, c] = Vt[k, j]
+        c += 1
+    return out
+
+
+@kernel
+def _gram_step(M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float, lam: float,
+               rank_tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The reference's ``_gram_step`` on ``M`` (m x r, the level's rows on its free
+    directions): ``M^+_damped R`` (R: m x k) and a basis (r x .) of the directions it leaves
+    unused, from the SVD of M where the reference's rows are tall (``tall``) or the
+    eigen-decomposition of ``M M^T``, with its rank floors."""
+    m, r = M.shape
+    if tall:
+        _, U, sv, Vt = gesdd(fortran(M), False)
+        top = sv[0] ** 2 if sv.shape[0] else 0.0
+        floor = (rank_tol * max(1.0, math.sqrt(top))) ** 2
+        if not exact:
+            floor = max(floor, 10.0 * m * _EPS * top)
+        keep = np.zeros(sv.shape[0], np.bool_)
+        kept = 0
+        for k in range(sv.shape[0]):
+            keep[k] = sv[k] * sv[k] > floor
+            kept += keep[k]
+        Y = _damped_solve(Vt, U, sv, False, keep, R, eps, lam)
+        return Y, _rows_not_kept(Vt, keep, Vt.shape[0] - kept)
+    E = fortran(mmt(M, M))
+    _, w = syevd(E)
+    top = max(w[-1], 0.0) if w.shape[0] else 0.0
+    floor = max((rank_tol * max(1.0, math.sqrt(top))) ** 2, 10.0 * w.shape[0] * _EPS * top)
+    keep = np.zeros(w.shape[0], np.bool_)
+    kept = 0
+    for k in range(w.shape[0]):
+        keep[k] = w[k] > floor
+        kept += keep[k]
+    MtU = mtm(E, M)  # row k: (M^T u_k)^T
+    Y = _damped_solve(MtU, E, w, True, keep, R, eps, lam)
+    V_r = np.zeros((kept, r))  # orthonormal rows: the directions the level uses
+    c = 0
+    for k in range(w.shape[0]):
+        if keep[k]:
+            scale = 1.0 / math.sqrt(w[k])
+            for j in range(r):
+                V_r[c, j] = MtU[k, j] * scale
+            c += 1
+    return Y, null_basis(V_r)
+
+
+@kernel
+def _solve_ls(M: np.ndarray, R: np.ndarray, eps: float, lam: float,
+              rank_tol: float) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
+    """Damped least squares ``Y = M^+_damped R`` (R: m x 2), the null-space basis of M and
+    its rank, from the SVD."""
+    m, n = M.shape
+    if m == 0 or n == 0:
+        return np.zeros((n, R.shape[1])), np.eye(n), 0
+    _, U, s, Vt = gesdd(fortran(M), True)
+    smax = s[0] if s.shape[0] else 0.0
+    keep = np.zeros(s.shape[0], np.bool_)
+    rank = 0
+    for k in range(s.shape[0]):
+        keep[k] = s[k] > rank_tol * max(1.0, smax)
+        rank += keep[k]
+    for k in range(s.shape[0]):  # (the reference counts them and keeps the first rank)
+        keep[k] = k < rank
+    Y = _damped_solve(Vt, U, s, False, keep, R, eps, lam)
+    return Y, _rows_not_kept(Vt, keep, n - rank), rank
+
+
+@kernel
+def free_rank(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> int:
+    """How many free directions there are: the mask's count, or Z's columns."""
+    if not is_mask:
+        return Z.shape[1]
+    r = 0
+    for j in range(mask.shape[0]):
+        r += mask[j]
+    return r
+
+
+@kernel
+def restrict(A: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``A Zb`` (m x r) for the orthonormal basis ``Zb`` of the free directions: the mask's
+    columns of A in order, or ``A Z``."""
+    if not is_mask:
+        return mm(A, Z)
+    m = A.shape[0]
+    out = np.empty((m, free_rank(Z, is_mask, mask)))
+    c = 0
+    for j in range(mask.shape[0]):
+        if mask[j]:
+            for i in range(m):
+                out[i, c] = A[i, j]
+            c += 1
+    return out
+
+
+@kernel
+def lift(Y: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``Zb Y`` (n x k) for coordinates ``Y`` (r x k) on the free directions: Y's rows
+    placed at the mask's joints, or ``Z Y``."""
+    if not is_mask:
+        return mm(Z, Y)
+    return scatter_rows(Y, mask)
+
+
+@kernel
+def project_free(d: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
+    """``Zb Zb^T d``: ``d`` projected on the free directions."""
+    if not is_mask:
+        return mv(Z, mtv(Z, d))
+    out = np.zeros(d.shape[0])
+    for j in range(d.shape[0]):
+        if mask[j]:
+            out[j] = d[j]
+    return out
+
+
+@kernel
+def row_norm2(Z: np.ndarray, j: int) -> float:
+    """``|Z_j|^2``, row j's squared norm."""
+    s = 0.0
+    for k in range(Z.shape[1]):
+        s += Z[j, k] * Z[j, k]
+    return s
+
+
+@kernel
+def _zero_fixed_rows(Z: np.ndarray) -> np.ndarray:
+    """``Z`` with the rows of joints that do not move (``|Z_j|^2 <= 1e-18``, rounding) set to
+    exactly 0, as the reference's basis of the free directions."""
+    out = Z
+    for j in range(Z.shape[0]):
+        if row_norm2(Z, j) <= FIXED:
+            if out is Z:
+                out = Z.copy()
+            out[j, :] = 0.0
+    return out
+
+
+@kernel
+def _trace(G: np.ndarray) -> float:
+    """``_trace(G)``."""
+    t = 0.0
+    for k in range(G.shape[0]):
+        t += G[k, k]
+    return t
+
+
+@kernel
+def _certify_wide(M: np.ndarray, eps: float, rank_tol: float):
+    """The reference's certificate of ``G = M M^T`` (m x m): ``(ok, L^-1)``."""
+    dummy = np.zeros((0, 0)).T
+    G = mmt(M, M)
+    if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, _trace(G)):
+        return False, dummy
+    ok, Linv = cholesky_inverse(G)
+    if not ok or not _exceeds(G, Linv, eps):
+        return False, dummy
+    return True, Linv
+
+
+@kernel
+def _certify_tall(M: np.ndarray, eps: float, floor: float):
+    """A certificate that the tall ``M`` (m x r, m >= r) has ``lambda_min(M^T M) >= eps^2 >
+    floor`` and ``kappa_F <= NORMAL_KAPPA``: ``(ok, L^-1, kappa_F^2)``; then no direction is
+    damped or dropped, and its normal equations are accurate."""
+    dummy = np.zeros((0, 0)).T
+    if M.shape[1] == 0 or not eps * eps > floor:
+        return False, dummy, 0.0
+    G = mtm(M, M)
+    ok, Linv = cholesky_inverse(G)
+    if not ok or not _exceeds(G, Linv, eps):
+        return False, dummy, 0.0
+    k2 = frobenius2(Linv) * _trace(G)
+    if k2 > NORMAL_KAPPA * NORMAL_KAPPA:
+        return False, dummy, 0.0
+    return True, Linv, k2
+
+
+@kernel
+def _exceeds(G: np.ndarray, Linv: np.ndarray, eps: float) -> bool:
+    """``lambda_min(G) >= eps^2``: ``_trace(G^-1) <= 1 / eps^2``, or else ``G - eps^2 I`` has a
+    Cholesky factor (the reference's two tests)."""
+    if frobenius2(Linv) * eps * eps <= 1.0:
+        return True
+    S = fortran(G)
+    for k in range(S.shape[0]):
+        S[k, k] -= eps**2
+    return potrf(S, True) == 0
+
+
+@kernel
+def level_step(A: np.ndarray, R: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray,
+          par: np.ndarray, sns: bool):  # fmt: skip
+    """A level's least-squares step on its free directions (``Z``, ``is_mask``, ``mask``:
+    see :func:`restrict`), ``Zb`` (n x r): ``(Y, M, Nf, route, rank)`` with ``Y = Zb
+    M^+_damped R`` (``M = A Zb``, R: m x k), what :func:`leftover` needs for the basis of
+    the directions the level leaves free, and the rank the reference reports.
+
+    The route is the reference's: its certified Cholesky where it certifies (``G = M M^T``,
+    m <= r; ``M^T M`` when the level has more rows than nu and nothing is fixed), else its
+    eigen-decomposition (``_gram_step``) or, in SNS (``sns``), its damped SVD
+    (``_solve_ls``), each on ``M`` instead of ``A F`` (the same singular values and
+    directions). Before those, where ``M`` is tall, a certificate on ``M^T M`` (no direction
+    damped or dropped, well conditioned) takes the normal equations, which is what those
+    routes then compute, at a fraction of the cost."""
+    eps, lam, rank_tol = par[PAR_THRESHOLD], par[PAR_DAMPING], par[PAR_RANK]
+    n, m = mask.shape[0], A.shape[0]
+    r = free_rank(Z, is_mask, mask)
+    if r == 0:  # nothing left to move (the reference's routes all give 0)
+        return np.zeros((n, R.shape[1])), np.zeros((m, 0)), np.zeros((0, 0)), ROUTE_ALL, 0
+    M = restrict(A, Z, is_mask, mask)
+    if m <= n and m <= r:  # the reference certifies G = M M^T
+        ok, Linv = _certify_wide(M, eps, rank_tol)
+        if ok:
+            Y = lift(mtm(M, mtm(Linv, mm(Linv, R))), Z, is_mask, mask)
+            return Y, M, np.zeros((0, 0)), ROUTE_WIDE, m
+    top = frobenius2(M)
+    tall_ref = m > n
+    if sns:
+        floor = (rank_tol**2) * max(1.0, top)
+    else:
+        floor = (rank_tol * max(1.0, math.sqrt(top))) ** 2
+        if not (tall_ref and is_mask):
+            floor = max(floor, 10.0 * m * _EPS * top)
+    if sns and not is_mask:  # the reference's SVD takes a basis whose fixed rows are 0
+        Z = _zero_fixed_rows(Z)
+        M = mm(A, Z)
+    if m > r or (tall_ref and r == n):  # (m <= r: M^T M singular, or M M^T certified)
+        ok, Linv, k2 = _certify_tall(M, eps, floor)
+        if ok:
+            Y = lift(normal_solve(M, Linv, R, k2), Z, is_mask, mask)
+            return Y, M, np.zeros((0, 0)), ROUTE_ALL, r
+    if sns:
+        Y, Nf, rank = _solve_ls(M, R, eps, lam, rank_tol)
+    else:
+        Y, Nf = _gram_step(M, R, tall_ref, is_mask, eps, lam, rank_tol)
+        rank = 0
+    return lift(Y, Z, is_mask, mask), M, lift(Nf, Z, is_mask, mask), ROUTE_BASIS, rank
+
+
+@kernel
+def leftover(Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: np.ndarray,
+              route: int) -> np.ndarray:  # fmt: skip
+    """The basis (n x .) of the free directions a level's step leaves (see :func:`level_step`):
+    those that ``M = A Zb`` does not move, none, or the given ``N``."""
+    if route == ROUTE_WIDE:
+        return lift(null_basis(M), Z, is_mask, mask)
+    if route == ROUTE_ALL:
+        return np.zeros((mask.shape[0], 0))
+    return N
+

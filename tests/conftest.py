@@ -41,6 +41,7 @@ EQUIVALENCE = [
     "test_dmp_kernels.py",
     "test_kernels.py",
     "test_daqp_kernel.py",
+    "test_forward_kernel.py",
 ]
 _MODE = "WHOLEBODY_NUMBA_MODE"
 _background: dict[str, object] = {}

@@ -20,13 +20,29 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from wholebody.errors import ModelError
+
 if TYPE_CHECKING:
     from wholebody.robot.parts import Frame
     from wholebody.robot.robot import Robot
 
-__all__ = ["RobotKinematics"]
+__all__ = ["RobotKinematics", "pack_model"]
 
 _SE3_DOUBLES = 12  # rotation (3 x 3, column-major), translation (3)
+
+_KINDS = {
+    "REVOLUTE": ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"),
+    "UNBOUNDED": (
+        "JointModelRUBX",
+        "JointModelRUBY",
+        "JointModelRUBZ",
+        "JointModelRevoluteUnboundedUnaligned",
+    ),
+    "PRISMATIC": ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"),
+    "PLANAR": ("JointModelPlanar",),
+    "FREE_FLYER": ("JointModelFreeFlyer",),
+}
+"""The kinds of :mod:`wholebody.kernels.forward` and Pinocchio's joint types of each."""
 
 
 class RobotKinematics:
@@ -62,6 +78,7 @@ class RobotKinematics:
         self.position_index, self.position_pair = index, pair
         for arr in (self.act_k, self.act_j, self.act_a, index, pair):
             arr.setflags(write=False)
+        self._tables: tuple[np.ndarray, np.ndarray] | None = None
         self._data: pin.Data | None = None
         self._J = self._oMf = None
         self.fast = False
@@ -78,6 +95,14 @@ class RobotKinematics:
                 if jm.nv:
                     out[f, jm.idx_v : jm.idx_v + jm.nv] = True
         return out
+
+    def model_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(model_i, model_f)``: the robot's model packed for the kernels of
+        :mod:`wholebody.kernels.forward` (:func:`pack_model`; made on first use, read-only).
+        A :class:`~wholebody.errors.ModelError` names a joint of a type they do not move."""
+        if self._tables is None:
+            self._tables = pack_model(self.robot.model)
+        return self._tables
 
     def views(self) -> tuple[np.ndarray, np.ndarray]:
         """``(J, oMf)``: ``data.J`` (6 x nv, column-major) and the frame placements
@@ -103,6 +128,55 @@ class RobotKinematics:
         q = robot.random_configuration(np.random.default_rng(0))
         robot.update(q)
         return bool(np.array_equal(self._J, data.J) and np.array_equal(self._oMf, _gather(data)))
+
+
+def pack_model(model: pin.Model) -> tuple[np.ndarray, np.ndarray]:
+    """``model`` as the two read-only tables of :mod:`wholebody.kernels.forward`: per joint
+    (Pinocchio's order, the universe first) then per frame, ``model_i`` (kind, parent joint,
+    idx_q, idx_v) and ``model_f`` (placement in the parent joint, 12 doubles as in
+    :meth:`RobotKinematics.views`; a joint's unit axis in its own frame).
+
+    Raises a :class:`~wholebody.errors.ModelError` naming the first joint of a type the
+    kernels do not move (they move revolute, continuous, prismatic, planar and free-flyer
+    joints)."""
+    from wholebody.kernels import forward  # (imports numba: only when the tables are asked for)
+
+    kinds = {t: getattr(forward, kind) for kind, types in _KINDS.items() for t in types}
+    q0 = pin.neutral(model)
+    nj = model.njoints
+    model_i = np.zeros((nj + model.nframes, 4), dtype=np.int64)
+    model_f = np.zeros((nj + model.nframes, _SE3_DOUBLES + 3))
+    model_i[0, 0] = forward.ROOT
+    model_f[0, :_SE3_DOUBLES] = _packed(pin.SE3.Identity())
+    for i in range(1, nj):
+        jm = model.joints[i]
+        kind = kinds.get(jm.shortname(), -1)
+        if kind < 0:
+            known = ", ".join(t.removeprefix("JointModel") for t in kinds)
+            raise ModelError(
+                f"joint {model.names[i]!r} is a {jm.shortname()}: the compiled kinematics "
+                f"move these joint types only: {known}"
+            )
+        model_i[i] = kind, model.parents[i], jm.idx_q, jm.idx_v
+        model_f[i, :_SE3_DOUBLES] = _packed(model.jointPlacements[i])
+        if kind in (forward.REVOLUTE, forward.UNBOUNDED, forward.PRISMATIC):
+            # the axis: the motion subspace S = (linear; angular) of a one-velocity joint (not
+            # every type's Python binding shows its axis)
+            jdata = jm.createData()
+            jm.calc(jdata, q0)
+            S = np.asarray(jdata.S).reshape(6)
+            model_f[i, _SE3_DOUBLES:] = S[:3] if kind == forward.PRISMATIC else S[3:]
+    for f, frame in enumerate(model.frames):
+        model_i[nj + f, :2] = forward.FRAME, frame.parentJoint
+        model_f[nj + f, :_SE3_DOUBLES] = _packed(frame.placement)
+    model_i.setflags(write=False)
+    model_f.setflags(write=False)
+    return model_i, model_f
+
+
+def _packed(M: pin.SE3) -> np.ndarray:
+    """A placement as 12 doubles: rotation in column-major order, then translation (m)."""
+    return np.concatenate((M.rotation.ravel(order="F"), M.translation))
 
 
 def _gather(data: pin.Data) -> np.ndarray:

@@ -37,7 +37,7 @@ def rng() -> np.random.Generator:
 # cache flavour, so it compiles everything once more: ~5 minutes). The session fails if they
 # do. Started when the equivalence file is collected and slow tests are not deselected.
 EQUIVALENCE = [
-    "test_compiled_equivalence.py",
+    "test_step.py",
     "test_dmp_kernels.py",
     "test_kernels.py",
     "test_daqp_kernel.py",
@@ -51,7 +51,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     config = session.config
     if os.environ.get(_MODE) or config.option.collectonly or "not slow" in config.option.markexpr:
         return
-    if not any(item.path.name == "test_compiled_equivalence.py" for item in session.items):
+    if not any(item.path.name == "test_step.py" for item in session.items):
         return
     here = Path(__file__).parent
     files = " ".join(shlex.quote(str(here / f)) for f in EQUIVALENCE)

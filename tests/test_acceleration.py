@@ -19,7 +19,7 @@ from wholebody.scenarios import load_scenario, run_scenario
 from wholebody.solvers import ProjectionSolver
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import AccelerationLimits, FrameTask
-from wholebody.tasks.limits import _braking
+from wholebody.kernels.limits import braking_speed
 
 DT = 0.01
 
@@ -42,6 +42,10 @@ def test_defaults_and_overrides_from_robot_toml(tmp_path, humanoid):
         toml.write_text(toml.read_text().split("[acceleration]")[0] + f"[acceleration]\n{bad}\n")
         with pytest.raises(ConfigError, match=message):
             wholebody.load_robot(d)
+
+
+def _braking(d: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
+    return np.array([braking_speed(di, ai, dt) for di, ai in zip(d, a, strict=True)])
 
 
 def test_the_braking_bound_is_invariant_and_stops_at_the_limit(rng):

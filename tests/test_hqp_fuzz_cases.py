@@ -41,22 +41,6 @@ def objective(lev: LevelProblem, x: np.ndarray) -> float:
     return math.sqrt(r @ r + s @ s)
 
 
-def test_daqps_hierarchy_does_not_let_a_lower_level_spoil_the_top_one():
-    """daqp's soft-weighted hierarchy returned a top level 8 % worse than the top level alone,
-    violating its inequality row by 1.44; the solver now checks the level where the box
-    bites against that level's own QP."""
-    problem = top_level_with_a_lower_level(1075)
-    alone = StackProblem(problem.levels[:1], problem.lower, problem.upper, problem.scale, {})
-    best = objective(
-        problem.levels[0], HierarchicalQPSolver(method="cascade").solve_problem(alone).u
-    )
-    u = HierarchicalQPSolver(method="native").solve_problem(problem).u
-    assert objective(problem.levels[0], u) <= best + 1e-6 * (
-        1 + np.linalg.norm(problem.levels[0].b)
-    )
-    assert np.all(u >= problem.lower - 1e-9) and np.all(u <= problem.upper + 1e-9)
-
-
 @pytest.mark.parametrize("engine", ["daqp", "proxsuite", "osqp"])
 def test_the_cascade_removes_the_tikhonov_bias_of_a_level_with_inequality_rows(engine):
     """10 x1 = 10 and x2 >= 100 are met exactly at (1, 100); the Tikhonov term used to leave
@@ -65,7 +49,7 @@ def test_the_cascade_removes_the_tikhonov_bias_of_a_level_with_inequality_rows(e
                        np.array([100.0]), np.array([np.inf]), {"task": slice(0, 1)},
                        {"above": slice(0, 1)})  # fmt: skip
     problem = StackProblem([lev], np.full(2, -1000.0), np.full(2, 1000.0), np.ones(2), {})
-    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem)
+    r = HierarchicalQPSolver(engine).solve_problem(problem)
     assert r.status == SolverStatus.OK and not r.infeasible
     assert r.u[0] == pytest.approx(1.0, abs=1e-8) and r.u[1] >= 100.0 - 1e-8
 
@@ -88,7 +72,7 @@ def test_a_level_qp_is_feasible_at_its_start_when_inherited_rows_drifted():
     relaxed bound, in directions the next level cannot move: that level's QP was infeasible
     at y = 0 (with the default iteration limit, 230 s and FAILED). The inherited bounds are
     now widened to contain the current point, like the box."""
-    solver = HierarchicalQPSolver("proxsuite", method="cascade", engine_settings={"max_iter": 100})
+    solver = HierarchicalQPSolver("proxsuite", engine_settings={"max_iter": 100})
     r = solver.solve_problem(inherited_rows_off_by_round_off())
     assert r.status != SolverStatus.FAILED, r.message
     assert not any(rep.failed for rep in solver.levels)
@@ -110,7 +94,7 @@ def test_a_skipped_levels_inequality_tasks_are_listed_as_infeasible():
     """proxsuite fails the second level's QP (inequality rows only; here held to one
     iteration): the level is skipped and its inequality task, violated at the answer, is
     listed like its equalities."""
-    solver = HierarchicalQPSolver("proxsuite", method="cascade", engine_settings={"max_iter": 1})
+    solver = HierarchicalQPSolver("proxsuite", engine_settings={"max_iter": 1})
     r = solver.solve_problem(a_level_proxsuite_skips())  # one iteration: the level fails
     assert solver.levels[1].failed
     assert r.status == SolverStatus.FAILED
@@ -139,7 +123,7 @@ def test_a_level_bought_off_its_optimum_by_the_tikhonov_term_does_not_freeze_the
         [2.0731344405461356, 0.06390362752565901, 0.09517461611250529, 0.08258190095972785]
     )
     problem = StackProblem(levels, lower, upper, np.ones(n), {})
-    r = HierarchicalQPSolver("daqp", method="cascade").solve_problem(problem)
+    r = HierarchicalQPSolver("daqp").solve_problem(problem)
     assert r.status == SolverStatus.OK and not r.infeasible
     np.testing.assert_array_less(r.level_residuals, 1e-8)
 
@@ -195,7 +179,7 @@ def test_round_off_rows_do_not_use_up_a_lower_levels_freedom(engine):
                                ([[0.0, 0.0, 0.0, 1.0]], [3.0]), ([[0.1, 1.0, 0.0, 0.0]], [-5.0])])  # fmt: skip
     problem = StackProblem(levels, np.array([-1.0, -1.0, -0.1, -0.1]),
                            np.array([1.0, 1.0, 0.1, 0.1]), np.ones(4), {})  # fmt: skip
-    u = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem).u
+    u = HierarchicalQPSolver(engine).solve_problem(problem).u
     np.testing.assert_allclose(u, [0.49, -1.0, -0.1, -0.1], atol=1e-6)  # the certified optimum
 
 
@@ -207,7 +191,7 @@ def test_a_bound_the_optimal_set_does_not_move_along_is_not_pinned_away(engine):
     levels = _equality_levels([([[0.2, -0.9, 1.0], [0.2, -0.3, 1.0]], [-2.9, -0.5]),
                                ([[0.4, 0.0, 0.9]], [-1.6])])  # fmt: skip
     problem = StackProblem(levels, -np.ones(3), np.ones(3), np.ones(3), {})
-    u = HierarchicalQPSolver(engine, method="cascade").solve_problem(problem).u
+    u = HierarchicalQPSolver(engine).solve_problem(problem).u
     np.testing.assert_allclose(u, [-1.0, 1.0, -0.9], atol=1e-6)
 
 
@@ -220,7 +204,7 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
                       np.array([np.inf]), {}, {"above": slice(0, 1)})  # fmt: skip
     L1 = LevelProblem("L1", np.eye(1), np.zeros(1), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
                       {"t1": slice(0, 1)}, {})  # fmt: skip
-    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+    r = HierarchicalQPSolver(engine).solve_problem(
         StackProblem([L0, L1], np.full(1, -1000.0), np.full(1, 1000.0), np.ones(1), {})
     )
     assert ("L0", "above") not in r.infeasible and r.u[0] == pytest.approx(400.0, abs=1e-6)
@@ -233,7 +217,7 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
     L1 = LevelProblem("L1", np.eye(n), np.array([2.2191508000828906, -1.7598913582999285,
                       -2.813567964954028]), *none, {"t1": slice(0, n)}, {})  # fmt: skip
     u = (
-        HierarchicalQPSolver(engine, method="cascade")
+        HierarchicalQPSolver(engine)
         .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
         .u
     )
@@ -246,7 +230,7 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
     L1 = LevelProblem("L1", np.array([[1.5, 0.8, 0.2], [-1.9, -0.3, 0.4]]),
                       np.array([-0.8, -0.4]), *none, {"t1": slice(0, 2)}, {})  # fmt: skip
     u = (
-        HierarchicalQPSolver(engine, method="cascade")
+        HierarchicalQPSolver(engine)
         .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
         .u
     )
@@ -264,7 +248,7 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
     levels = [LevelProblem("L0", row, np.array([-3.5]), *none, {"t0": slice(0, 1)}, {}),
               LevelProblem("L1", 1.2 * row, np.array([4.77]), *none, {"t1": slice(0, 1)}, {})]  # fmt: skip
     box = np.array([-1.0, -np.inf, -1.0]), np.array([1.0, np.inf, 1.0])
-    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+    r = HierarchicalQPSolver(engine).solve_problem(
         StackProblem(levels, *box, np.ones(3), {})
     )
     assert r.level_residuals[0] < 1e-6 and ("L0", "t0") not in r.infeasible
@@ -275,16 +259,16 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
     lo = np.array([-112.4481878597328, -200.88631992778832, -5.382834797819274])
     hi = np.array([209.79712291742493, 238.5391295942699, 10.781618844429781])
     level = LevelProblem("L0", A, b, *none, {"t": slice(0, 3)}, {})
-    r = HierarchicalQPSolver(engine, method="cascade").solve_problem(
+    r = HierarchicalQPSolver(engine).solve_problem(
         StackProblem([level], lo, hi, np.ones(3), {})
     )
     assert np.linalg.norm(A @ r.u - b) == pytest.approx(0.0261061, abs=1e-6)
 
 
-def test_a_skipped_non_finite_level_above_the_box_does_not_crash_daqps_hierarchy():
-    """A level with a NaN row above the level where the box bites: daqp's hierarchical mode
-    was handed the NaN row and crashed the interpreter (segmentation fault). The rows of a
-    level skipped as non-finite are now inert rows for daqp, as they are for the cascade."""
+def test_a_skipped_non_finite_level_above_the_box_does_not_reach_the_engine():
+    """A level with a NaN row above the level where the box bites: daqp handed a NaN row
+    crashed the interpreter (segmentation fault, in its hierarchical mode). A level with
+    non-finite rows is skipped and named; its rows never reach a QP."""
     nan = np.nan
     A0 = np.array(
         [
@@ -345,17 +329,13 @@ def test_a_skipped_non_finite_level_above_the_box_does_not_crash_daqps_hierarchy
     lower = np.array([-0.2597349005370813, -0.19271378763852473, -0.06332819674228664])
     upper = np.array([0.26197943146421515, 0.15254391681296, 0.2081913430327174])
     problem = StackProblem(levels, lower, upper, np.ones(3), {})
-    native = HierarchicalQPSolver(method="native").solve_problem(problem)
-    cascade = HierarchicalQPSolver(method="cascade").solve_problem(problem)
-    for result in (native, cascade):
-        assert result.status == SolverStatus.FAILED and "non-finite rows from t2" in result.message
-        assert np.all(result.u >= lower) and np.all(result.u <= upper)
-    assert objective(levels[1], native.u) <= objective(levels[1], cascade.u) + 1e-6
+    result = HierarchicalQPSolver().solve_problem(problem)
+    assert result.status == SolverStatus.FAILED and "non-finite rows from t2" in result.message
+    assert np.all(result.u >= lower) and np.all(result.u <= upper)
 
 
-@pytest.mark.parametrize("method", ["native", "cascade"])
 @pytest.mark.parametrize("value", [np.nan, np.inf])
-def test_a_non_finite_level_with_no_freedom_left_is_reported(method, value):
+def test_a_non_finite_level_with_no_freedom_left_is_reported(value):
     """A level below one that fixes every direction moves nothing, but its NaN or inf rows
     are still named (they were not: status INFEASIBLE, the task not even listed, as NaN
     compares false with the tolerance)."""
@@ -375,7 +355,7 @@ def test_a_non_finite_level_with_no_freedom_left_is_reported(method, value):
     box = np.full(n, 1e12)
     problem = StackProblem(levels, -box, box, np.ones(n), {})
     with np.errstate(invalid="ignore", over="ignore"):  # (the residuals of the inf rows)
-        result = HierarchicalQPSolver(method=method).solve_problem(problem)
+        result = HierarchicalQPSolver().solve_problem(problem)
     assert result.status == SolverStatus.FAILED
     assert "below: non-finite rows from t2" in result.message
     assert ("below", "t2") in result.infeasible and np.all(np.isfinite(result.u))

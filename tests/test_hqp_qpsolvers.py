@@ -90,18 +90,15 @@ def test_an_unknown_solver_or_setting_is_refused_on_construction():
     good = next(iter(SETTINGS[name]))
     with pytest.raises(SolverError, match=f"{name}: setting.*{good}s.*refused"):
         HierarchicalQPSolver(name, engine_settings={good + "s": 1e-9})
-    with pytest.raises(SolverError, match="'native' with engine 'daqp'"):
-        HierarchicalQPSolver(name, method="native")
     assert qpsolvers_engines() == [f"qpsolvers:{s}" for s in qpsolvers.available_solvers]
 
 
 # ---------------------------------------------------------------------- the hierarchy
-@pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize("name", ENGINES)
-def test_lexicographic_optimum_on_synthetic_stacks(rng, name, compiled):
+def test_lexicographic_optimum_on_synthetic_stacks(rng, name):
     """test_hqp's synthetic stacks (rank-deficient levels, tight boxes, a box excluding 0):
     certified optimal, and the daqp engine's answer."""
-    solver, ref = hqp(name, compiled=compiled), HierarchicalQPSolver(compiled=compiled)
+    solver, ref = hqp(name), HierarchicalQPSolver()
     with_qp = 0
     for trial in range(30):
         problem = synthetic(rng, box=rng.choice([0.3, 1.0, 5.0]), shift=bool(trial % 2))

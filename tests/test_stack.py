@@ -91,8 +91,7 @@ def test_projection_fallback_after_non_finite_rows_is_failed(humanoid):
     assert "non-finite" in result.message
 
 
-@pytest.mark.parametrize("method", ["native", "cascade"])
-def test_hqp_reports_a_violated_inequality_below_a_level_that_used_all_freedom(humanoid, method):
+def test_hqp_reports_a_violated_inequality_below_a_level_that_used_all_freedom(humanoid):
     """The energy level (rows s I) leaves no freedom: the half-space below it cannot be met
     and must be reported, not dropped."""
     state = humanoid.update(humanoid.home())
@@ -101,7 +100,7 @@ def test_hqp_reports_a_violated_inequality_below_a_level_that_used_all_freedom(h
                            state.position(left.frame)[2] + 0.2)  # fmt: skip
     energy = Level([ArmPotentialEnergy(humanoid, "left", 0.1)])
     stack = Stack(humanoid, [[left, right], energy, [above]], limits(humanoid))
-    solver = HierarchicalQPSolver(method=method)
+    solver = HierarchicalQPSolver()
     result = solver.solve(stack, state, DT)
     assert solver.levels[2].free == 0
     assert result.status == SolverStatus.INFEASIBLE
@@ -207,9 +206,8 @@ def two_hands(robot, q, ki=5.0):
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
-@pytest.mark.parametrize("compiled", [True, False])
 def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(
-    humanoid, solver, compiled
+    humanoid, solver
 ):
     """The left elbow is pinned at rest: a bound is active at every step. The right hand's
     rows do not move that joint, so its integral keeps integrating; the left hand's do, so
@@ -219,7 +217,7 @@ def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(
     stack = Stack(humanoid, [Level([right], name="right"), Level([left], name="left")],
                   [PinnedJoint(humanoid, "left_elbow_flexion"), *limits(humanoid)])  # fmt: skip
     elbow = humanoid.index("left_elbow_flexion")
-    s = solver(compiled=compiled)
+    s = solver()
     for _ in range(20):
         state = humanoid.update(q)
         result = s.solve(stack, state, DT)
@@ -266,8 +264,7 @@ def test_a_task_is_saturated_when_its_level_is_scaled_or_it_is_unmet(humanoid):
                                                         "left_tool": True}  # fmt: skip
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_the_status_has_one_meaning_for_both_backends(humanoid, compiled):
+def test_the_status_has_one_meaning_for_both_backends(humanoid):
     """The left elbow rests on its upper limit and the posture level under the hands asks
     it to go 0.3 rad further: the box, not the hands, keeps that level from its optimum,
     and both backends say INFEASIBLE (the projection, which re-solves the level around the
@@ -288,7 +285,7 @@ def test_the_status_has_one_meaning_for_both_backends(humanoid, compiled):
         posture.set_target(target)
         stack = Stack(humanoid, [Level(hands, name="hands"), Level([posture], name="posture")],
                       constraints)  # fmt: skip
-        results = [solver(compiled=compiled).solve(stack, state, DT) for solver in SOLVERS]
+        results = [solver().solve(stack, state, DT) for solver in SOLVERS]
         for r in results:
             assert not any(level == "hands" for level, _ in r.infeasible)  # the hands are met
         return [r.status for r in results], results

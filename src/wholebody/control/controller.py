@@ -1,23 +1,29 @@
 """The control loop: references -> tasks -> solver -> integrate -> log.
 
-One step at time ``t_k = k dt``:
+One step at time ``t_k = k dt`` (:meth:`Controller.step`):
 
 1. every referenced task gets its target: the reference pose at ``t_k`` and, as the
    paper's feed-forward ``x'_d``, the reference twist at the **mid-step** ``t_k + dt/2``.
    With ``u`` held for the step, the mid-step twist makes the commanded motion the secant
    of the reference to second order, so the tracking error does not lag by ``a dt / 2 Kp``
-   as with the twist at ``t_k`` (set ``feedforward="start"`` for the latter);
-2. kinematics at ``q_k`` (:meth:`Robot.update`), the solver's ``u_k``;
-3. the log row (errors, tracked positions against references, arm energies);
-4. the tasks' integrators advance, each with its own anti-windup (its integral stops
+   as with the twist at ``t_k`` (set ``feedforward="start"`` for the latter). The references
+   are sampled a block of steps at a time into a buffer the kernel reads;
+2. the kinematics at ``q_k``, the stack's rows, the solver's ``u_k``;
+3. the tasks' integrators advance, each with its own anti-windup (its integral stops
    growing while a bound limits that task: :meth:`Stack.saturated_tasks
-   <wholebody.solvers.Stack.saturated_tasks>`; a joint no task moves may rest on its limit);
-5. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold), or with a
-   ``plant`` the configuration it reaches under ``u_k`` (a physics simulation).
+   <wholebody.solvers.Stack.saturated_tasks>`; a joint no task moves may rest on its limit),
+   and the limits with a memory keep ``u_k``;
+4. ``q_{k+1} = integrate(q_k, u_k, dt)`` (exact on the configuration manifold).
 
-``step_time`` is the wall time of the control computation of a step: targets (reference
-sampling), kinematics, stack evaluation, solve, the integrators' advance and the integration,
-without the log's own recording and monitoring (and without a plant's simulation).
+Steps 2 to 4 are **one kernel call** (:mod:`wholebody.kernels.control`) when every entry of
+the stack is compiled and the robot's joints are ones the kernels move (then the kernel
+computes the kinematics too); an entry written in Python adds Pinocchio's kinematics and the
+entry's own Python code around the call. :meth:`Controller.run` runs the loop with a log row
+per step (errors, tracked positions against references, arm energies) and, with a ``plant``,
+integrates by the configuration the plant reaches under ``u_k`` (a physics simulation).
+
+``step_time`` is the wall time of the control computation of a step: steps 1 to 4, without
+the log's own recording and monitoring (and without a plant's simulation).
 """
 
 from __future__ import annotations
@@ -33,13 +39,18 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from wholebody.control.batch import BatchResult, solve_many
 from wholebody.control.log import ArmTrace, RunLog
 from wholebody.control.recovery import StallRecovery
 from wholebody.errors import DimensionError, WholebodyError
+from wholebody.kernels import layout as lay
+from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS
+from wholebody.kernels.evaluate import REF_WIDTH
 from wholebody.planning.trajectory import Trajectory
-from wholebody.robot import Robot
+from wholebody.robot import Robot, RobotState
 from wholebody.solvers.base import Solver
-from wholebody.solvers.result import SolverStatus
+from wholebody.solvers.plan import Plan
+from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import Stack
 from wholebody.tasks.arm_energy import ArmPotentialEnergy
 from wholebody.tasks.base import Objective, Task
@@ -168,21 +179,201 @@ class Controller:
         self.plant = plant
         self.threads = _thread_count(threads)
 
-    def _sampled_targets(self, k0: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Each reference's poses at steps ``k0 .. k0+n-1`` and its twists at the same steps
-        (at mid-step with ``feedforward="midpoint"``), sampled in one vectorised call."""
-        t = (k0 + np.arange(n)) * self.dt
-        t_ff = t + 0.5 * self.dt if self.feedforward == "midpoint" else t
-        out = []
-        for traj in self.references.values():
-            s = traj.sample_many(np.concatenate((t, t_ff)))
-            poses = np.zeros((n, 4, 4))
-            poses[:, :3, :3] = s.rotations[:n]
-            poses[:, :3, 3] = s.positions[:n]
-            poses[:, 3, 3] = 1.0
-            out.append((poses, np.hstack((s.linear_velocities[n:], s.angular_velocities[n:]))))
-        return out
+        self._k = 0
+        self._refs: np.ndarray | None = None  # (block, nR, REF_WIDTH) samples of the references
+        self._python_refs: list[tuple[int, ReferenceTask]] = []  # (index, task) set in Python
+        self._bound: Plan | None = None  # the plan the references are bound to
+        self._plan: Plan | None = None  # the plan of the last step
+        self._fast = False
+        self._limits: object | None = None
+        self._plan_of_step: Plan | None = None
+        self._u = np.zeros(robot.nu)
+        self.solve_time = 0.0
+        """Wall time (s) of the last step's kernel call (or calls)."""
 
+    # ------------------------------------------------------------------ one step
+    @property
+    def t(self) -> float:
+        """The time (s) of the next step: ``k dt`` after :meth:`reset`."""
+        return self._k * self.dt
+
+    def reset(self, u0: np.ndarray | None = None) -> None:
+        """Start again at t = 0: the tasks' integrals, the limits' memory (the velocity the
+        robot has now, ``u0``, default at rest) and a recovery forgotten."""
+        self.stack.reset()
+        if self.recovery is not None:
+            self.recovery.reset()
+        self._k = 0
+        self._refs = None
+        if u0 is not None:
+            u0 = np.asarray(u0, dtype=float)
+            if u0.shape != (self.robot.nu,) or not np.isfinite(u0).all():
+                raise DimensionError(f"u0 must be {self.robot.nu} finite velocities, got "
+                                     f"{u0!r}")  # fmt: skip
+            self.stack.set_velocity(u0, self.dt)
+
+    def step(self, q: np.ndarray) -> np.ndarray:
+        """One control step at the configuration ``q`` (measured, or the last
+        :attr:`q_next`): the actuated velocity ``u`` (rad/s, m/s; a new array) to apply for
+        ``dt`` seconds. The references are read at :attr:`t`, the tasks' integrators and the
+        limits' memory advance, and :attr:`q_next` is the configuration ``u`` reaches
+        (exact integration). :attr:`result` reports the solve.
+
+        The BLAS threads are limited to ``threads`` from the first step on (threadpoolctl),
+        until :meth:`close`."""
+        if self._limits is None and self.threads is not None:
+            self._limits = threadpool_limits(self.threads)
+        self._step(self._checked(q), None)
+        return self._u.copy()
+
+    @property
+    def q_next(self) -> np.ndarray:
+        """The configuration the last step's ``u`` reaches in ``dt`` (a view, overwritten by
+        the next step)."""
+        if self._plan is None:
+            raise WholebodyError("Controller.q_next: no step was taken yet")
+        return self._plan.step_buffers(len(self.references)).batch.Q_next[0]
+
+    @property
+    def result(self) -> SolverResult:
+        """The last step's solve as a :class:`SolverResult` (made when asked for)."""
+        plan = self._plan
+        if plan is None:
+            raise WholebodyError("Controller.result: no step was taken yet")
+        if plan.last_result is None:
+            plan.last_result = self.solver.result(plan, self.solve_time, self.stack)
+        return plan.last_result
+
+    def step_many(
+        self,
+        Q: np.ndarray,
+        targets: Mapping[Task, np.ndarray] | None = None,
+        *,
+        steps: int = 1,
+        threads: int | None = None,
+    ) -> BatchResult:
+        """Solve ``N`` independent states of the stack in one kernel call per thread
+        (:mod:`wholebody.control.batch`): each from its configuration ``Q[n]`` (N x nq), the
+        pose tasks in ``targets`` going to their poses ``targets[task][n]`` (N x 4 x 4),
+        ``steps`` control steps each (a closed-loop reach inside the kernel), on ``threads``
+        threads (default: every core). The stack's own state (integrals, memories) is the
+        start of every state and is left unchanged. Needs every entry compiled, and daqp for
+        the HQP."""
+        with _threads(1):  # one BLAS thread in each of the batch's threads
+            return solve_many(self, Q, targets, steps, threads)
+
+    def close(self) -> None:
+        """Give the BLAS threads back (what :meth:`step` limited)."""
+        if self._limits is not None:
+            self._limits.restore_original_limits()  # type: ignore[attr-defined]
+            self._limits = None
+
+    def _checked(self, q: np.ndarray) -> np.ndarray:
+        """``q`` as the kernel takes it: nq finite numbers."""
+        if q.__class__ is not np.ndarray or q.shape != (self.robot.nq,) or q.dtype != float:
+            q = self.robot.check_configuration(q)
+        if not math.isfinite(q.dot(q)):
+            raise DimensionError(f"configuration of robot {self.robot.name!r} is not finite: {q}")
+        return q
+
+    def _step(self, q: np.ndarray, state: RobotState | None) -> None:
+        """The step of :meth:`step` (module docstring), ``state`` the kinematics at ``q`` if
+        the caller has them."""
+        rec = self.recovery
+        stack = self.stack if rec is None else rec.stack
+        plan = stack.plan()
+        if plan is not self._bound:
+            self._bind(plan)
+        j = self._k % _BLOCK
+        if j == 0 or self._refs is None:
+            self._sample(self._k - j)
+        buffers = plan.step_buffers(len(self.references))
+        batch = buffers.batch
+        batch.Q[0] = q
+        if self.references:
+            batch.refs[0] = self._refs[j]  # type: ignore[index]
+        start = time.perf_counter()
+        if self._fast and rec is None:
+            plan.sync(state, self.dt)
+            if plan.stale:  # an entry changed shape: lay the stack out anew, then step
+                self._bound = None
+                return self._step(q, state)
+            self.solver.run(plan, buffers.own, batch, 1, KINEMATICS | ADVANCE | INTEGRATE)
+            plan.evaluated = -1.0 if state is None else state.stamp
+        else:
+            state = self._general(plan, q, state, j)
+            plan = self._plan_of_step
+        self.solve_time = time.perf_counter() - start
+        plan.last_result = None
+        self._plan, self._u = plan, plan.step_buffers(len(self.references)).batch.U[0]
+        if rec is not None:
+            rec.advance(state, self.dt, self.result)  # (the stack's advance: after the solve)
+        self._k += 1
+
+    def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None,
+                 j: int) -> RobotState:  # fmt: skip
+        """A step with Pinocchio's kinematics and the Python entries' own code around the
+        kernel call (the stack has entries written in Python, a recovery watches, or the
+        robot has joints the kernels do not move)."""
+        if state is None:
+            state = self.robot.update(q)
+        for r, task in self._python_refs:
+            task.set_target(self._refs[j, r, :16].reshape(4, 4), self._refs[j, r, 16:])  # type: ignore[index]
+        plan.sync(state, self.dt)
+        if plan.stale:  # an entry changed shape: laid out anew
+            plan = self._rebind(state)
+        self._plan_of_step = plan
+        buffers = plan.step_buffers(len(self.references))
+        what = INTEGRATE if self.recovery is not None else ADVANCE | INTEGRATE
+        self.solver.run(plan, buffers.pinocchio(), buffers.batch, 1, what)
+        plan.evaluated = state.stamp
+        if self.recovery is None:
+            plan.advance_python(state, self.dt, buffers.batch.U[0])
+        return state
+
+    def _rebind(self, state: RobotState) -> Plan:
+        """The stack laid out anew (an entry changed shape), references bound again."""
+        stack = self.stack if self.recovery is None else self.recovery.stack
+        plan = stack.synced_plan(state, self.dt)
+        self._bind(plan)
+        buffers = plan.step_buffers(len(self.references))
+        buffers.batch.Q[0] = state.q
+        if self.references:
+            buffers.batch.refs[0] = self._refs[self._k % _BLOCK]  # type: ignore[index]
+        return plan
+
+    def _bind(self, plan: Plan) -> None:
+        """The references of the compiled pose tasks of ``plan`` read by the kernel, the
+        others set in Python; whether a step of ``plan`` is one kernel call."""
+        self._python_refs = []
+        for r, task in enumerate(self.references):
+            if not plan.follow(task, r):
+                self._python_refs.append((r, task))
+        movable = plan.step_buffers(len(self.references)).movable
+        self._fast = movable and not plan.python and not self._python_refs
+        self._bound = plan
+
+    def _sample(self, k0: int) -> None:
+        """Each reference's poses at steps ``k0 .. k0 + block - 1`` and its twists at the
+        same steps (at mid-step with ``feedforward="midpoint"``), sampled in one vectorised
+        call each, into the buffer the kernel reads (:data:`~wholebody.kernels.evaluate.
+        REF_WIDTH` numbers a sample: the pose row by row, then the twist)."""
+        if self._refs is None:
+            self._refs = np.zeros((_BLOCK, len(self.references), REF_WIDTH))
+        t = (k0 + np.arange(_BLOCK)) * self.dt
+        t_ff = t + 0.5 * self.dt if self.feedforward == "midpoint" else t
+        refs = self._refs
+        for r, traj in enumerate(self.references.values()):
+            s = traj.sample_many(np.concatenate((t, t_ff)))
+            poses = refs[:, r, :16].reshape(_BLOCK, 4, 4)
+            poses[:] = 0.0
+            poses[:, :3, :3] = s.rotations[:_BLOCK]
+            poses[:, :3, 3] = s.positions[:_BLOCK]
+            poses[:, 3, 3] = 1.0
+            refs[:, r, 16:19] = s.linear_velocities[_BLOCK:]
+            refs[:, r, 19:22] = s.angular_velocities[_BLOCK:]
+
+    # ------------------------------------------------------------------ a run
     def run(
         self,
         q0: np.ndarray,
@@ -207,14 +398,7 @@ class Controller:
             raise DimensionError(f"duration {duration} s is shorter than one step of {self.dt} s")
         tracked = [t for t in self.stack.tasks if isinstance(t, FrameTask)]
         log = _Recorder(robot, self.stack, self.monitors, tracked, n)
-        self.stack.reset()
-        if self.recovery is not None:
-            self.recovery.reset()
-        if u0 is not None:
-            u0 = np.asarray(u0, dtype=float)
-            if u0.shape != (robot.nu,) or not np.isfinite(u0).all():
-                raise DimensionError(f"u0 must be {robot.nu} finite velocities, got {u0!r}")
-            self.stack.set_velocity(u0, self.dt)
+        self.reset(u0)
         bar = _progress(n, progress)
         with _threads(self.threads), _gc_paused():  # no collection mid-step
             q, done = self._loop(q, n, log, callback, bar)
@@ -251,33 +435,23 @@ class Controller:
         callback: Callable[[int, float, np.ndarray], None] | None,
         bar: object,
     ) -> tuple[np.ndarray, int]:
-        """The ``n`` control steps from ``q`` (fewer if the plant stops the run); the
-        references sampled a block at a time. The final configuration and the steps done."""
-        robot, tasks, rec = self.robot, list(self.references), self.recovery
-        advance = robot.integrate if self.plant is None else self.plant.step
+        """The ``n`` control steps from ``q`` (fewer if the plant stops the run), each logged
+        with the kinematics at its configuration. The final configuration and the steps
+        done."""
+        robot = self.robot
         for k in range(n):
-            start = time.perf_counter()  # the step's time includes its share of the sampling
-            if k % _BLOCK == 0:
-                targets = self._sampled_targets(k, min(_BLOCK, n - k))
-            t, j = k * self.dt, k % _BLOCK
-            for task, (poses, twists) in zip(tasks, targets, strict=True):
-                task.set_target(poses[j], twists[j])
-            state = robot.update(q)
-            stack = self.stack if rec is None else rec.stack
-            result = self.solver.solve(stack, state, self.dt)
-            compute = time.perf_counter() - start
-            log.record(k, t, q, state, result, stack is self.stack)  # before the next update
+            state = robot.update(q)  # the log's kinematics (not the step's time)
             start = time.perf_counter()
-            if rec is None:
-                stack.advance(state, self.dt, result=result)
-            else:
-                rec.advance(state, self.dt, result)
-            if self.plant is None:  # the integration is the controller's own work
-                q = advance(q, result.u, self.dt)
-                log.step_time[k] = compute + (time.perf_counter() - start)
+            self._step(q, state)
+            log.step_time[k] = time.perf_counter() - start
+            t = k * self.dt
+            plan = self._plan
+            own = self.recovery is None or plan is self.stack.current_plan
+            log.record(k, t, q, state, plan, self.solve_time, own)  # type: ignore[arg-type]
+            if self.plant is None:
+                q = self.q_next.copy()
             else:  # a plant's step (a simulation) is not the controller's time
-                log.step_time[k] = compute + (time.perf_counter() - start)
-                q = advance(q, result.u, self.dt)
+                q = self.plant.step(q, self._u.copy(), self.dt)
             if callback is not None:
                 callback(k, t + self.dt, q)
             if bar is not None:
@@ -352,28 +526,35 @@ class _Recorder:
         self.arms = {m.arm.name: np.zeros((n, 6)) for m in self.energies}
         self.values = {m.name: np.zeros(n) for m in self.others}
 
-    def record(self, k: int, t: float, q: np.ndarray, state, result, own: bool = True) -> None:
-        """Step ``k``'s row; ``own``: solved with the controller's stack (else a retreat's,
-        whose level residuals are not the stack's: NaN)."""
+    def record(self, k: int, t: float, q: np.ndarray, state: RobotState, plan: Plan,
+               solve_time: float, own: bool = True) -> None:  # fmt: skip
+        """Step ``k``'s row from the solve's outcome in ``plan``'s arena; ``own``: solved with
+        the controller's stack (else a retreat's, whose level residuals are not the stack's:
+        NaN)."""
+        out, U, levels = plan.view(lay.I_OUT), plan.view(lay.F_U), plan.view(lay.F_LEVEL_OUT)
+        unmet, tasks = plan.view(lay.I_INFEASIBLE), plan.view(lay.I_TASK)
+        status = int(out[lay.OUT_STATUS])
         self.t[k] = t
         self.q[k] = q
-        self.u[k] = result.u
+        self.u[k] = U[1]
         self.jp[k] = state.joint_positions()
-        self.solve_time[k] = result.solve_time
-        self.status[k] = int(result.status)
-        self.limit_hit[k] = result.limit_hit
-        self.failed[k] = result.status == SolverStatus.FAILED or any(
-            level == self.top for level, _ in result.infeasible
+        self.solve_time[k] = solve_time
+        self.status[k] = status
+        self.limit_hit[k] = (
+            status in (SolverStatus.BOUNDS_ACTIVE, SolverStatus.SCALED)
+            or plan.view(lay.I_ACTIVE).any()
+            or (levels[:, 1] < 1.0).any()
         )
-        self.level_res[k] = result.level_residuals if own else np.nan
+        top_unmet = plan.level_names[0] == self.top and unmet[tasks[:, 0] == 0].any()
+        self.failed[k] = status == SolverStatus.FAILED or bool(top_unmet)
+        self.level_res[k] = levels[:, 0] if own else np.nan
         for task in self.tasks:
             self.errors[task.name][k] = task.error(state)
         for task in self.tracked:
             self.pos[task.name][k] = state.position(task.frame)
             self.ref[task.name][k] = task.target[:3, 3] if task.target is not None else np.nan
-        plan = self.stack.current_plan
         for m in self.energies:  # the solve's own value when the stack has the same energy
-            parts = plan.arm_parts(m, state) if plan is not None else None
+            parts = plan.arm_parts(m, state)
             self.arms[m.arm.name][k] = parts if parts is not None else m.parts(state)
         for m in self.others:
             self.values[m.name][k] = m.evaluate(state).value

@@ -137,13 +137,14 @@ def kernel(fn: F) -> F:
     """Compile ``fn`` with numba in nopython mode, cached on disk.
 
     ``error_model="numpy"``: a float division by zero gives inf or NaN as in numpy (the
-    kernels guard the divisions whose result they use), not a Python exception.
+    kernels guard the divisions whose result they use), not a Python exception. ``nogil``:
+    a kernel releases the GIL, so threads run kernels at once (a batch split over cores).
 
     A kernel called from another kernel is compiled for its arguments' plain types: numba
     would otherwise compile it once per *literal* constant it is called with (a flag
     ``True``, a region id), and every such copy is optimised again inside each caller
     (compiling the control kernels took three times as long)."""
-    dispatcher = numba.njit(cache=True, error_model="numpy")(fn)
+    dispatcher = numba.njit(cache=True, error_model="numpy", nogil=True)(fn)
     if not DISABLED:
         plain = type(dispatcher).get_call_template
 

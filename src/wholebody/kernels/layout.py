@@ -9,13 +9,13 @@ as a view: ``fmat(f, h, F_A)`` is the (K, nu) matrix of task rows.
 
 Every task, inequality task, objective and limit of the stack is one row of the **entry
 table** ``I_ENTRY``: its category, its kind (which kernel computes it, or ``KIND_PYTHON``:
-written by Python before the kernel runs), its level, its first row and row count (in ``F_A`` for a task, in
-``F_C`` for an inequality task), its slot (an objective's row of ``F_OBJ*``, a limit's box in
-``F_BOXES``, a task's index in ``I_TASK``), the reference it follows, and where its own
-numbers lie in the parameter regions ``F_PAR`` and ``I_PAR``: what the entry packed there
-itself (:meth:`wholebody.tasks.Task.pack`), and a flag (an objective's gradient comes with a
-curvature). The Python side writes a region through the same
-views (:meth:`Plan.view`); nothing is copied between the two.
+written by Python before the kernel runs), its level, its first row and row count (in ``F_A``
+for a task, in ``F_C`` for an inequality task), its slot (an objective's row of ``F_OBJ*``, a
+limit's box in ``F_BOXES``, a task's index in ``I_TASK``), the reference it follows, where its
+own numbers lie in the parameter regions ``F_PAR`` and ``I_PAR`` (what the entry packed there
+itself: :meth:`wholebody.tasks.Task.pack`), and a flag (an objective's gradient comes with a
+curvature). The Python side writes a region through the same views (:meth:`Plan.view`);
+nothing is copied between the two.
 """
 
 from __future__ import annotations

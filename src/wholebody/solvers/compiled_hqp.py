@@ -16,10 +16,12 @@ import numba
 import numpy as np
 
 from wholebody import kernels
+from wholebody.kernels import control
 from wholebody.kernels import hqp as kernel
 from wholebody.kernels import layout as lay
+from wholebody.kernels.evaluate import evaluate
 from wholebody.solvers.level_report import LevelReport
-from wholebody.solvers.plan import Arena, first_call
+from wholebody.solvers.plan import Arena, Plan, first_call
 from wholebody.solvers.qp import QPStatus
 from wholebody.solvers.result import SolverResult
 
@@ -63,6 +65,7 @@ class Workspace:
         self.state = self.view(kernel.W_STATE)
         self.report = self.view(kernel.W_REPORT)
         self.limited = self.view(kernel.W_LIMITED)
+        self.record = control.Arena(self.f, self.i, self.h)
         self._H, self._g = self.view(kernel.W_H), self.view(kernel.W_G)
         self._Q, self._qb = self.view(kernel.W_QC), self.view(kernel.W_QB)
         self._nv = nv
@@ -107,6 +110,31 @@ def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     else:
         first_call("hqp stages", "the hierarchical QP kernels", _compile_then, solver, arena,
                    ws)  # fmt: skip
+
+
+def run_steps(solver: HierarchicalQPSolver, plan: Plan, ws: Workspace,
+              kinematics: control.Kinematics, batch: control.Batch, steps: int,
+              what: int) -> None:  # fmt: skip
+    """Whole steps on the synced ``plan`` (:mod:`wholebody.kernels.control`): one kernel
+    call with daqp; with another engine one state and one step, the engine's QPs between the
+    kernel stages."""
+    arena = plan.step_buffers(batch.refs.shape[1]).arena
+    if solver.in_kernel or batch.Q.shape[0] != 1 or steps != 1:
+        solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (daqp only)
+        return
+    if what & (control.KINEMATICS | control.RESET):
+        solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (refused)
+    q = batch.Q[0]
+    first_call("evaluate", "the control kernels", evaluate, plan.f, plan.i, plan.h,
+               kinematics.J, kinematics.oMf, q, batch.refs[0])  # fmt: skip
+    run(solver, plan, ws)
+    first_call("after", "the control kernels", control.after, arena, kinematics, q,
+               batch.Q_next[0], what)  # fmt: skip
+    batch.U[0] = plan.view(lay.F_U)[1]
+    if not what & control.INTEGRATE:
+        batch.Q_next[0] = q
+    batch.status[0] = plan.view(lay.I_OUT)[lay.OUT_STATUS]
+    batch.params[0] = plan.view(lay.F_PAR)
 
 
 _READY = False  # whether every stage is compiled in this process

@@ -103,14 +103,14 @@ from typing import Any
 import numpy as np
 
 from wholebody.errors import SolverError
+from wholebody.kernels import control
 from wholebody.kernels import daqp as dk
 from wholebody.kernels import hqp as hqp_kernel
-from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Solver
 from wholebody.solvers.level_report import LevelReport
-from wholebody.solvers.plan import NO_REFERENCES, Arena, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
 from wholebody.solvers.qp import QPEngine, make_engine
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
@@ -183,7 +183,8 @@ class HierarchicalQPSolver(Solver):
         """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
         self._engines: list[QPEngine] = []
         self.qp_time = 0.0
-        """Wall time (s) of the last solve without the stack evaluation."""
+        """Wall time (s) of the last solve (the stack's evaluation included: one kernel call
+        with daqp)."""
         self._par = np.zeros(hqp_kernel.PAR_WIDTH)
         self._workspace: compiled_hqp.Workspace | None = None
         self._levels: list[LevelReport] | None = []
@@ -236,17 +237,40 @@ class HierarchicalQPSolver(Solver):
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
         """Evaluate ``stack`` at ``state`` for a step of ``dt`` s and solve it.
 
-        ``solve_time`` covers the evaluation and the solve; :attr:`qp_time` the solve only.
+        ``solve_time`` and :attr:`qp_time` cover the evaluation and the solve (one kernel
+        call).
         """
         t0 = time.perf_counter()
         plan = stack.synced_plan(state, dt)
-        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state),
-                   NO_REFERENCES)  # fmt: skip
+        buffers = plan.step_buffers()
+        buffers.batch.Q[0] = state.q
+        self.run(plan, buffers.pinocchio(), buffers.batch, 1, 0)
         plan.evaluated = state.stamp
-        result = self._solve_arena(plan)
-        result.solve_time = time.perf_counter() - t0
+        result = self.result(plan, 0.0)
+        self.qp_time = result.solve_time = time.perf_counter() - t0
         plan.last_result = result
         return result
+
+    def run(self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch,
+            steps: int, what: int) -> None:  # fmt: skip
+        """Whole steps on the synced ``plan``: one kernel call with daqp
+        (:func:`wholebody.kernels.control.hqp_run`), else the stages with the engine's QPs
+        between them (one state, one step; :mod:`wholebody.solvers.compiled_hqp`)."""
+        ws = self.workspace(plan)
+        compiled_hqp.run_steps(self, plan, ws, kinematics, batch, steps, what)
+
+    def kernel_run(self, arena: control.Arena, kinematics: control.Kinematics,
+                   batch: control.Batch, steps: int, what: int,
+                   workspace: control.Arena | None) -> None:  # fmt: skip
+        """:func:`wholebody.kernels.control.hqp_run` on an arena and the cascade's workspace
+        (a plan's, or copies of them: a thread's share of a batch); daqp only."""
+        if not self.in_kernel:
+            raise SolverError(f"HierarchicalQPSolver({self.engine_name!r}): a batch, several "
+                              "steps in one call or the compiled kinematics need the engine "
+                              "'daqp' (the QPs are then solved inside the kernel)")  # fmt: skip
+        first_call("hqp", "the hierarchical QP kernels", control.hqp_run, arena, workspace,
+                   kinematics, batch, self.parameters(), self._daqp_settings, steps,
+                   what)  # fmt: skip
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
         """Solve an evaluated stack (rows in scaled coordinates)."""
@@ -255,9 +279,15 @@ class HierarchicalQPSolver(Solver):
     def _solve_arena(self, arena: Arena) -> SolverResult:
         """The cascade on an evaluated arena."""
         t0 = time.perf_counter()
-        ws = self.workspace(arena)
-        compiled_hqp.run(self, arena, ws)
-        self._levels = None
-        result = compiled_hqp.result(self, arena, ws)
+        compiled_hqp.run(self, arena, self.workspace(arena))
+        result = self.result(arena, 0.0)
         self.qp_time = result.solve_time = time.perf_counter() - t0
+        return result
+
+    def result(self, arena: Arena, solve_time: float, stack: Stack | None = None) -> SolverResult:
+        """The last cascade's outcome in ``arena`` as a :class:`SolverResult` (``stack``:
+        unused, for the same call as the projection's)."""
+        self._levels = None
+        result = compiled_hqp.result(self, arena, self.workspace(arena))
+        result.solve_time = solve_time
         return result

@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from wholebody import kernels
-from wholebody.errors import DimensionError
+from wholebody.errors import DimensionError, ModelError
+from wholebody.kernels import control
 from wholebody.kernels import layout as lay
 from wholebody.kernels.evaluate import REF_WIDTH, evaluate
 from wholebody.kernels.objectives import AE_WIDTH, ARM_PARTS
@@ -222,6 +223,7 @@ class Plan(Arena):
         self._frame_list: list[Frame] = []
         self._collect()
         super().__init__(self._shapes())
+        self.inequality_rows = self._inequality_rows
         self._fill()
         self.reported = [(t, r.entry.name, self.levels[r.level].name)
                          for t, r in enumerate(self.tasks) if r.rows]  # fmt: skip
@@ -230,6 +232,7 @@ class Plan(Arena):
         self._problem: StackProblem | None = None
         self._python_values: dict[str, ObjectiveValue] = {}
         self.metric_version = -1
+        self._steps: StepBuffers | None = None
         self.stale = False
         self.evaluated = -1.0  # the stamp of the state of the last kernel evaluation
         self.last_result: SolverResult | None = None
@@ -354,23 +357,25 @@ class Plan(Arena):
         self._boxes = v(lay.F_BOXES)
         self._scalars = v(lay.F_SCALARS)
 
-    def follow(self, task: Task, reference: int) -> None:
-        """Let the compiled pose task ``task`` take its target and twist from row
-        ``reference`` of the references' samples each step (-1: no longer)."""
+    def follow(self, task: object, reference: int) -> bool:
+        """Let ``task``, if it is a compiled pose task of the stack, take its target and
+        twist from row ``reference`` of the references' samples each step (-1: no longer);
+        whether it is one."""
         for e, rec in enumerate(self.records):
             if rec.entry is task and rec.packed is not None and rec.packed.kind == lay.KIND_POSE:
                 self._table[e, lay.E_REF] = reference
-                return
-        raise DimensionError(f"{task.name}: not a compiled pose task of this stack")
+                return True
+        return False
 
     # ------------------------------------------------------------------ each step
-    def sync(self, state: RobotState, dt: float) -> None:
+    def sync(self, state: RobotState | None, dt: float) -> None:
         """Write into the arena what Python owns (see the module docstring); sets
         :attr:`stale` when the stack must be laid out anew (an entry's block changed
-        shape)."""
+        shape). ``state``: the kinematics at the step's configuration (None where the kernel
+        computes them: then every entry must be compiled)."""
         stack = self.stack
         scalars = self._scalars
-        scalars[0], scalars[2] = dt, state.stamp
+        scalars[0], scalars[2] = dt, -1.0 if state is None else state.stamp
         if stack._scale_version != self.metric_version:
             metric = self.view(lay.F_METRIC)
             metric[0], metric[1] = stack.scale, stack._scale_sq
@@ -389,6 +394,8 @@ class Plan(Arena):
         for rec in self.objectives:
             obj[rec.slot, 0] = rec.entry.weight
         if self.python:
+            if state is None:
+                raise DimensionError("entries written in Python need the robot's state")
             self._sync_python(state, dt)
 
     def _readopt(self, rec: _Record) -> None:
@@ -460,6 +467,13 @@ class Plan(Arena):
         """``(f, i, h, J, oMf, q)``: what every kernel entry point takes first."""
         J, oMf = self.robot.kinematics.views()
         return self.f, self.i, self.h, J, oMf, state.q
+
+    def step_buffers(self, references: int = 0) -> StepBuffers:
+        """The buffers of a compiled step with ``references`` references (made once)."""
+        steps = self._steps
+        if steps is None or steps.references != references:
+            steps = self._steps = StepBuffers(self, references)
+        return steps
 
     def evaluate(self, state: RobotState, dt: float) -> None:
         """Sync and evaluate every row and the box at ``state`` (scaled, in the arena)."""
@@ -546,6 +560,46 @@ class Plan(Arena):
             if kind == lay.KIND_ARM and rec.entry.same_energy(energy):
                 return rec.block[AE_WIDTH : AE_WIDTH + ARM_PARTS]
         return None
+
+
+class StepBuffers:
+    """What a compiled step reads and writes besides the arena (:mod:`wholebody.kernels.
+    control`): the arena as a record, the kinematics' buffers (Pinocchio's views, or the
+    kernel's own with the packed model) and a batch of one state for ``references``
+    references."""
+
+    def __init__(self, plan: Plan, references: int) -> None:
+        robot = self.robot = plan.robot
+        model = robot.model
+        self.arena = control.Arena(plan.f, plan.i, plan.h)
+        try:
+            model_i, model_f = robot.kinematics.model_tables()
+            self.movable = True
+        except ModelError:  # joints the kernels do not move: Pinocchio's kinematics only
+            model_i, model_f = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 15))
+            self.movable = False
+        self.own = control.Kinematics(model_i, model_f, np.zeros((robot.nv, 6)).T,
+                                      np.zeros((model.nframes, 12)),
+                                      np.zeros((model.njoints, 12)), np.zeros(robot.nv))  # fmt: skip
+        self.references = references
+        self.batch = control.Batch(
+            np.zeros((1, robot.nq)),
+            np.zeros((1, references, REF_WIDTH)),
+            np.zeros((1, robot.nu)),
+            np.zeros((1, robot.nq)),
+            np.zeros(1, dtype=np.int64),
+            np.zeros((1, plan.view(lay.F_PAR).size)),
+        )
+        self._views: tuple[np.ndarray, np.ndarray] | None = None
+        self._pinocchio: control.Kinematics | None = None
+
+    def pinocchio(self) -> control.Kinematics:
+        """The kinematics read from the robot's Pinocchio data (after :meth:`Robot.update`)."""
+        views = self.robot.kinematics.views()
+        if self._views is None or views[0] is not self._views[0] or views[1] is not self._views[1]:
+            self._views = views
+            self._pinocchio = self.own._replace(J=views[0], oMf=views[1])
+        return self._pinocchio  # type: ignore[return-value]
 
 
 class _Probe:

@@ -103,13 +103,13 @@ import time
 import numpy as np
 
 from wholebody.errors import SolverError
+from wholebody.kernels import control
 from wholebody.kernels import layout as lay
 from wholebody.kernels import projection as kernel
-from wholebody.kernels.evaluate import evaluate
 from wholebody.kernels.pinv import PAR_WIDTH
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Solver
-from wholebody.solvers.plan import NO_REFERENCES, Arena, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
 
@@ -176,14 +176,28 @@ class ProjectionSolver(Solver):
         """Evaluate ``stack`` at ``state`` for a step of ``dt`` s and solve it."""
         start = time.perf_counter()
         plan = stack.synced_plan(state, dt)
-        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state),
-                   NO_REFERENCES)  # fmt: skip
+        buffers = plan.step_buffers()
+        buffers.batch.Q[0] = state.q
+        self.run(plan, buffers.pinocchio(), buffers.batch, 1, 0)
         plan.evaluated = state.stamp
-        first_call("projection", "the projection kernels", kernel.project, plan.f, plan.i,
-                   plan.h, self.parameters())  # fmt: skip
         result = self.result(plan, time.perf_counter() - start, stack)
         plan.last_result = result
         return result
+
+    def run(self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch,
+            steps: int, what: int) -> None:  # fmt: skip
+        """Whole steps in one kernel call (:func:`wholebody.kernels.control.projection_run`)
+        on the synced ``plan``."""
+        arena = plan.step_buffers(batch.refs.shape[1]).arena
+        self.kernel_run(arena, kinematics, batch, steps, what, None)
+
+    def kernel_run(self, arena: control.Arena, kinematics: control.Kinematics,
+                   batch: control.Batch, steps: int, what: int,
+                   workspace: control.Arena | None) -> None:  # fmt: skip
+        """:func:`wholebody.kernels.control.projection_run` on an arena (a plan's, or a copy
+        of it: a thread's share of a batch); ``workspace``: unused (the HQP's)."""
+        first_call("projection", "the projection kernels", control.projection_run, arena,
+                   kinematics, batch, self.parameters(), steps, what)  # fmt: skip
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
         """Solve an evaluated stack (rows in scaled coordinates, e.g. ``stack.evaluate()``'s

@@ -249,6 +249,7 @@ class PoseTask(Task):
         self._params[POSE_INTEGRAL : POSE_INTEGRAL + 6] = 0.0
         if self._params[POSE_HAS] == TARGET_HELD:
             self._params[POSE_HAS] = TARGET_NONE
+            self._params[POSE_STAMP] = -1.0  # the last error was for the forgotten target
 
     def _pack(self, packer: Packer, fa: int, fb: int) -> Packed | None:
         """The kernel's view of this task tracking frame ``fb`` (relative to ``fa``, -1: the

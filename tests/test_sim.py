@@ -150,7 +150,7 @@ def _reach_controller(robot, plant=None):
 
 
 def test_plant_protocol_and_a_stopping_plant():
-    """A plant that integrates exactly gives the kinematic run's log; a plant that stops
+    """A plant that integrates exactly gives the kinematic run's log (to rounding); a plant that stops
     ends the run with a log of the steps done and the reason in its metadata; an object
     without ``step`` is refused."""
     robot = wb.load_robot("mobile_humanoid")
@@ -173,7 +173,8 @@ def test_plant_protocol_and_a_stopping_plant():
 
     plain = _reach_controller(robot).run(robot.home(), 1.0)
     exact = _reach_controller(robot, Exact()).run(robot.home(), 1.0)
-    np.testing.assert_array_equal(plain.q, exact.q)
+    # the kinematic run integrates in the kernel: Pinocchio's integrate to rounding
+    np.testing.assert_allclose(plain.q, exact.q, rtol=0, atol=1e-12)
     stopped = _reach_controller(robot, Stopping()).run(robot.home(), 1.0)
     assert len(stopped) == 7 and stopped.meta["stopped"] == "enough"
     assert len(stopped.task_errors["right_tool"]) == 7

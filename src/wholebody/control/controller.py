@@ -312,9 +312,10 @@ class Controller:
 
     def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None,
                  j: int) -> RobotState:  # fmt: skip
-        """A step with Pinocchio's kinematics and the Python entries' own code around the
-        kernel call (the stack has entries written in Python, a recovery watches, or the
-        robot has joints the kernels do not move)."""
+        """A step with the Python entries' own code around the kernel call, and Pinocchio's
+        kinematics for them (the stack has entries written in Python, a recovery watches, or
+        the robot has joints the kernels do not move: then the kernel reads Pinocchio's
+        kinematics too)."""
         if state is None:
             state = self.robot.update(q)
         for r, task in self._python_refs:
@@ -325,7 +326,10 @@ class Controller:
         self._plan_of_step = plan
         buffers = plan.step_buffers(len(self.references))
         what = INTEGRATE if self.recovery is not None else ADVANCE | INTEGRATE
-        self.solver.run(plan, buffers.pinocchio(), buffers.batch, 1, what)
+        if buffers.movable:  # the kernel's kinematics, as in a step of one call
+            self.solver.run(plan, buffers.own, buffers.batch, 1, what | KINEMATICS)
+        else:
+            self.solver.run(plan, buffers.pinocchio(), buffers.batch, 1, what)
         plan.evaluated = state.stamp
         if self.recovery is None:
             plan.advance_python(state, self.dt, buffers.batch.U[0])

@@ -36,7 +36,12 @@ def rng() -> np.random.Generator:
 # NUMBA_BOUNDSCHECK=1 (an index out of bounds raises instead of corrupting memory; its own
 # cache flavour, so it compiles everything once more: ~5 minutes). The session fails if they
 # do. Started when the equivalence file is collected and slow tests are not deselected.
-EQUIVALENCE = ["test_compiled_equivalence.py", "test_dmp_kernels.py", "test_kernels.py"]
+EQUIVALENCE = [
+    "test_compiled_equivalence.py",
+    "test_dmp_kernels.py",
+    "test_kernels.py",
+    "test_collision_kernel.py",
+]
 _MODE = "WHOLEBODY_NUMBA_MODE"
 _background: dict[str, object] = {}
 

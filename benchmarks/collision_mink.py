@@ -7,7 +7,9 @@ loaded by Pinocchio/coal for wholebody and by MuJoCo (``fusestatic="false"``, so
 keeps its body) for mink; mink gets exactly wholebody's pairs, shape to geom by link and
 order. The base is fixed at the origin (MuJoCo welds the URDF's root to the world). At
 ``--n`` random postures (seed 0), interleaved, one thread: the time of (a) wholebody
-``task.compute(robot.update(q), 0.01)`` and (b) mink ``configuration.update(qpos)`` +
+``task.compute(robot.update(q), 0.01)`` (the Python task: rows, bounds, names), (b) wholebody
+``robot.update(q)`` + the kernel :func:`~wholebody.kernels.collision.collision_rows` (what the
+control step calls: 32 rows at most) and (c) mink ``configuration.update(qpos)`` +
 ``limit.compute_qp_inequalities(configuration, 0.01)``; the pairs each finds within the
 detection distance (5 cm), and the largest distance difference of the pairs both find.
 
@@ -28,6 +30,7 @@ from threadpoolctl import threadpool_limits
 
 import wholebody as wb
 from wholebody.collision import CollisionModel
+from wholebody.kernels.collision import RESULT_WIDTH, collision_rows
 
 SAFETY, DETECTION, DT = 0.01, 0.05, 0.01
 MJ_TYPE = {"Box": mujoco.mjtGeom.mjGEOM_BOX, "Cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
@@ -115,9 +118,20 @@ def run(n: int) -> None:
     dropped = [model.pair_name(i, k) for i, k in model.pairs
                if tuple(sorted((gmap[i], gmap[k]))) not in kept]  # fmt: skip
     qs = postures(robot, n)
-    stats: dict[str, list[float]] = {k: [] for k in ("wb", "mink", "n_wb", "n_mink", "gap")}
+    keys = ("wb", "kernel", "mink", "n_wb", "n_mink", "gap")
+    stats: dict[str, list[float]] = {k: [] for k in keys}
+    rows = np.empty((task.max_rows, robot.nu))
+    buffers = (rows, np.empty((len(model.pairs), RESULT_WIDTH)), np.empty(len(model.pairs), int))
+    external = np.empty((0, RESULT_WIDTH))
+
+    def kernel(q: np.ndarray) -> None:
+        robot.update(q)
+        J, oMf = robot.kinematics.views()
+        collision_rows(J, oMf, model.packed, external, DETECTION, *buffers)
+
     for q in qs[:5]:  # warm-up (numba, caches)
         task.compute(robot.update(q), DT)
+        kernel(q)
         config.update(qpos_of(robot, mj, q))
         limit.compute_qp_inequalities(config, DT)
     with threadpool_limits(1):
@@ -126,13 +140,16 @@ def run(n: int) -> None:
             t0 = time.perf_counter()
             task.compute(robot.update(q), DT)
             t1 = time.perf_counter()
+            kernel(q)
+            t2 = time.perf_counter()
             config.update(qpos)
             h = limit.compute_qp_inequalities(config, DT).h
-            t2 = time.perf_counter()
+            t3 = time.perf_counter()
             found = {limit.geom_id_pairs[r] for r in np.flatnonzero(np.isfinite(h))}
             state = robot.update(q)
             stats["wb"].append(t1 - t0)
-            stats["mink"].append(t2 - t1)
+            stats["kernel"].append(t2 - t1)
+            stats["mink"].append(t3 - t2)
             stats["n_wb"].append(len(model.distances(state, DETECTION)))
             stats["n_mink"].append(len(found))
             stats["gap"].append(distance_gap(model, mj, config.data, gmap, state, found))
@@ -146,15 +163,19 @@ def report(stats: dict[str, list[float]], n_wb: int, n_mink: int, dropped: list[
         print(f"pairs mink drops (welded / parent-child bodies): {', '.join(dropped)}")
     print("| case | median us | p90 us | pairs within 5 cm (median) | per pair us |")
     print("|---|---|---|---|---|")
-    rows = (("wholebody CollisionAvoidance.compute", "wb", "n_wb"),
-            ("mink update + CollisionAvoidanceLimit", "mink", "n_mink"))  # fmt: skip
+    rows = (
+        ("wholebody CollisionAvoidance.compute", "wb", "n_wb"),
+        ("wholebody update + collision_rows kernel", "kernel", "n_wb"),
+        ("mink update + CollisionAvoidanceLimit", "mink", "n_mink"),
+    )
     for label, key, count in rows:
         t = np.array(stats[key]) * 1e6
         med, p90, pairs = np.median(t), np.percentile(t, 90), np.median(stats[count])
         per = f"{med / pairs:.1f}" if pairs else "-"
         print(f"| {label} | {med:.0f} | {p90:.0f} | {pairs:.0f} | {per} |")
     ratio = np.median(stats["wb"]) / np.median(stats["mink"])
-    print(f"\nratio of medians wholebody/mink: {ratio:.2f}")
+    kernel = np.median(stats["kernel"]) / np.median(stats["mink"])
+    print(f"\nratio of medians wholebody/mink: {ratio:.2f} (the task), {kernel:.2f} (the kernel)")
     diff = int(np.sum(np.array(stats["n_wb"]) != np.array(stats["n_mink"])))
     print(f"postures where the counts within 5 cm differ: {diff}")
     print(f"largest distance difference (pairs both find): {max(stats['gap']):.2e} m")

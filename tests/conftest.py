@@ -42,6 +42,7 @@ EQUIVALENCE = [
     "test_kernels.py",
     "test_daqp_kernel.py",
     "test_forward_kernel.py",
+    "test_collision_kernel.py",
 ]
 _MODE = "WHOLEBODY_NUMBA_MODE"
 _background: dict[str, object] = {}

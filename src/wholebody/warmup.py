@@ -5,8 +5,8 @@ The kernels (:mod:`wholebody.kernels`) compile on their first call and are cache
 (2.5 to 5.5 minutes measured on a 2-core machine, once) and later processes only load the cache
 (about a second). Warming up runs, on the bundled humanoid, a few steps of each solver on a
 stack that reaches every compiled path (frame, relative and posture tasks, limits, the arm
-energy with the shipped stiffness network, h1, manipulability, bounds active), and the DMP
-kernels.
+energy with the shipped stiffness network, h1, manipulability, bounds active), the collision
+kernels (the humanoid's own pairs) and the DMP kernels.
 """
 
 from __future__ import annotations
@@ -70,6 +70,7 @@ def warmup() -> Warmup:
     """Compile (or load from the cache) every kernel of the package; safe to call again."""
     import wholebody
     from wholebody import kernels
+    from wholebody.collision import CollisionModel
     from wholebody.planning import dmp
     from wholebody.solvers import ProjectionSolver
     from wholebody.solvers.hqp import HierarchicalQPSolver
@@ -79,5 +80,6 @@ def warmup() -> Warmup:
     for tight in (False, True):
         _steps(robot, ProjectionSolver(), tight)
         _steps(robot, HierarchicalQPSolver("daqp"), tight)
+    CollisionModel(robot).distances(robot.update(robot.home()), 0.05)
     dmp.warmup()
     return Warmup(time.perf_counter() - start, kernels.cache_directory(), not kernels.DISABLED)

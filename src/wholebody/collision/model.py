@@ -14,14 +14,18 @@ shoulder cap in its socket: they are listed in :attr:`CollisionModel.excluded` w
 reason), and pairs ``[collision] exclude`` names; and every robot shape against every
 obstacle. Names in ``exclude`` may be links or shapes.
 
-**Distance and its rate.** For a pair at distance ``d`` with witness points ``p_a`` on shape
-a and ``p_b`` on shape b, and ``n = (p_b - p_a) / d`` (coal's normal where the shapes touch or
-overlap), moving the robot at ``u`` changes the distance at::
+**Distance and its rate.** For a pair at signed distance ``d`` (negative where the shapes
+overlap) with witness points ``p_a`` on shape a and ``p_b`` on shape b and the unit normal
+``n`` from a to b (``p_b - p_a = d n``), moving the robot at ``u`` changes the distance at::
 
-    d' = n^T (J_b(p_b) - J_a(p_a)) u,    J(p) = J_lin,j - [p - o_j]x J_ang,j
+    d' = n^T (J_b(p_b) - J_a(p_a)) u
 
-with ``J_lin,j, J_ang,j`` the world-aligned Jacobian of the joint ``j`` that carries the shape
-(origin ``o_j``), in actuated columns; an obstacle's is zero. Units: m, m/s.
+with ``J(p)`` the world-aligned Jacobian of the point p fixed to the shape, in actuated
+columns; an obstacle's is zero. Units: m, m/s. Both come from one kernel,
+:func:`wholebody.kernels.collision.collision_rows` (spheres, capsules, boxes and cylinders:
+:mod:`wholebody.kernels.distance`), on the model packed once (:attr:`CollisionModel.packed`);
+a pair with a mesh (or any other coal shape) is measured by coal first and handed to it
+(:meth:`CollisionModel.external`).
 """
 
 from __future__ import annotations
@@ -36,7 +40,20 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody.errors import DimensionError
+from wholebody.kernels.collision import (
+    CENTRE,
+    EXTERNAL,
+    RADIUS,
+    RESULT_WIDTH,
+    SHAPE_WIDTH,
+    SIZE,
+    PackedCollision,
+    collision_rows,
+    nearest_pairs,
+)
+from wholebody.kernels.distance import BOX, CAPSULE, CYLINDER, SPHERE
 from wholebody.robot import Robot, RobotState
+from wholebody.robot.parts import Frame
 
 __all__ = ["SHAPES", "CollisionModel", "Obstacle", "PairDistance"]
 
@@ -45,9 +62,13 @@ SHAPES = ("box", "cylinder", "sphere", "capsule")
 ``length`` along their z axis, sphere ``radius``."""
 
 
+CONTACT_SLACK = 1e-9
+"""m: how far beyond the safety distance a pair at the home (or start) posture still counts as
+in contact there."""
+
 GJK_TOLERANCE = 1e-9
-"""coal's GJK tolerance (m): at its default 1e-6 the witness points of two cylinders are off
-by enough to make the distance's derivative wrong by 1e-4."""
+"""coal's GJK tolerance (m), for the pairs with a mesh: at its default 1e-6 the witness points
+of two curved shapes are off by enough to make the distance's derivative wrong by 1e-4."""
 
 
 @dataclass(frozen=True)
@@ -167,19 +188,24 @@ class CollisionModel:
             self.geometry.addGeometryObject(pin.GeometryObject(obstacle.name, 0, 0, placement,
                                                                shape))  # fmt: skip
         self.obstacles = tuple(obstacles)
+        self._table = _shape_table(self.geometry, robot, self.n_robot)
+        self._request = coal.DistanceRequest()  # for the pairs with a mesh
+        self._request.gjk_tolerance = GJK_TOLERANCE
+        self._warned_meshes = False
         self.excluded: dict[tuple[str, str], str] = {}
         base = [robot.model.getJointId(w) for w in robot.config.base.wheels]
         self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)
-        self._set_pairs()
         self._contacts(safety, robot.home() if start is None else start,
                        "home" if start is None else "start")  # fmt: skip
         self._set_pairs()
-        self._radius, self._centre = _bounding_spheres(self.geometry)
-        self._pair_index = np.array(self.pairs, dtype=np.intp).reshape(-1, 2)
         self._labels = [(self.pair_name(i, k), self.link(i), self.link(k)) for i, k in self.pairs]
-        self._warned_meshes = False
+        self.packed, self._coal_pairs = self._pack(self.pairs)
+        """The model as the kernels read it (:mod:`wholebody.kernels.collision`)."""
+        self._found = np.empty((len(self.pairs), RESULT_WIDTH))
+        self._index = np.empty(len(self.pairs), dtype=np.int64)
+        self._rows = np.empty((len(self.pairs), robot.nu))
 
     # ------------------------------------------------------------------ pairs
     def link(self, index: int) -> str:
@@ -240,24 +266,30 @@ class CollisionModel:
 
     def _contacts(self, safety: float, q: np.ndarray, where: str) -> None:
         """Leave out the robot's own pairs (carried objects included) closer than ``safety``
-        at the posture ``q`` (home, or the start of a carry)."""
+        at the posture ``q`` (home, or the start of a carry), measured as :meth:`distances`
+        does; a pair at ``safety`` within ``CONTACT_SLACK`` counts (two links 1 cm apart by
+        design, with a safety of 1 cm: the constraint would hold them there)."""
         model = self.robot.model  # its own data: the robot's current state stays valid
-        pin.updateGeometryPlacements(model, model.createData(), self.geometry, self.data,
-                                     np.asarray(q, dtype=float))  # fmt: skip
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
+        oMf = _frame_placements(data)
+        packed, coal_pairs = self._pack(self.pairs)
+        found = np.empty((len(self.pairs), RESULT_WIDTH))
+        index = np.empty(len(self.pairs), dtype=np.int64)
+        within = safety + CONTACT_SLACK
+        external = self._coal_distances(coal_pairs, oMf, within, warn=False)  # only d counts
+        n, _ = nearest_pairs(oMf, packed, external, within, found, index)
+        close = {int(index[r]): float(found[r, 0]) for r in range(n)}
         objs = self.geometry.geometryObjects
         keep = []
         for p, (i, k) in enumerate(self.pairs):
-            if k >= self.n_robot:  # an obstacle: where the robot stands is the scenario's
+            if k >= self.n_robot or p not in close:  # an obstacle: the scenario's business
                 keep.append((i, k))
                 continue
-            d = float(pin.computeDistance(self.geometry, self.data, p).min_distance)
-            if d < safety:
-                self.excluded[(objs[i].name, objs[k].name)] = (
-                    f"{d * 1e3:.1f} mm apart at the {where} posture (< safety "
-                    f"{safety * 1e3:.0f} mm)"
-                )
-            else:
-                keep.append((i, k))
+            self.excluded[(objs[i].name, objs[k].name)] = (
+                f"{close[p] * 1e3:.1f} mm apart at the {where} posture (< safety "
+                f"{safety * 1e3:.0f} mm)"
+            )
         self.pairs = keep
 
     def pair_name(self, i: int, k: int) -> str:
@@ -267,32 +299,86 @@ class CollisionModel:
 
     # ------------------------------------------------------------------ distances
     def distances(self, state: RobotState, within: float = math.inf) -> list[PairDistance]:
-        """Every checked pair closer than ``within`` (m) at ``state``, with its row. A
-        bounding-sphere test skips the pairs that cannot be that close."""
-        model = self.robot.model
-        pin.updateGeometryPlacements(model, state._data(), self.geometry, self.data)
-        objs, oMg = self.geometry.geometryObjects, self.data.oMg
-        centres = np.array([oMg[i].act(self._centre[i]) for i in range(len(objs))])
-        ia, ib = self._pair_index[:, 0], self._pair_index[:, 1]
-        gaps = (np.linalg.norm(centres[ib] - centres[ia], axis=1) - self._radius[ia]
-                - self._radius[ib])  # fmt: skip
-        out, jacobians = [], {}
-        for p in np.flatnonzero(gaps < within):
-            i, k = self.pairs[p]
-            d, pa, pb, n = _result(pin.computeDistance(self.geometry, self.data, int(p)))
-            if n is None:
-                n = self._apart(centres[i], centres[k], self._labels[p][0])
-            if d < within:
-                row = (self._point_row(state, objs[k].parentJoint, pb, n, jacobians)
-                       - self._point_row(state, objs[i].parentJoint, pa, n, jacobians))  # fmt: skip
-                name, a, b = self._labels[p]
-                out.append(PairDistance(name, a, b, d, pa, pb, n, row))
+        """Every checked pair closer than ``within`` (m) at ``state``, closest first, with its
+        row: the kernel :func:`~wholebody.kernels.collision.collision_rows` (bounding spheres
+        first, then the exact distance), after coal for the pairs with a mesh."""
+        state._data()  # a stale state raises
+        J, oMf = self.robot.kinematics.views()
+        within = float(within)
+        external = self.external(oMf, within)
+        n, _ = collision_rows(
+            J, oMf, self.packed, external, within, self._rows, self._found, self._index
+        )
+        found, rows = self._found[:n].copy(), self._rows[:n].copy()  # the pairs' own arrays
+        out = []
+        for r in range(n):
+            name, a, b = self._labels[self._index[r]]
+            f = found[r]
+            out.append(PairDistance(name, a, b, float(f[0]), f[1:4], f[4:7], f[7:10], rows[r]))
         return out
 
-    def _apart(self, a: np.ndarray, b: np.ndarray, name: str) -> np.ndarray:
+    def external(self, oMf: np.ndarray, within: float) -> np.ndarray:
+        """The kernels' ``external`` rows at the frame placements ``oMf`` (nframes, 12): coal's
+        results (``d, p_a, p_b, n``) for the pairs with a mesh, ``d = inf`` where they are
+        farther apart than ``within`` (m) by their bounding spheres; none without meshes."""
+        return self._coal_distances(self._coal_pairs, oMf, within)
+
+    def _pack(self, pairs: list[tuple[int, int]]) -> tuple[PackedCollision, np.ndarray]:
+        """The kernels' model for ``pairs``, and the pairs coal computes (a shape the kernel
+        does not handle; (C, 2) shape indices), in the order of their rows in ``external``."""
+        shapes, kinds, support = self._table
+        table = np.zeros((len(pairs), 3), dtype=np.int64)
+        coal_pairs = []
+        for p, (i, k) in enumerate(pairs):
+            slot = -1
+            if kinds[i, 0] == EXTERNAL or kinds[k, 0] == EXTERNAL:
+                slot = len(coal_pairs)
+                coal_pairs.append((i, k))
+            table[p] = (i, k, slot)
+        kin = self.robot.kinematics
+        act = np.ascontiguousarray(np.stack([kin.act_k, kin.act_j]))
+        packed = PackedCollision(shapes, kinds, support, table, act, kin.act_a.copy())
+        return packed, np.array(coal_pairs, dtype=np.intp).reshape(-1, 2)
+
+    def _coal_distances(
+        self, coal_pairs: np.ndarray, oMf: np.ndarray, within: float, warn: bool = True
+    ) -> np.ndarray:
+        """The results (rows ``d, p_a, p_b, n``, world) of the pairs coal computes (shape
+        indices, (C, 2)), at the frame placements ``oMf``; ``d = inf`` where the bounding
+        spheres are farther apart than ``within`` (m). ``warn``: about meshes in contact
+        (:meth:`_apart`)."""
+        out = np.empty((len(coal_pairs), RESULT_WIDTH))
+        if not len(coal_pairs):
+            return out
+        shapes, kinds, _ = self._table
+        R = shapes[:, :9].reshape(-1, 3, 3).transpose(0, 2, 1)  # each rotation (column-major)
+        t = shapes[:, 9:12]
+        robot = kinds[:, 1] >= 0
+        f = kinds[robot, 1]
+        Rf = oMf[f, :9].reshape(-1, 3, 3).transpose(0, 2, 1)
+        R, t = R.copy(), t.copy()
+        R[robot] = Rf @ R[robot]
+        t[robot] = np.einsum("fij,fj->fi", Rf, t[robot]) + oMf[f, 9:12]
+        centre = np.einsum("sij,sj->si", R, shapes[:, CENTRE : CENTRE + 3]) + t
+        a, b = coal_pairs[:, 0], coal_pairs[:, 1]
+        gap = np.linalg.norm(centre[b] - centre[a], axis=1) - shapes[a, RADIUS] - shapes[b, RADIUS]
+        out[:, 0] = np.inf
+        objs = self.geometry.geometryObjects
+        for s in np.flatnonzero(gap < within + 1e-9):
+            i, k = int(a[s]), int(b[s])
+            res = coal.DistanceResult()
+            A, B = coal.Transform3s(R[i], t[i]), coal.Transform3s(R[k], t[k])
+            coal.distance(objs[i].geometry, A, objs[k].geometry, B, self._request, res)
+            d, pa, pb, n = _result(res)
+            if n is None:
+                n = self._apart(centre[i], centre[k], self.pair_name(i, k), warn)
+            out[s, 0], out[s, 1:4], out[s, 4:7], out[s, 7:10] = d, pa, pb, n
+        return out
+
+    def _apart(self, a: np.ndarray, b: np.ndarray, name: str, warn: bool) -> np.ndarray:
         """The direction from a's bounding-sphere centre to b's: the normal of two meshes in
-        contact, where coal gives none (a warning, once per model)."""
-        if not self._warned_meshes:
+        contact, where coal gives none (a warning if ``warn``, once per model)."""
+        if warn and not self._warned_meshes:
             self._warned_meshes = True
             warnings.warn(f"{name}: two meshes in contact have no separating direction; "
                           "pushing their centres apart (simplify them to capsules in "
@@ -300,25 +386,6 @@ class CollisionModel:
         gap = b - a
         length = float(np.linalg.norm(gap))
         return gap / length if length > 0 else np.array([0.0, 0.0, 1.0])
-
-    def _point_row(self, state: RobotState, joint: int, point: np.ndarray, n: np.ndarray,
-                   cache: dict[int, np.ndarray]) -> np.ndarray:  # fmt: skip
-        """``n^T J(p)`` (nu,): the rate along ``n`` of ``point`` fixed to ``joint`` (zero for
-        the world), ``J(p) = J_lin - [r]x J_ang`` so ``n^T J(p) = n^T J_lin - (n x r)^T
-        J_ang``; ``cache`` keeps each joint's Jacobian (actuated columns) for the call."""
-        robot = self.robot
-        if joint == 0:
-            return np.zeros(robot.nu)
-        data = state._data()
-        J = cache.get(joint)
-        if J is None:
-            J = pin.getJointJacobian(robot.model, data, joint, pin.LOCAL_WORLD_ALIGNED)
-            J = cache[joint] = J @ robot.actuation
-        r = point - data.oMi[joint].translation
-        # n x r written out: np.cross costs ten times this
-        n_x_r = np.array([n[1] * r[2] - n[2] * r[1], n[2] * r[0] - n[0] * r[2],
-                          n[0] * r[1] - n[1] * r[0]])  # fmt: skip
-        return n @ J[:3] - n_x_r @ J[3:]
 
     def summary(self) -> str:
         """How many pairs are checked and why the others are not."""
@@ -374,15 +441,76 @@ def _named_pairs(model: CollisionModel, pairs: Iterable[Sequence[str]]) -> set[f
     return out
 
 
-def _bounding_spheres(geom: pin.GeometryModel) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Each shape's bounding-sphere radius and centre in the shape's frame (from its AABB)."""
-    radius, centre = [], []
-    for obj in geom.geometryObjects:
-        g = obj.geometry
-        g.computeLocalAABB()
-        radius.append(float(g.aabb_radius))
-        centre.append(np.asarray(g.aabb_center, dtype=float).copy())
-    return np.array(radius), centre
+def _shape_table(
+    geom: pin.GeometryModel, robot: Robot, n_robot: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shapes as :class:`~wholebody.kernels.collision.PackedCollision` holds them:
+    ``(shapes, kinds, support)``. A robot shape is fixed to its parent frame (the placement
+    relative to it ``frame.placement^-1 * placement``), an obstacle to the world; a shape
+    other than a sphere, capsule, box or cylinder (a mesh, a swept shape) is EXTERNAL, left
+    to coal."""
+    model = robot.model
+    objs = geom.geometryObjects
+    shapes = np.zeros((len(objs), SHAPE_WIDTH))
+    kinds = np.zeros((len(objs), 2), dtype=np.int64)
+    frames = []
+    for s, obj in enumerate(objs):
+        kind, size, centre, radius = _primitive(obj.geometry)
+        if s < n_robot:
+            f = _frame_of(model, obj)
+            local = model.frames[f].placement.inverse() * obj.placement
+            frames.append(Frame(model.frames[f].name, f, int(obj.parentJoint)))
+        else:
+            f, local = -1, obj.placement
+        shapes[s, :9] = local.rotation.ravel(order="F")
+        shapes[s, 9:12] = local.translation
+        shapes[s, SIZE : SIZE + 3] = size
+        shapes[s, CENTRE : CENTRE + 3] = centre
+        shapes[s, RADIUS] = radius
+        kinds[s] = (kind, f)
+    support = np.zeros((len(objs), model.nv), dtype=np.bool_)
+    support[:n_robot] = robot.kinematics.support(frames)
+    return shapes, kinds, support
+
+
+def _primitive(g: coal.CollisionGeometry) -> tuple[int, tuple[float, ...], np.ndarray, float]:
+    """A coal shape's kernel kind, sizes (m: radius or half extents, half lengths), and its
+    bounding sphere's centre (its own axes) and radius (m)."""
+    plain = isinstance(g, coal.ShapeBase) and g.getSweptSphereRadius() == 0.0
+    origin = np.zeros(3)
+    if type(g) is coal.Sphere and plain:
+        return SPHERE, (g.radius, 0.0, 0.0), origin, g.radius
+    if type(g) is coal.Capsule and plain:
+        return CAPSULE, (g.radius, g.halfLength, 0.0), origin, g.radius + g.halfLength
+    if type(g) is coal.Box and plain:
+        half = np.asarray(g.halfSide, dtype=float)
+        return BOX, tuple(half), origin, float(np.linalg.norm(half))
+    if type(g) is coal.Cylinder and plain:
+        radius = math.hypot(g.radius, g.halfLength)
+        return CYLINDER, (g.radius, g.halfLength, 0.0), origin, radius
+    g.computeLocalAABB()
+    centre = np.asarray(g.aabb_center, dtype=float).copy()
+    return EXTERNAL, (0.0, 0.0, 0.0), centre, float(g.aabb_radius)
+
+
+def _frame_of(model: pin.Model, obj: pin.GeometryObject) -> int:
+    """The frame a robot shape is fixed to: its parent frame, or where that frame is not on
+    the shape's joint, the first frame that is."""
+    if model.frames[obj.parentFrame].parentJoint == obj.parentJoint:
+        return int(obj.parentFrame)
+    for f, frame in enumerate(model.frames):
+        if frame.parentJoint == obj.parentJoint:
+            return f
+    raise DimensionError(f"collision shape {obj.name!r}: no frame on its joint")
+
+
+def _frame_placements(data: pin.Data) -> np.ndarray:
+    """The frame placements (nframes, 12): rotation column-major, then translation."""
+    out = np.empty((len(data.oMf), 12))
+    for f, M in enumerate(data.oMf):
+        out[f, :9] = M.rotation.ravel(order="F")
+        out[f, 9:] = M.translation
+    return out
 
 
 def _simplified(geom: pin.GeometryModel, robot: Robot,

@@ -468,7 +468,7 @@ def _shape_table(
         shapes[s, CENTRE : CENTRE + 3] = centre
         shapes[s, RADIUS] = radius
         kinds[s] = (kind, f)
-    support = np.zeros((len(objs), model.nv), dtype=np.bool_)
+    support = np.zeros((len(objs), model.nv), dtype=np.int64)
     support[:n_robot] = robot.kinematics.support(frames)
     return shapes, kinds, support
 

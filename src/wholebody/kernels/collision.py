@@ -45,6 +45,7 @@ __all__ = [
     "SHAPE_WIDTH",
     "SIZE",
     "PackedCollision",
+    "collision_entry",
     "collision_rows",
     "nearest_pairs",
     "pair_rows",
@@ -69,7 +70,7 @@ class PackedCollision(NamedTuple):
 
     shapes: np.ndarray  # (S, SHAPE_WIDTH): local placement, sizes, bounding sphere
     kinds: np.ndarray  # (S, 2) int: kind (distance.SPHERE, ... or EXTERNAL), frame (-1: world)
-    support: np.ndarray  # (S, nv) bool: the velocity coordinates that move the shape
+    support: np.ndarray  # (S, nv) int: 1 where the velocity coordinate moves the shape
     pairs: np.ndarray  # (P, 3) int: shape a, shape b, row in external (-1: computed here)
     act: np.ndarray  # (2, E) int: actuation entries' column k of u, row j of v
     act_a: np.ndarray  # (E,): their values (v = A u)
@@ -212,3 +213,43 @@ def collision_rows(
     n, near = nearest_pairs(oMf, model, external, within, found[: rows.shape[0]], index)
     pair_rows(J, model, found, index, n, rows)
     return n, near
+
+
+# the block of a compiled CollisionAvoidance (floats): safety, influence (m), approach speed
+# (m/s), rows written and pairs within (out), then per row its pair's result (RESULT_WIDTH,
+# out) and the pair's index (out), then the shapes (S x SHAPE_WIDTH); its integers: S, P, the
+# kinds (S x 2), the support (S x nv), the pairs (P x 3)
+CA_SAFETY, CA_INFLUENCE, CA_SPEED, CA_WRITTEN, CA_WITHIN = 0, 1, 2, 3, 4
+CA_HEAD = 5
+
+
+@kernel
+def collision_entry(J: np.ndarray, oMf: np.ndarray, par: np.ndarray, ints: np.ndarray,
+                    act: np.ndarray, act_a: np.ndarray, C: np.ndarray,
+                    cb: np.ndarray) -> None:  # fmt: skip
+    """A compiled :class:`~wholebody.tasks.CollisionAvoidance`'s rows ``C`` (max_rows x nu,
+    unscaled) and bounds ``cb`` (2 x max_rows) from its blocks (above): the velocity damper
+    ``d' >= -speed (d - safety) / (influence - safety)`` on the closest pairs within the
+    influence, the rows left over inactive (``-inf <= 0 u <= inf``)."""
+    m, nv = C.shape[0], J.shape[1]
+    S, P = ints[0], ints[1]
+    kinds = ints[2 : 2 + 2 * S].reshape((S, 2))
+    support = ints[2 + 2 * S : 2 + 2 * S + S * nv].reshape((S, nv))
+    pairs = ints[2 + 2 * S + S * nv : 2 + 2 * S + S * nv + 3 * P].reshape((P, 3))
+    found = par[CA_HEAD : CA_HEAD + m * RESULT_WIDTH].reshape((m, RESULT_WIDTH))
+    at = CA_HEAD + m * RESULT_WIDTH
+    shapes = par[at + m : at + m + S * SHAPE_WIDTH].reshape((S, SHAPE_WIDTH))
+    model = PackedCollision(shapes, kinds, support, pairs, act, act_a)
+    index = np.zeros(m, np.int64)
+    safety, influence, speed = par[CA_SAFETY], par[CA_INFLUENCE], par[CA_SPEED]
+    n, near = collision_rows(J, oMf, model, np.zeros((0, RESULT_WIDTH)), influence, C, found,
+                             index)  # fmt: skip
+    par[CA_WRITTEN], par[CA_WITHIN] = n, near
+    for r in range(m):
+        par[at + r] = index[r] if r < n else -1.0
+        cb[1, r] = np.inf
+        if r < n:
+            cb[0, r] = -speed * (found[r, 0] - safety) / (influence - safety)
+        else:
+            cb[0, r] = -np.inf
+            C[r, :] = 0.0

@@ -18,6 +18,7 @@ import numpy as np
 
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
+from wholebody.kernels.collision import collision_entry
 from wholebody.kernels.kinematics import frame_kinematics, joint_positions
 from wholebody.kernels.layout import fmat, ften, fvec, imat, ivec
 from wholebody.kernels.limits import acceleration_box, position_box, velocity_box
@@ -77,7 +78,7 @@ def evaluate(
         if cat == lay.CAT_TASK:
             _task(f, i, h, entries[e], refs)
         elif cat == lay.CAT_INEQUALITY:
-            _inequality(f, i, h, entries[e], dt)
+            _inequality(f, i, h, entries[e], dt, J, oMf)
         elif cat == lay.CAT_OBJECTIVE:
             _objective(f, i, h, entries[e])
         else:
@@ -118,13 +119,21 @@ def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
 
 
 @kernel
-def _inequality(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
-                dt: float) -> None:  # fmt: skip
-    """A compiled inequality task's rows and bounds (unscaled): a half-space."""
+def _inequality(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, dt: float,
+                J: np.ndarray, oMf: np.ndarray) -> None:  # fmt: skip
+    """A compiled inequality task's rows and bounds (unscaled): a half-space, or collision
+    avoidance (from Pinocchio's ``data.J`` and ``data.oMf``)."""
     par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
-    frame = ivec(i, h, lay.I_PAR)[entry[lay.E_I0]]
+    ints = ivec(i, h, lay.I_PAR)[entry[lay.E_I0] : entry[lay.E_I0] + entry[lay.E_IN]]
     row = entry[lay.E_ROW]
     cb = fmat(f, h, lay.F_CB)
+    if entry[lay.E_KIND] == lay.KIND_COLLISION:
+        rows = row + entry[lay.E_ROWS]
+        act = imat(i, h, lay.I_ACT)
+        collision_entry(J, oMf, par, ints, act, fvec(f, h, lay.F_ACT_A),
+                        fmat(f, h, lay.F_C)[row:rows], cb[:, row:rows])  # fmt: skip
+        return
+    frame = ints[0]
     cb[0, row] = half_space_row(ften(f, h, lay.F_KIN_J)[frame], fmat(f, h, lay.F_KIN_P)[frame],
                                 par[0:3], par[3], par[4], dt,
                                 fmat(f, h, lay.F_C)[row])  # fmt: skip

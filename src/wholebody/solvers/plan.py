@@ -375,6 +375,9 @@ class Plan(Arena):
         computes them: then every entry must be compiled)."""
         stack = self.stack
         scalars = self._scalars
+        if dt != scalars[0]:
+            for rec in self.records:
+                rec.entry.check_step(dt)
         scalars[0], scalars[2] = dt, -1.0 if state is None else state.stamp
         if stack._scale_version != self.metric_version:
             metric = self.view(lay.F_METRIC)

@@ -141,6 +141,10 @@ class Compiled:
         """From now on keep the parameter block in ``block``, a stack's copy of it."""
         self._params = block
 
+    def check_step(self, dt: float) -> None:  # noqa: B027 - a hook
+        """Raise an error naming the entry if it cannot take a step of ``dt`` s (the stack
+        asks whenever ``dt`` changes)."""
+
     def compiled_as(self, cls: type, *methods: str) -> bool:
         """Whether ``type(self)`` keeps ``cls``'s ``methods`` (a subclass that overrides one
         of them changes what the entry computes: it is evaluated in Python)."""

@@ -14,6 +14,10 @@ the same with its obstacle coupling term (``CouplingTermObstacleAvoidance3D``, I
 cylinder is represented by its centre point, one coupling term per obstacle, summed). Its
 rollout integrates at its default ``int_dt = 1 ms`` with the ``rk4-cython`` step.
 
+Everything runs with one BLAS thread (``threadpool_limits(1)``, as ``Controller.run``): on a
+loaded 2-core machine OpenBLAS's threads, two pools of them (numpy's and scipy's), made
+movement_primitives' fit + rollout take 55 ms instead of 6.
+
 Also printed: the largest distance of the obstacle paths from the converged one
 (``tolerance=1e-8``; the tests hold that one against scipy's ``solve_ivp``), and the
 start-up cost of the kernels, measured in fresh processes: with an empty numba cache (the
@@ -36,6 +40,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from wholebody.planning import DMP, DynamicPotential, cylinder, minimum_jerk_scaling
 
@@ -313,7 +318,8 @@ def main() -> None:
     ours, timed, baselines = cases(dmp, t, X, pots)
     path_sets = paths(dmp, pots)
     start = startup()
-    med = timings(timed, args.repeats)
+    with threadpool_limits(1):
+        med = timings(timed, args.repeats)
     text = report(args.repeats, ours, baselines, med, path_sets, start)
     print(text)
     if args.write:

@@ -531,6 +531,7 @@ Potential: TypeAlias = DynamicPotential | StaticPotential
 def _row(
     static: bool, shape: Superquadric, gain: float, beta: float, eta: float, floor: float
 ) -> np.ndarray:
+    """A potential's row of the force kernel (:func:`wholebody.kernels.potentials.row`)."""
     from wholebody.planning.dmp.compiled import kernels
 
     return kernels().potentials.row(

@@ -78,10 +78,10 @@ class DMPStepper:
 
     Notes
     -----
-    ``step(state, dt, out=state)`` updates in place and allocates no arrays; without ``out``
-    it returns a new :class:`DMPState`. States of other types (float32 arrays, lists) are
-    read as float64 and written back in their own type. The goal may be moved between
-    steps with :meth:`set_goal`.
+    ``step(state, dt, out=state)`` updates ``state``'s arrays in place, through buffers the
+    stepper keeps; without ``out`` it returns a new :class:`DMPState`. States of other types
+    (float32 arrays, lists) are read as float64 and written back in their own type. The
+    goal may be moved between steps with :meth:`set_goal`.
     """
 
     def __init__(

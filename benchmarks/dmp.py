@@ -1,13 +1,11 @@
-"""DMP speed: fit + 160-sample 3-D rollout, with and without the paper's two cylinders,
-compiled (numba kernels, :mod:`wholebody.kernels.dmp`) and the Python reference.
+"""DMP speed: fit + 160-sample 3-D rollout, with and without the paper's two cylinders, and
+the online stepper (the numba kernels of :mod:`wholebody.kernels.dmp`, the only
+implementation).
 
-Run as ``python benchmarks/dmp.py [--repeats N] [--write]``. Every case runs twice per round,
-compiled and in the reference implementation (``wholebody.planning.dmp.
-reference_implementation``), and the cases are interleaved (one of each per round, in a new
-random order every round) so that load on the machine and cold caches affect them alike;
-medians are printed, with the ratio compiled / reference of the same run. The paper (Niu et al.
-2024, Section 5) reports 160-point trajectories in 0.2252, 0.2444 and 0.2246 s on a laptop i7
-(225 ms).
+Run as ``python benchmarks/dmp.py [--repeats N] [--write]``. The cases are interleaved (one
+of each per round, in a new random order every round) so that load on the machine and cold
+caches affect them alike; medians are printed. The paper (Niu et al. 2024, Section 5)
+reports 160-point trajectories in 0.2252, 0.2444 and 0.2246 s on a laptop i7 (225 ms).
 
 ``movement_primitives`` (BSD; the optional ``bench`` extra) is timed as a baseline when it
 imports, in the same interleaved rounds: fit (``imitate``) + 160-sample open-loop rollout, and
@@ -16,11 +14,16 @@ the same with its obstacle coupling term (``CouplingTermObstacleAvoidance3D``, I
 cylinder is represented by its centre point, one coupling term per obstacle, summed). Its
 rollout integrates at its default ``int_dt = 1 ms`` with the ``rk4-cython`` step.
 
-Also printed: the largest distance between the compiled and the reference paths (and from
-the converged obstacle path, ``tolerance=1e-8``), and the start-up cost of the kernels,
-measured in fresh processes: with an empty numba cache (the first call compiles) and again
-with that cache warm (what every later process pays). ``--write`` puts the printed tables
-into ``benchmarks/README.md`` between ``<!-- dmp:begin -->`` and ``<!-- dmp:end -->``.
+Everything runs with one BLAS thread (``threadpool_limits(1)``, as ``Controller.run``): on a
+loaded 2-core machine OpenBLAS's threads, two pools of them (numpy's and scipy's), made
+movement_primitives' fit + rollout take 55 ms instead of 6.
+
+Also printed: the largest distance of the obstacle paths from the converged one
+(``tolerance=1e-8``; the tests hold that one against scipy's ``solve_ivp``), and the
+start-up cost of the kernels, measured in fresh processes: with an empty numba cache (the
+first call compiles) and again with that cache warm (what every later process pays).
+``--write`` puts the printed tables into ``benchmarks/README.md`` between
+``<!-- dmp:begin -->`` and ``<!-- dmp:end -->``.
 """
 
 from __future__ import annotations
@@ -37,9 +40,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from wholebody.planning import DMP, DynamicPotential, cylinder, minimum_jerk_scaling
-from wholebody.planning.dmp import reference_implementation
 
 PAPER_S = 0.225
 README = Path(__file__).resolve().parent / "README.md"
@@ -121,16 +124,6 @@ def stepped(dmp: DMP, obstacles: list[DynamicPotential]) -> np.ndarray:
     return np.array(path)
 
 
-def reference(run: Callable[[], object]) -> Callable[[], object]:
-    """``run`` in the Python reference implementation."""
-
-    def ref() -> object:
-        with reference_implementation():
-            return run()
-
-    return ref
-
-
 def startup() -> tuple[tuple[float, float], tuple[float, float]]:
     """(import s, first fit + obstacle rollout s) of a fresh process with an empty numba
     cache, then of another with that cache warm."""
@@ -184,8 +177,8 @@ def write_section(text: str, path: Path = README) -> None:
 def cases(
     dmp: DMP, t: np.ndarray, X: np.ndarray, pots: list[DynamicPotential]
 ) -> tuple[dict[str, Callable[[], object]], dict[str, Callable[[], object]], list[tuple[str, str]]]:
-    """(wholebody's cases, every case to time: each of ours compiled and `` [ref]``, then
-    the baselines, (baseline, the case of ours it is compared with))."""
+    """(wholebody's cases, every case to time: ours, then the baselines, (baseline, the case
+    of ours it is compared with))."""
     ours: dict[str, Callable[[], object]] = {
         "fit + rollout (160 samples, 3-D)": lambda: DMP.fit(X, t).rollout(160),
         "rollout alone": lambda: dmp.rollout(160),
@@ -197,10 +190,7 @@ def cases(
         "stepper, 159 steps": lambda: stepped(dmp, []),
         "stepper + 2 cylinders, 159 steps": lambda: stepped(dmp, pots),
     }
-    timed: dict[str, Callable[[], object]] = {}
-    for name, run in ours.items():
-        timed[name] = run
-        timed[name + " [ref]"] = reference(run)
+    timed: dict[str, Callable[[], object]] = dict(ours)
     baselines: list[tuple[str, str]] = []
     for label, points, mine in (
         ("movement_primitives fit + rollout", (), "fit + rollout (160 samples, 3-D)"),
@@ -214,27 +204,17 @@ def cases(
     return ours, timed, baselines
 
 
-def paths(
-    dmp: DMP, t: np.ndarray, X: np.ndarray, pots: list[DynamicPotential]
-) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
-    """The compiled and the reference positions (160, 3) of the compared cases, and the
-    converged obstacle path."""
-
-    def run(fitted: DMP) -> dict[str, np.ndarray]:
-        return {
-            "fit + rollout": fitted.rollout(160).positions,
-            "fit + rollout + 2 cylinders (adaptive)": fitted.rollout(160, obstacles=pots).positions,
-            "2 cylinders, fixed-step RK4": fitted.rollout(
-                160, obstacles=pots, tolerance=math.inf, max_substeps=1
-            ).positions,
-            "stepper + 2 cylinders": stepped(fitted, pots),
-        }
-
-    compiled = run(DMP.fit(X, t))
-    with reference_implementation():
-        ref = run(DMP.fit(X, t))
+def paths(dmp: DMP, pots: list[DynamicPotential]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The positions (160, 3) of the obstacle cases, and the converged obstacle path."""
+    ours = {
+        "rollout + 2 cylinders (adaptive)": dmp.rollout(160, obstacles=pots).positions,
+        "2 cylinders, fixed-step RK4": dmp.rollout(
+            160, obstacles=pots, tolerance=math.inf, max_substeps=1
+        ).positions,
+        "stepper + 2 cylinders": stepped(dmp, pots),
+    }
     converged = dmp.rollout(160, obstacles=pots, tolerance=1e-8, max_substeps=4096).positions
-    return compiled, ref, converged
+    return ours, converged
 
 
 def timings(timed: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
@@ -265,7 +245,7 @@ def report(
     ours: dict[str, Callable[[], object]],
     baselines: list[tuple[str, str]],
     med: dict[str, float],
-    path_sets: tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray],
+    path_sets: tuple[dict[str, np.ndarray], np.ndarray],
     start: tuple[tuple[float, float], tuple[float, float]],
 ) -> str:
     """The tables, in Markdown."""
@@ -276,61 +256,36 @@ def report(
         f"{platform.python_version()}, numpy {np.__version__}.",
         "",
         table(
-            ["case", "compiled ms", "reference (Python) ms", "compiled / ref", "paper / compiled"],
-            [
-                [
-                    n,
-                    f"{med[n]:.3f}",
-                    f"{med[n + ' [ref]']:.3f}",
-                    f"{med[n] / med[n + ' [ref]']:.2f}",
-                    f"{PAPER_S * 1e3 / med[n]:.0f}x",
-                ]
-                for n in ours
-            ],
+            ["case", "ms", "paper / wholebody"],
+            [[n, f"{med[n]:.3f}", f"{PAPER_S * 1e3 / med[n]:.0f}x"] for n in ours],
         ),
     ]
     if baselines:
         mp_fit = med[baselines[0][0]]
         rows = [[label, med[label], mine] for label, mine in baselines]
-        rows += [[f"{baselines[0][0]} vs {mine}", mp_fit, mine]
-                 for mine in ("rollout + 2 cylinders (adaptive RK4)",
-                              "fit + rollout + 2 cylinders")]  # fmt: skip
+        rows += [
+            [f"{baselines[0][0]} vs {mine}", mp_fit, mine]
+            for mine in ("rollout + 2 cylinders (adaptive RK4)", "fit + rollout + 2 cylinders")
+        ]
         out += [
             "",
-            "Against movement_primitives (same run; ratio = its median / wholebody compiled):",
+            "Against movement_primitives (same run; ratio = its median / wholebody's):",
             "",
             table(
-                ["movement_primitives case", "its ms", "wholebody ms", "reference ms", "ratio"],
+                ["movement_primitives case", "its ms", "wholebody ms", "ratio"],
                 [
-                    [
-                        label,
-                        f"{theirs:.3f}",
-                        f"{med[mine]:.3f}",
-                        f"{med[mine + ' [ref]']:.3f}",
-                        f"{theirs / med[mine]:.1f}x",
-                    ]
+                    [label, f"{theirs:.3f}", f"{med[mine]:.3f}", f"{theirs / med[mine]:.1f}x"]
                     for label, theirs, mine in rows
                 ],
             ),
         ]
-    compiled, ref, converged = path_sets
+    found, converged = path_sets
     cold, warm = start
     out += [
         "",
-        "Largest distance between paths (160 samples, m):",
+        "Largest distance from the converged path (160 samples, m):",
         "",
-        table(
-            ["path", "compiled vs reference", "compiled vs converged", "reference vs converged"],
-            [
-                [n, gap(compiled[n], ref[n])]
-                + (
-                    [gap(compiled[n], converged), gap(ref[n], converged)]
-                    if "cyl" in n
-                    else ["", ""]
-                )
-                for n in compiled
-            ],
-        ),
+        table(["path", "vs converged"], [[n, gap(found[n], converged)] for n in found]),
         "",
         "(converged: `tolerance=1e-8, max_substeps=4096`; (*) fixed-step RK4 is not meant to "
         "converge: it shows why the substeps are adaptive.)",
@@ -361,9 +316,10 @@ def main() -> None:
     pots = [DynamicPotential(cylinder(c, 0.04, 0.2, margin=0.02), gain=10.0, beta=2.0, eta=2.0)
             for c in CENTERS]  # fmt: skip
     ours, timed, baselines = cases(dmp, t, X, pots)
-    path_sets = paths(dmp, t, X, pots)
+    path_sets = paths(dmp, pots)
     start = startup()
-    med = timings(timed, args.repeats)
+    with threadpool_limits(1):
+        med = timings(timed, args.repeats)
     text = report(args.repeats, ours, baselines, med, path_sets, start)
     print(text)
     if args.write:

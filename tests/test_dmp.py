@@ -168,9 +168,12 @@ def test_linear_rollout_equals_plain_rk4() -> None:
     K, D, T = cfg.K, cfg.D, 1.5
     rate = cfg.alpha_s / (cfg.phase_tau_ratio * T)
 
+    centers, widths = cfg.centers(), cfg.widths()
+
     def F(t: float, z: np.ndarray) -> np.ndarray:
         s = np.exp(-rate * t)
-        f = d.forcing(np.array([s]))[0]
+        psi = np.exp(-widths * (s - centers) ** 2)
+        f = s * (psi @ d.weights) / psi.sum()  # the forcing term, from its formula
         x, v = z[:2], z[2:]
         dv = K * (d.goal - x) - D * v - K * (d.goal - d.start) * s + K * f
         return np.concatenate([v, dv]) / T

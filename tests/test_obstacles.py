@@ -22,7 +22,8 @@ from wholebody.planning import (
     sphere_distance,
     total_force,
 )
-from wholebody.planning.obstacles import make_point_force
+from wholebody.planning.dmp import integrator
+from wholebody.planning.obstacles import potential_rows
 
 TILT = exp_so3(np.array([0.3, -0.5, 0.8]))
 
@@ -86,10 +87,6 @@ def test_dynamic_force_is_minus_the_gradient(
         rel = np.linalg.norm(F - G, axis=1) / np.linalg.norm(G, axis=1).clip(1e-300)
         assert np.all(rel[active] < 1e-5), (shape, rel[active].max())
         assert not np.any(F[~active])
-        # the scalar kernel used by the integrators gives the same numbers
-        kern = pot.point_force()
-        K = np.array([kern(*a, *b) for a, b in zip(x, v, strict=True)])
-        assert np.allclose(K, F, rtol=1e-10, atol=1e-12 * np.abs(F).max())
 
 
 @pytest.mark.parametrize("eta", [0.5, 1.0, 2.0])
@@ -105,9 +102,6 @@ def test_static_force_is_minus_the_gradient(eta: float, rng: np.random.Generator
         assert live.sum() >= 12
         rel = np.linalg.norm(F - G, axis=1)[live] / np.linalg.norm(G, axis=1)[live]
         assert np.all(rel < 1e-5), rel.max()
-        kern = pot.point_force()
-        K = np.array([kern(*a, 0.0, 0.0, 0.0) for a in x])
-        assert np.allclose(K, F, rtol=1e-10, atol=0.0)
 
 
 def test_isopotential_derivatives_match_finite_differences(rng: np.random.Generator) -> None:
@@ -141,11 +135,18 @@ def test_forces_are_finite_inside_and_on_the_axis(rng: np.random.Generator) -> N
             assert np.all(np.isfinite(pot.potential(x, v)))
             F = pot.force(x, v)
             assert np.all(np.isfinite(F))
-            kern = pot.point_force()
-            K = np.array([kern(*a, *b) for a, b in zip(x, v, strict=True)])
-            assert np.all(np.isfinite(K))
             # bounded by the saturation: |phi| <= gain * C_min^-eta * (scale of grad/hess terms)
             assert np.abs(F).max() < 1e12
+
+
+class _Sum:
+    """The sum of several potentials' ``U`` (for finite differences)."""
+
+    def __init__(self, pots: list) -> None:
+        self.pots = pots
+
+    def potential(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return sum(p.potential(x, v) for p in self.pots)
 
 
 def test_forces_add_and_vanish_when_moving_away() -> None:
@@ -154,9 +155,11 @@ def test_forces_add_and_vanish_when_moving_away() -> None:
     x = np.array([[0.2, 0.05, 0.01], [0.25, -0.1, 0.05]])
     v = np.array([[-1.0, 0.1, 0.0], [1.0, 0.3, 0.2]])
     assert np.allclose(total_force(pots, x, v), pots[0].force(x, v) + pots[1].force(x, v))
-    kern = make_point_force(pots)
-    assert kern is not None
-    assert np.allclose([kern(*x[0], *v[0]), kern(*x[1], *v[1])], total_force(pots, x, v))
+    assert np.allclose(total_force(pots, x[0], v[0]), total_force(pots, x, v)[0])
+    # and the sum is minus the gradient of the summed potentials
+    total = _Sum(pots)
+    F = total_force(pots, x, v)
+    assert np.allclose(F, fd_force(total, x, v, eps=1e-6), rtol=1e-6, atol=1e-9)
     # moving away from the sphere: no force from it
     assert not np.any(pots[0].force(np.array([0.3, 0.0, 0.0]), np.array([1.0, 0.2, 0.0])))
     # approaching head-on: pushed back along the normal
@@ -278,23 +281,13 @@ def test_the_step_control_spends_its_evaluations_near_the_obstacles(scene_dmp: D
     """Substep counts follow the error estimate (not doubling and halving): in the paper's
     scene 1677 force evaluations against 1993, the path within 1e-5 m of the converged one;
     far from the obstacles one RK4 step per sample."""
-    calls = [0]
-
-    class Counted(DynamicPotential):
-        def point_force(self):
-            force = super().point_force()
-
-            def counted(*args: float) -> tuple[float, float, float]:
-                calls[0] += 1
-                return force(*args)
-
-            return counted
-
-    first, second = scene_potentials()
-    pots = [Counted(first.shape, first.gain, first.beta, first.eta), second]
-    r = scene_dmp.rollout(160, obstacles=pots)
-    assert 4 * 159 < calls[0] < 1900  # one call of the first obstacle's force per evaluation
-    ref = scene_dmp.rollout(160, obstacles=scene_potentials(), tolerance=1e-8, max_substeps=4096)
+    pots = scene_potentials()
+    r, counts, evaluations = integrator.rollout(
+        scene_dmp, 160, scene_dmp.start, scene_dmp.goal, 2.0, potential_rows(pots), 1e-3, 256
+    )
+    assert 4 * 159 < evaluations < 1900
+    assert np.mean(counts == 1) > 0.5 and counts.max() > 4
+    ref = scene_dmp.rollout(160, obstacles=pots, tolerance=1e-8, max_substeps=4096)
     assert np.max(np.linalg.norm(ref.positions - r.positions, axis=1)) < 1e-5
 
 
@@ -341,30 +334,26 @@ def test_exponents_beyond_32_are_refused(make) -> None:
         make(33.0)
 
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # uncompiled: numpy scalars overflow
 def test_a_non_finite_force_raises_and_a_jumping_force_is_integrated(scene_dmp: DMP) -> None:
-    """A force that turns NaN (a user potential's 0/0) stopped nothing: max() in the error
-    estimate drops NaN, and 90 of 160 samples came back NaN. A force that jumps (beta = 1,
+    """A force that turns non-finite stops the rollout and the stepper (it once returned 90
+    of 160 samples NaN: max() in the error estimate drops NaN). A force that jumps (beta = 1,
     where cos theta changes sign) keeps its estimate near 1e-3 m however small the substep:
     within 10 x the tolerance at max_substeps the interval is accepted, and the path is within
     a millimetre of a fine reference."""
-
-    class NaNBeyond:
-        def point_force(self):
-            def force(x1, x2, x3, v1, v2, v3):
-                return (0.0, np.nan, 0.0) if x2 > -0.45 else (0.0, 0.0, 0.0)
-
-            return force
-
+    huge = [DynamicPotential(cylinder(CENTERS[0], RADIUS, HEIGHT, margin=MARGIN), gain=1e305)]
     with pytest.raises(IntegrationError, match="non-finite state"):
-        scene_dmp.rollout(160, obstacles=[NaNBeyond()])
-    stepper = scene_dmp.stepper(obstacles=[NaNBeyond()])
+        scene_dmp.rollout(160, obstacles=huge)
+    stepper = scene_dmp.stepper(obstacles=huge)
     state = stepper.initial_state()
     with pytest.raises(IntegrationError, match="non-finite state"):
         for _ in range(159):
             state = stepper.step(state, 2.0 / 159)
 
-    jumping = [DynamicPotential(cylinder(c, RADIUS, HEIGHT, margin=MARGIN), gain=GAIN, beta=1.0,
-                                eta=ETA) for c in CENTERS]  # fmt: skip
+    jumping = [
+        DynamicPotential(cylinder(c, RADIUS, HEIGHT, margin=MARGIN), gain=GAIN, beta=1.0, eta=ETA)
+        for c in CENTERS
+    ]
     path = scene_dmp.rollout(160, obstacles=jumping).positions
     ref = scene_dmp.rollout(160, obstacles=jumping, max_substeps=4096).positions
     assert np.max(np.linalg.norm(path - ref, axis=1)) < 1e-3

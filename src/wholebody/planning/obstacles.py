@@ -61,14 +61,30 @@ which the path is converged under step refinement, clears both cylinders and rea
 goal. Weak steering (small ``lambda``, ``beta = 1``, ``eta <= 1``) lets the hand stall
 head-on in front of the cylinder and slip round it: there the force switches on and off
 with the sign of ``cos theta``, and the path depends on the step size.
+
+**One implementation of the force.** The forces are computed by the kernel
+:func:`wholebody.kernels.potentials.force`, which the DMP integrator evaluates at every RK4
+stage; :meth:`DynamicPotential.force`, :meth:`StaticPotential.force` and :func:`total_force`
+call it for many points at once. :meth:`~DynamicPotential.potential` stays vectorised numpy
+(for plots and checks: the tests hold the force against its finite differences).
+
+**Supported potentials (decision).** A DMP avoids obstacles given as
+:class:`DynamicPotential` or :class:`StaticPotential` of a :class:`Superquadric` (``sphere``,
+``cylinder``, ``box`` or any superquadric at any pose); several potentials add their forces.
+Anything else is refused with a :class:`~wholebody.errors.DimensionError` that says so
+(:func:`potential_rows`), as is a subclass with its own ``force()`` or ``potential()``: the
+integrator is compiled and computes these potentials from their parameters, so it could not
+honour an override, and a Python callback at every stage would bring back a second,
+fifty times slower integrator. A subclass that only adds attributes (a name, say) is
+accepted.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import TypeAlias
 
 import numpy as np
 
@@ -84,7 +100,7 @@ __all__ = [
     "box_distance",
     "cylinder",
     "cylinder_distance",
-    "make_point_force",
+    "potential_rows",
     "sphere",
     "sphere_distance",
     "total_force",
@@ -96,10 +112,8 @@ from the centre (a 4 cm obstacle 2.6 km away); steeper shapes would give inf and
 within reach."""
 
 _Q_FLOOR = 1e-150
-"""Floor of ``q = a^n + b^n`` on the obstacle's axis, where ``q^(m/n-2)`` would be infinite."""
-
-PointForce = Callable[[float, float, float, float, float, float], tuple[float, float, float]]
-"""``(x1, x2, x3, v1, v2, v3) -> (phi1, phi2, phi3)``: the force at one point, scalar code."""
+"""Floor of ``q = a^n + b^n`` on the obstacle's axis, where ``q^(m/n-2)`` would be infinite
+(the same as the force kernel's)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,16 +209,6 @@ class Superquadric:
         H[..., 1, 0] = h12
         H[..., 2, 2] = 2.0 * m * (2.0 * m - 1.0) * cm1 * inv[2] ** 2
         return C, g, H
-
-    def _params(self) -> tuple[float, ...]:
-        """Flat parameters for the scalar kernels: c, R (row-major), 1/f, n, m."""
-        return (
-            *self.center.tolist(),
-            *self.rotation.ravel().tolist(),
-            *(1.0 / self.semi_axes).tolist(),
-            self.n,
-            self.m,
-        )
 
 
 # --------------------------------------------------------------------------------------
@@ -375,23 +379,6 @@ def box_distance(
 # Potentials
 
 
-@runtime_checkable
-class Potential(Protocol):
-    """A repulsive potential ``U(x, v)`` with its force ``phi = -grad_x U``."""
-
-    def potential(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``U`` (N,) at points ``x`` (N, 3) moving with ``v`` (N, 3)."""
-        ...
-
-    def force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``phi = -grad_x U`` (N, 3)."""
-        ...
-
-    def point_force(self) -> PointForce:
-        """The same force at one point, as a scalar closure (fast inside integrators)."""
-        ...
-
-
 def _floor(value: float) -> float:
     return as_positive(value, "potential: floor")
 
@@ -406,6 +393,16 @@ def _pair(x: np.ndarray, v: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarr
             f"{name}: x and v must have the same shape, got {xa.shape}, {va.shape}"
         )
     return xa, va, single
+
+
+def _forces(rows: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The summed force (N, 3) of the kernel ``rows`` at ``x`` moving with ``v`` (N, 3), by
+    :func:`wholebody.kernels.potentials.forces`."""
+    from wholebody.planning.dmp.compiled import as_buffer, kernels
+
+    out = np.empty(x.shape)
+    kernels().potentials.forces(rows, as_buffer(x), as_buffer(v), out)
+    return out
 
 
 class DynamicPotential:
@@ -449,124 +446,31 @@ class DynamicPotential:
         self.eta = as_positive(eta, "DynamicPotential: eta")
         self.floor = _floor(floor)
 
-    def _terms(self, x: np.ndarray, v: np.ndarray, hessian: bool) -> dict[str, np.ndarray]:
+    def potential(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``U`` (N,) (or a scalar for one point) at ``x`` (N, 3) moving with ``v`` (N, 3)."""
+        xa, va, single = _pair(x, v, "DynamicPotential.potential")
         shape = self.shape
-        R = shape.rotation
-        p = (x - shape.center) @ R
-        w = v @ R
-        C, g, H = shape._local_terms(p, hessian)
+        w = va @ shape.rotation
+        C, g, _ = shape._local_terms(shape.local(xa), hessian=False)
         wg = np.einsum("ij,ij->i", w, g)
         gn = np.linalg.norm(g, axis=1)
         wn = np.linalg.norm(w, axis=1)
         active = (wg < 0.0) & (gn > 0.0) & (wn > 0.0)
         k = np.where(active, -wg / np.where(active, wn * gn, 1.0), 0.0)
         Cs = np.maximum(C, self.floor)
-        return {"w": w, "C": C, "Cs": Cs, "g": g, "H": H, "wg": wg, "gn": gn, "wn": wn,
-                "k": k, "active": active}  # fmt: skip
-
-    def potential(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``U`` (N,) (or a scalar for one point) at ``x`` (N, 3) moving with ``v`` (N, 3)."""
-        xa, va, single = _pair(x, v, "DynamicPotential.potential")
-        t = self._terms(xa, va, hessian=False)
-        U = np.where(t["active"], self.gain * t["k"] ** self.beta * t["wn"] / t["Cs"] ** self.eta,
-                     0.0)  # fmt: skip
+        U = np.where(active, self.gain * k**self.beta * wn / Cs**self.eta, 0.0)
         return U[0] if single else U
 
     def force(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``phi = -grad_x U`` (N, 3) (or (3,) for one point), world axes."""
+        """``phi = -grad_x U`` (N, 3) (or (3,) for one point), world axes, m: the DMP
+        integrator's force (module docstring)."""
         xa, va, single = _pair(x, v, "DynamicPotential.force")
-        t = self._terms(xa, va, hessian=True)
-        act = t["active"]
-        gn = np.where(act, t["gn"], 1.0)
-        g, w, k, Cs = t["g"], t["w"], t["k"], t["Cs"]
-        w_perp = w - (t["wg"] / gn**2)[:, None] * g
-        Hw = np.einsum("nij,nj->ni", t["H"], w_perp)
-        coef = self.gain * Cs ** (-self.eta) * np.where(act, k, 1.0) ** (self.beta - 1.0)
-        radial = np.where(t["C"] > self.floor, self.eta * k * t["wn"] / Cs, 0.0)
-        local = coef[:, None] * ((self.beta / gn)[:, None] * Hw + radial[:, None] * g)
-        local[~act] = 0.0
-        phi = local @ self.shape.rotation.T
+        phi = _forces(self._row()[None], xa, va)
         return phi[0] if single else phi
 
-    def point_force(self) -> PointForce:
-        """Scalar closure of :meth:`force` for one point (same formulas, Python floats)."""
-        cx, cy, cz, r00, r01, r02, r10, r11, r12, r20, r21, r22, i1, i2, i3, n, m = (
-            self.shape._params()
-        )
-        lam, beta, eta, floor = self.gain, self.beta, self.eta, self.floor
-        mn = m / n
-        n1, m1 = n - 1.0, m - 1.0
-        two_m = 2.0 * m
-        hd = 2.0 * (m - n)
-        n2 = 2.0 * n - 1.0
-        h33 = 2.0 * m * (2.0 * m - 1.0) * i3 * i3
-        b1 = beta - 1.0
-        sqrt = math.sqrt
-        round_section = n == 1.0
-        aligned = bool(np.array_equal(self.shape.rotation, np.eye(3)))
-
-        def force(
-            x1: float, x2: float, x3: float, v1: float, v2: float, v3: float
-        ) -> tuple[float, float, float]:
-            d1, d2, d3 = x1 - cx, x2 - cy, x3 - cz
-            if aligned:  # R = I: skip the rotations
-                u1, u2, u3 = d1 * i1, d2 * i2, d3 * i3
-                w1, w2, w3 = v1, v2, v3
-            else:
-                u1 = (r00 * d1 + r10 * d2 + r20 * d3) * i1
-                u2 = (r01 * d1 + r11 * d2 + r21 * d3) * i2
-                u3 = (r02 * d1 + r12 * d2 + r22 * d3) * i3
-                w1 = r00 * v1 + r10 * v2 + r20 * v3
-                w2 = r01 * v1 + r11 * v2 + r21 * v3
-                w3 = r02 * v1 + r12 * v2 + r22 * v3
-            a, b, c = u1 * u1, u2 * u2, u3 * u3
-            cm1 = c**m1
-            if round_section:  # n = 1: skip two powers
-                an1 = bn1 = 1.0
-                an, bn = a, b
-            else:
-                an1, bn1 = a**n1, b**n1
-                an, bn = an1 * a, bn1 * b
-            q = an + bn
-            if q < _Q_FLOOR:
-                q = _Q_FLOOR
-            qm = q**mn
-            t = two_m * qm / q
-            g1 = t * an1 * u1 * i1
-            g2 = t * bn1 * u2 * i2
-            g3 = two_m * cm1 * u3 * i3
-            wg = w1 * g1 + w2 * g2 + w3 * g3
-            if wg >= 0.0:
-                return 0.0, 0.0, 0.0
-            gg = g1 * g1 + g2 * g2 + g3 * g3
-            ww = w1 * w1 + w2 * w2 + w3 * w3
-            if gg == 0.0 or ww == 0.0:
-                return 0.0, 0.0, 0.0
-            gn, wn = sqrt(gg), sqrt(ww)
-            k = -wg / (wn * gn)
-            iso = qm + c * cm1 - 1.0
-            Cs = iso if iso > floor else floor
-            h = t / q
-            H11 = h * an1 * (hd * an + n2 * q) * i1 * i1
-            H22 = h * bn1 * (hd * bn + n2 * q) * i2 * i2
-            H12 = hd * h * an1 * bn1 * u1 * u2 * i1 * i2
-            r = wg / gg
-            p1, p2, p3 = w1 - r * g1, w2 - r * g2, w3 - r * g3
-            coef = lam * Cs**-eta * k**b1
-            sa = coef * beta / gn
-            sb = coef * eta * k * wn / Cs if iso > floor else 0.0
-            f1 = sa * (H11 * p1 + H12 * p2) + sb * g1
-            f2 = sa * (H12 * p1 + H22 * p2) + sb * g2
-            f3 = sa * h33 * cm1 * p3 + sb * g3
-            if aligned:
-                return f1, f2, f3
-            return (
-                r00 * f1 + r01 * f2 + r02 * f3,
-                r10 * f1 + r11 * f2 + r12 * f3,
-                r20 * f1 + r21 * f2 + r22 * f3,
-            )
-
-        return force
+    def _row(self) -> np.ndarray:
+        """This potential's row of the force kernel (:mod:`wholebody.kernels.potentials`)."""
+        return _row(False, self.shape, self.gain, self.beta, self.eta, self.floor)
 
 
 class StaticPotential:
@@ -607,134 +511,95 @@ class StaticPotential:
         return U[0] if single else U
 
     def force(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
-        """``phi = -grad_x U`` (N, 3) (or (3,) for one point), world axes."""
+        """``phi = -grad_x U`` (N, 3) (or (3,) for one point), world axes, m; ``v`` is
+        ignored."""
         xa = np.asarray(x, dtype=float)
         single = xa.ndim == 1
         xa = as_array(np.atleast_2d(xa), (None, 3), "StaticPotential.force: x")
-        shape = self.shape
-        iso, g, _ = shape._local_terms(shape.local(xa), hessian=False)
-        Cs = np.maximum(iso, self.floor)
-        s = self.gain * np.exp(-self.eta * Cs) * (self.eta / Cs + 1.0 / Cs**2)
-        s = np.where(iso > self.floor, s, 0.0)
-        phi = (s[:, None] * g) @ shape.rotation.T
+        phi = _forces(self._row()[None], xa, np.zeros(xa.shape))
         return phi[0] if single else phi
 
-    def point_force(self) -> PointForce:
-        """Scalar closure of :meth:`force` (the velocity arguments are ignored)."""
-        cx, cy, cz, r00, r01, r02, r10, r11, r12, r20, r21, r22, i1, i2, i3, n, m = (
-            self.shape._params()
-        )
-        A, eta, floor = self.gain, self.eta, self.floor
-        mn, n1, m1, two_m = m / n, n - 1.0, m - 1.0, 2.0 * m
-        exp = math.exp
+    def _row(self) -> np.ndarray:
+        """This potential's row of the force kernel (:mod:`wholebody.kernels.potentials`)."""
+        return _row(True, self.shape, self.gain, 1.0, self.eta, self.floor)
 
-        def force(
-            x1: float, x2: float, x3: float, v1: float, v2: float, v3: float
-        ) -> tuple[float, float, float]:
-            d1, d2, d3 = x1 - cx, x2 - cy, x3 - cz
-            u1 = (r00 * d1 + r10 * d2 + r20 * d3) * i1
-            u2 = (r01 * d1 + r11 * d2 + r21 * d3) * i2
-            u3 = (r02 * d1 + r12 * d2 + r22 * d3) * i3
-            a, b, c = u1 * u1, u2 * u2, u3 * u3
-            an1, bn1, cm1 = a**n1, b**n1, c**m1
-            q = an1 * a + bn1 * b
-            if q < _Q_FLOOR:
-                q = _Q_FLOOR
-            qm = q**mn
-            iso = qm + c * cm1 - 1.0
-            if iso <= floor:
-                return 0.0, 0.0, 0.0
-            t = two_m * qm / q
-            s = A * exp(-eta * iso) * (eta / iso + 1.0 / (iso * iso))
-            f1 = s * t * an1 * u1 * i1
-            f2 = s * t * bn1 * u2 * i2
-            f3 = s * two_m * cm1 * u3 * i3
-            return (
-                r00 * f1 + r01 * f2 + r02 * f3,
-                r10 * f1 + r11 * f2 + r12 * f3,
-                r20 * f1 + r21 * f2 + r22 * f3,
-            )
 
-        return force
+Potential: TypeAlias = DynamicPotential | StaticPotential
+"""A repulsive potential the DMP integrator computes (module docstring)."""
+
+
+def _row(
+    static: bool, shape: Superquadric, gain: float, beta: float, eta: float, floor: float
+) -> np.ndarray:
+    """A potential's row of the force kernel (:func:`wholebody.kernels.potentials.row`)."""
+    from wholebody.planning.dmp.compiled import kernels
+
+    return kernels().potentials.row(
+        static,
+        shape.center,
+        shape.rotation,
+        shape.semi_axes,
+        (shape.n, shape.m),
+        gain,
+        beta,
+        eta,
+        floor,
+    )
 
 
 def total_force(potentials: Sequence[Potential], x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Sum of the forces of several potentials at ``x`` (N, 3) with velocity ``v`` (N, 3)."""
-    xa = np.asarray(x, dtype=float)
-    out = np.zeros(xa.shape)
-    for pot in potentials:
-        out = out + pot.force(xa, v)
-    return out
+    """Sum of the forces (N, 3) m (or (3,) for one point) of several potentials at ``x``
+    (N, 3) m with velocity ``v`` (N, 3) m (the DMP's ``tau x'``)."""
+    xa, va, single = _pair(x, v, "total_force")
+    phi = _forces(potential_rows(potentials, "total_force"), xa, va)
+    return phi[0] if single else phi
 
 
-def make_point_force(potentials: Sequence[Potential]) -> PointForce | None:
-    """One scalar closure summing the forces of ``potentials`` (``None`` if there are none)."""
-    for p in potentials:
-        if not callable(getattr(p, "point_force", None)):
-            raise DimensionError(
-                "obstacles are repulsive potentials: wrap each shape in one, e.g. "
-                f"DynamicPotential(cylinder(center, radius, height)); got a {type(p).__name__}"
-            )
-    kernels = [p.point_force() for p in potentials]
-    if not kernels:
-        return None
-    if len(kernels) == 1:
-        return kernels[0]
-    if len(kernels) == 2:  # the common case, without the loop's overhead
-        first, second = kernels
-
-        def pair(
-            x1: float, x2: float, x3: float, v1: float, v2: float, v3: float
-        ) -> tuple[float, float, float]:
-            a1, a2, a3 = first(x1, x2, x3, v1, v2, v3)
-            b1, b2, b3 = second(x1, x2, x3, v1, v2, v3)
-            return a1 + b1, a2 + b2, a3 + b3
-
-        return pair
-
-    def force(
-        x1: float, x2: float, x3: float, v1: float, v2: float, v3: float
-    ) -> tuple[float, float, float]:
-        f1 = f2 = f3 = 0.0
-        for kern in kernels:
-            a, b, c = kern(x1, x2, x3, v1, v2, v3)
-            f1 += a
-            f2 += b
-            f3 += c
-        return f1, f2, f3
-
-    return force
+_NO_ROWS: np.ndarray | None = None
+_OWN = {
+    DynamicPotential: (DynamicPotential.force, DynamicPotential.potential),
+    StaticPotential: (StaticPotential.force, StaticPotential.potential),
+}
 
 
-def _kernel_row(potential: object) -> np.ndarray | None:
-    """``potential`` as a row of the compiled force (:func:`kernel_rows`), or None."""
-    cls = type(potential)
-    own = getattr(cls, "point_force", None)
-    if own is DynamicPotential.point_force:
-        static, beta = False, float(potential.beta)  # type: ignore[attr-defined]
-    elif own is StaticPotential.point_force:
-        static, beta = True, 1.0  # unused by the static force
-    else:
-        return None
-    shape = getattr(potential, "shape", None)
-    if not isinstance(shape, Superquadric) or type(shape)._params is not Superquadric._params:
-        return None
-    from wholebody.kernels.dmp import obstacle_row  # numba loads on first use only
-
-    gain, eta, floor = (float(getattr(potential, a)) for a in ("gain", "eta", "floor"))
-    return obstacle_row(static, shape._params(), gain, beta, eta, floor)
+def _supported(p: object) -> bool:
+    """Whether the kernels compute ``p``: a potential of this module (or a subclass that
+    keeps its ``force`` and ``potential``) of a superquadric."""
+    for base, methods in _OWN.items():
+        if isinstance(p, base):
+            own = (type(p).force, type(p).potential)
+            shape = getattr(p, "shape", None)
+            return own == methods and type(shape) is Superquadric
+    return False
 
 
-def kernel_rows(potentials: Sequence[object]) -> np.ndarray | None:
-    """The parameters of ``potentials`` for the compiled integrator (one row each, see
-    :mod:`wholebody.kernels.dmp`), or None when one of them is not a potential the kernels
-    compute: a user-written :class:`Potential`, or a subclass with its own ``point_force``.
-    The planner then integrates with the Python closures of :func:`make_point_force`
-    (slower, the same answers)."""
+def potential_rows(potentials: Sequence[object], where: str = "DMP") -> np.ndarray:
+    """The rows (n, ``ROW``) of the force kernel (:mod:`wholebody.kernels.potentials`) for
+    ``potentials``, (0, ``ROW``) for none. Raises :class:`~wholebody.errors.DimensionError`
+    for anything the kernels do not compute (module docstring); ``where`` names the caller
+    in the message."""
+    global _NO_ROWS
+    if not potentials and _NO_ROWS is not None:
+        return _NO_ROWS
+    from wholebody.planning.dmp.compiled import kernels
+
     rows = []
     for p in potentials:
-        row = _kernel_row(p)
-        if row is None:
-            return None
-        rows.append(row)
-    return np.array(rows) if rows else None
+        if isinstance(p, Superquadric):
+            raise DimensionError(
+                f"{where}: obstacles are repulsive potentials: wrap each shape in one, e.g. "
+                "DynamicPotential(cylinder(center, radius, height)); got a Superquadric"
+            )
+        if not _supported(p):
+            raise DimensionError(
+                f"{where}: obstacles must be DynamicPotential or StaticPotential of a "
+                "Superquadric (sphere, cylinder, box or Superquadric(...)), and a subclass "
+                "may not override force() or potential(): the compiled integrator computes "
+                f"these potentials from their parameters; got a {type(p).__name__}. Combine "
+                "several potentials for other shapes."
+            )
+        rows.append(p._row())  # type: ignore[attr-defined]
+    out = np.array(rows).reshape(len(rows), kernels().potentials.ROW)
+    if not rows:
+        _NO_ROWS = out  # (0, ROW): nothing to write, shared by every call without potentials
+    return out

@@ -20,18 +20,17 @@ One concept per module:
 * :mod:`~.model` -- :class:`DMP`: the forcing term and its fit from one demonstration.
 * :mod:`~.savgol` -- the Savitzky-Golay filter the fit differentiates the demonstration with.
 * :mod:`~.rollout` -- :class:`DMPRollout`, the samples a rollout returns.
-* :mod:`~.linear` -- the rollout without obstacles: RK4 of a linear system as a recurrence.
-* :mod:`~.adaptive` -- the rollout with obstacles: RK4 with adaptive substeps.
-* :mod:`~.stepper` -- :class:`DMPStepper` and :class:`DMPState`: the same integrators online.
+* :mod:`~.integrator` -- the rollout: RK4 substeps, adaptive with obstacles.
+* :mod:`~.stepper` -- :class:`DMPStepper` and :class:`DMPState`: the same integrator online.
 * :mod:`~.trajectory` -- :class:`DMPTrajectory`: a hand pose trajectory (DMP position plus
   slerp orientation).
-* :mod:`~.compiled` -- the switch between the compiled kernels (:mod:`wholebody.kernels.dmp`)
-  and this package's Python reference (:func:`reference_implementation`, :func:`warmup`).
+* :mod:`~.compiled` -- the kernels that implement all of it (:mod:`wholebody.kernels.dmp`):
+  loading them (:func:`warmup`) and laying out their buffers.
 """
 
 from __future__ import annotations
 
-from wholebody.planning.dmp.compiled import reference_implementation, warmup
+from wholebody.planning.dmp.compiled import warmup
 from wholebody.planning.dmp.config import DMPConfig
 from wholebody.planning.dmp.model import DMP
 from wholebody.planning.dmp.rollout import DMPRollout
@@ -46,7 +45,6 @@ __all__ = [
     "DMPState",
     "DMPStepper",
     "DMPTrajectory",
-    "reference_implementation",
     "savitzky_golay",
     "warmup",
 ]

@@ -18,31 +18,32 @@ ridge-regularised least squares, ``(Phi^T Phi + lambda I) W = Phi^T F`` with ``P
 (N, n_basis) phase-scaled normalised basis at the samples (one Cholesky solve for all
 dimensions).
 
-**Rollout** is :mod:`~wholebody.planning.dmp.linear` without obstacles and
-:mod:`~wholebody.planning.dmp.adaptive` with them; :meth:`DMP.stepper` integrates online
-(:mod:`~wholebody.planning.dmp.stepper`).
+The fit runs in the kernel :func:`wholebody.kernels.dmp.fit`; where the ridge leaves the
+normal matrix numerically indefinite (``regularization=0`` with nearly coincident basis
+functions) its Cholesky factorisation fails and the equations are solved by LU
+(``np.linalg.solve``) instead.
+
+**Rollout** is the integrator of :mod:`~wholebody.planning.dmp.integrator`;
+:meth:`DMP.stepper` integrates online with it (:mod:`~wholebody.planning.dmp.stepper`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from types import ModuleType
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.linalg.lapack import dposv as _posv
 
 from wholebody.errors import DimensionError
 from wholebody.planning._checks import as_array, as_positive, as_vector
-from wholebody.planning.dmp import compiled
-from wholebody.planning.dmp.adaptive import rollout_obstacles
+from wholebody.planning.dmp.compiled import arena, as_buffer, for_run, kernels
 from wholebody.planning.dmp.config import DMPConfig
-from wholebody.planning.dmp.linear import rollout_linear
+from wholebody.planning.dmp.integrator import rollout
 from wholebody.planning.dmp.rollout import DMPRollout
-from wholebody.planning.dmp.savgol import fit_windows, savitzky_golay
+from wholebody.planning.dmp.savgol import fit_windows
 from wholebody.planning.dmp.stepper import DMPStepper
-from wholebody.planning.obstacles import Potential
+from wholebody.planning.obstacles import Potential, potential_rows
 
 __all__ = ["DMP"]
 
@@ -77,24 +78,35 @@ class DMP:
         self.dim = int(W.shape[1])
         if self.dim < 1:
             raise DimensionError("DMP: weights must have at least one column (dimension)")
-        self.weights = W.copy()
+        self._p = arena(self.config, W)  # the kernels' numbers: weights, basis layout
         self.start = as_vector(start, self.dim, "DMP: start").copy()
         self.goal = as_vector(goal, self.dim, "DMP: goal").copy()
         self.duration = as_positive(duration, "DMP: duration")
-        self._c, self._h = self.config.layout()
+
+    @property
+    def weights(self) -> np.ndarray:
+        """``w`` (n_basis, d): a view of the numbers the kernels read (writing into it
+        changes the DMP)."""
+        ow = kernels().regions(self.dim, self.config.n_basis)[4]
+        return self._p[ow : ow + self.config.n_basis * self.dim].reshape(-1, self.dim)
+
+    @weights.setter
+    def weights(self, value: np.ndarray) -> None:
+        self.weights[:] = as_array(value, (self.config.n_basis, self.dim), "DMP: weights")
+
+    def _run(self, x0: np.ndarray, g: np.ndarray, T: float, tol: float, span: float) -> np.ndarray:
+        """The arena of a run of this DMP (:func:`~.compiled.for_run`)."""
+        return for_run(self._p, self.config, x0, g, T, tol, span)
 
     # ------------------------------------------------------------------ basis functions
 
     def basis(self, s: np.ndarray) -> np.ndarray:
-        """Normalised, phase-scaled basis ``s psi_i(s) / sum_j psi_j(s)`` (N, n_basis)."""
-        s = np.asarray(s, dtype=float)
-        psi = np.subtract(s[:, None], self._c)  # one (N, n_basis) array, worked in place
-        psi *= psi
-        psi *= -self._h
-        psi -= psi.max(axis=1)[:, None]  # the ratio is unchanged; no 0/0 once every psi underflows
-        np.exp(psi, out=psi)
-        psi *= (s / psi.sum(axis=1))[:, None]
-        return psi
+        """Normalised, phase-scaled basis ``s psi_i(s) / sum_j psi_j(s)`` (N, n_basis) at the
+        phases ``s`` (N,), by :func:`wholebody.kernels.dmp.basis` (the integrator's)."""
+        S = as_buffer(np.atleast_1d(s))
+        out = np.empty((S.shape[0], self.config.n_basis))
+        kernels().basis(S, self._p, out)
+        return out
 
     def forcing(self, s: np.ndarray) -> np.ndarray:
         """``f(s)`` (N, d) at phases ``s`` (N,)."""
@@ -146,53 +158,20 @@ class DMP:
         polyorder = _check_samples(N, int(polyorder), cfg)
         X, h, T = _uniform(X, times, dt)
         window = _window(window, polyorder, N)
-        kernels = compiled.kernels()
-        if kernels is not None:
-            return cls._fit_compiled(kernels, X, h, T, cfg, window, polyorder, regularization)
-        xs, xd, xdd = savitzky_golay(X, window, polyorder, h)
-        x0, g = xs[0].copy(), xs[-1].copy()
-        K, D = cfg.K, cfg.D
-        tau = T
-        s = np.exp(np.arange(N) * (-cfg.alpha_s * h / (cfg.phase_tau_ratio * T)))
-        target = (tau * tau * xdd + D * tau * xd) / K - (g - xs) + np.outer(s, g - x0)
-        dmp = cls(np.zeros((cfg.n_basis, d)), x0, g, T, cfg)
-        Phi = dmp.basis(s)
-        A = Phi.T.dot(Phi)
-        nb = cfg.n_basis
         ridge = _ridge(regularization)
-        A.flat[:: nb + 1] += ridge * A.trace() / nb
-        rhs = Phi.T.dot(target)
-        _, w, info = _posv(A, rhs)  # the ridge makes A positive definite: Cholesky
-        dmp.weights = w if info == 0 else np.linalg.solve(A, rhs)
-        return dmp
-
-    @classmethod
-    def _fit_compiled(
-        cls,
-        kernels: ModuleType,
-        X: np.ndarray,
-        h: float,
-        T: float,
-        cfg: DMPConfig,
-        window: int,
-        polyorder: int,
-        regularization: float,
-    ) -> DMP:
-        """:meth:`fit` from the uniformly resampled ``X`` (N, d) by
-        :func:`wholebody.kernels.dmp.fit`: the Savitzky-Golay filter there too up to 400
-        samples, beyond by FFT convolutions here (:func:`~.savgol.fit_windows`)."""
-        ridge = _ridge(regularization)
-        N, d = X.shape
         nb = cfg.n_basis
-        filtered = np.empty((3, N, d))
-        E = fit_windows(X, window, polyorder, h, filtered)
-        c, hw = cfg.layout()
-        A, rhs, W = np.empty((nb, nb)), np.empty((nb, d)), np.empty((nb, d))
-        rate_h = -float(cfg.alpha_s) * h / (cfg.phase_tau_ratio * T)
-        info = kernels.fit(np.ascontiguousarray(X, dtype=float), E, filtered, float(h), float(T),
-                           cfg.K, cfg.D, rate_h, c, hw, ridge, A, rhs, W)  # fmt: skip
-        dmp = cls(np.zeros((nb, d)), filtered[0, 0].copy(), filtered[0, -1].copy(), T, cfg)
-        dmp.weights = W if info == 0 else np.linalg.solve(A, rhs)
+        p = for_run(arena(cfg, np.zeros((nb, d))), cfg, np.zeros(d), np.zeros(d), T, 0.0, 0.0)
+        Y = np.empty((3, N, d))
+        E = fit_windows(X, window, polyorder, h, Y)
+        M = np.empty((2 * nb + d, nb))
+        k = kernels()
+        info = k.fit(as_buffer(X), E, Y, p, M, float(h), ridge)
+        if info != 0:  # not positive definite: LU
+            ow = k.regions(d, nb)[4]
+            p[ow : ow + nb * d] = np.linalg.solve(M[:nb], M[2 * nb :].T).ravel()
+        dmp = cls.__new__(cls)  # the fit's arena is the DMP's (DMP.__init__ builds it)
+        dmp.config, dmp.dim, dmp._p = cfg, d, p
+        dmp.start, dmp.goal, dmp.duration = Y[0, 0].copy(), Y[0, -1].copy(), T
         return dmp
 
     # ------------------------------------------------------------------ rollout
@@ -226,7 +205,9 @@ class DMP:
         duration, start, goal
             ``T`` (s), ``x0`` and ``g`` (d,) (m); default the demonstration's.
         obstacles
-            Repulsive potentials (3-D DMPs only); their forces add.
+            Repulsive potentials (3-D DMPs only): :class:`~wholebody.planning.DynamicPotential`
+            or :class:`~wholebody.planning.StaticPotential` of a superquadric (others are
+            refused: :mod:`wholebody.planning.obstacles`); their forces add.
         tolerance
             With obstacles: tolerance (m) on the substeps' local error estimate (the embedded
             third-order estimate, on ``x`` and on ``v = tau x'``; conservative: the global
@@ -237,6 +218,8 @@ class DMP:
 
         Raises
         ------
+        DimensionError
+            Obstacles that are not such potentials, or obstacles for a DMP that is not 3-D.
         IntegrationError
             With obstacles, when an interval's error estimate stays above 10 x ``tolerance``
             with ``max_substeps`` substeps, or the state becomes NaN or inf (the path is not
@@ -247,12 +230,10 @@ class DMP:
         if samples != N or N < 2:
             raise DimensionError(f"DMP.rollout: samples must be an integer >= 2, got {samples}")
         x0, g, T = self._targets(start, goal, duration)
-        obstacles = tuple(obstacles)
-        kernels = compiled.kernels()
-        if obstacles:
-            return rollout_obstacles(self, N, x0, g, T, obstacles, tolerance, max_substeps,
-                                     kernels)[0]  # fmt: skip
-        return rollout_linear(self, N, x0, g, T, kernels)
+        obs = potential_rows(obstacles, "DMP.rollout")
+        if len(obs) and self.dim != 3:
+            raise DimensionError(f"DMP.rollout: obstacles need a 3-D DMP, this one is {self.dim}-D")
+        return rollout(self, N, x0, g, T, obs, tolerance, max_substeps)[0]
 
     def stepper(
         self,

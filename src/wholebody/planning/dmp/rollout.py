@@ -1,4 +1,4 @@
-"""A rolled-out DMP: its samples in time, as both integrators return them.
+"""A rolled-out DMP: its samples in time, as the integrator returns them.
 
 Velocities ``x' = v / tau`` and accelerations ``x'' = v' / tau`` are those of the model at
 the samples (the integrator's state and derivative), not finite differences of the
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DMPRollout", "rollout_result"]
+__all__ = ["DMPRollout"]
 
 
 @dataclass(frozen=True)
@@ -41,18 +41,3 @@ class DMPRollout:
     start: np.ndarray
     goal: np.ndarray
     duration: float
-
-
-def rollout_result(
-    times: np.ndarray,
-    phase: np.ndarray,
-    x: np.ndarray,
-    v: np.ndarray,
-    a: np.ndarray,
-    x0: np.ndarray,
-    g: np.ndarray,
-    T: float,
-) -> DMPRollout:
-    """A :class:`DMPRollout` (``v``, ``a``: the velocities and accelerations x', x'')."""
-    return DMPRollout(times=times, positions=x, velocities=v, accelerations=a, phase=phase,
-                      start=x0.copy(), goal=g.copy(), duration=T)  # fmt: skip

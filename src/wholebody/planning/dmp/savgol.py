@@ -7,7 +7,9 @@ last ``m`` samples use the polynomial of the first and last window (scipy's
 ``savgol_filter(..., mode="interp")``). With the window's offsets normalised to
 ``x = (i - m) / m`` in [-1, 1] and ``V[i, j] = x_i^j``, the polynomial's coefficients are
 ``C y`` with ``C = V^+`` ((p + 1) x w), and its k-th derivative per sample is the k-th
-derivative in ``x`` divided by ``m^k``.
+derivative in ``x`` divided by ``m^k``. Up to :data:`LONG` samples the kernel
+:func:`wholebody.kernels.dmp.savgol` applies these window operators; beyond, FFT
+convolutions here (:func:`fit_windows`).
 
 Why this filter for the fit (:meth:`~wholebody.planning.dmp.DMP.fit`): it is exact for
 polynomial pieces, keeps the bias on smooth data to a fraction of a millimetre and does not
@@ -25,8 +27,9 @@ from scipy.signal import fftconvolve
 
 __all__ = ["fit_windows", "savitzky_golay"]
 
-DENSE_SAVGOL = 400
-"""Up to this many samples the filter is one cached (3n, n) matrix (at most 3.8 MB)."""
+LONG = 400
+"""Beyond this many samples the filter runs as FFT convolutions (the window, about N/8
+samples, grows with N: a direct correlation would cost O(N^2))."""
 
 
 @lru_cache(maxsize=32)
@@ -69,26 +72,6 @@ _NO_WINDOWS = np.empty((3, 0, 0))  # kernels.fit: the filtered demonstration is 
 _NO_WINDOWS.setflags(write=False)
 
 
-@lru_cache(maxsize=16)
-def _savgol_operator(n: int, window: int, polyorder: int) -> np.ndarray:
-    """The Savitzky-Golay filter of an ``n``-sample signal as one (3n, n) matrix (unit
-    spacing): rows ``k n .. (k + 1) n`` give the value (k = 0) and the first and second
-    derivatives; interior samples use the centre of their own window, the first and last
-    ``m`` samples the polynomial fitted to the first and last window (scipy's
-    ``mode="interp"``). For ``n <= 400`` only (:data:`DENSE_SAVGOL`)."""
-    m = window // 2
-    E = _savgol_windows(window, polyorder)  # (3, w, w): sample i of a window, from it
-    S = np.zeros((3, n, n))
-    for k in range(3):
-        for i in range(m, n - m):
-            S[k, i, i - m : i + m + 1] = E[k, m]
-        S[k, :m, :window] = E[k, :m]
-        S[k, n - m :, n - window :] = E[k, m + 1 :]
-    S = S.reshape(3 * n, n)
-    S.setflags(write=False)
-    return S
-
-
 def savitzky_golay(
     X: np.ndarray, window: int, polyorder: int, h: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -96,32 +79,36 @@ def savitzky_golay(
     seconds: the Savitzky-Golay filter (local least-squares polynomial of degree
     ``polyorder`` over ``window`` samples, odd, ``<= N``), the first and last ``window // 2``
     samples from the polynomial fitted to the first and last window. It equals scipy's
-    ``savgol_filter(..., mode="interp")`` to round-off: up to 400 samples as one cached
-    matrix product (no per-call overhead), beyond as FFT convolutions (memory proportional
-    to ``N``, not to ``N window``)."""
+    ``savgol_filter(..., mode="interp")`` to round-off; it is what :meth:`DMP.fit
+    <wholebody.planning.dmp.DMP.fit>` differentiates the demonstration with."""
     N, d = X.shape
-    if N <= DENSE_SAVGOL:
-        out = _savgol_operator(N, window, polyorder).dot(X).reshape(3, N, d)
-    else:
-        m = window // 2
-        x, C = _savgol_fit(window, polyorder)
-        out = np.empty((3, N, d))
-        centre = _savgol_rows(x[m : m + 1], polyorder, m)[:, 0].dot(C)  # (3, w)
-        for k in range(3):  # sample i: centre[k] . X[i - m : i + m + 1], a correlation
-            out[k, m : N - m] = fftconvolve(X, centre[k, ::-1, None], mode="valid", axes=0)
-        out[:, :m] = _savgol_rows(x[:m], polyorder, m).dot(C.dot(X[:window]))
-        out[:, N - m :] = _savgol_rows(x[m + 1 :], polyorder, m).dot(C.dot(X[N - window :]))
-    return out[0], out[1] / h, out[2] / (h * h)
+    out = np.empty((3, N, d))
+    E = fit_windows(X, window, polyorder, h, out)
+    if E.shape[1] > 0:
+        from wholebody.planning.dmp.compiled import as_buffer, kernels
+
+        kernels().savgol(as_buffer(X), E, float(h), out)
+    return out[0], out[1], out[2]
 
 
 def fit_windows(
     X: np.ndarray, window: int, polyorder: int, h: float, filtered: np.ndarray
 ) -> np.ndarray:
-    """What the compiled fit (:func:`wholebody.kernels.dmp.fit`) needs of the filter for ``X``
-    (N, d): up to :data:`DENSE_SAVGOL` samples the (3, w, w) window operators, which it
-    applies itself; beyond, ``filtered`` (3, N, d) is filled here by FFT convolutions and an
-    empty (3, 0, 0) array is returned."""
-    if X.shape[0] <= DENSE_SAVGOL:
+    """What the fit's filter (:func:`wholebody.kernels.dmp.savgol`) needs for ``X`` (N, d):
+    up to :data:`LONG` samples the (3, w, w) window operators, which it applies itself as a
+    correlation over the window; beyond, ``filtered`` (3, N, d) is filled here by FFT
+    convolutions (their cost does not grow with the window) and an empty (3, 0, 0) array is
+    returned."""
+    N = X.shape[0]
+    if N <= LONG:
         return _savgol_windows(window, polyorder)
-    filtered[:] = savitzky_golay(X, window, polyorder, h)
+    m = window // 2
+    x, C = _savgol_fit(window, polyorder)
+    centre = _savgol_rows(x[m : m + 1], polyorder, m)[:, 0].dot(C)  # (3, w)
+    for k in range(3):  # sample i: centre[k] . X[i - m : i + m + 1], a correlation
+        filtered[k, m : N - m] = fftconvolve(X, centre[k, ::-1, None], mode="valid", axes=0)
+    filtered[:, :m] = _savgol_rows(x[:m], polyorder, m).dot(C.dot(X[:window]))
+    filtered[:, N - m :] = _savgol_rows(x[m + 1 :], polyorder, m).dot(C.dot(X[N - window :]))
+    filtered[1] /= h
+    filtered[2] /= h * h
     return _NO_WINDOWS

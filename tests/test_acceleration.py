@@ -12,6 +12,7 @@ import pytest
 import wholebody
 from wholebody.control import Controller
 from wholebody.errors import ConfigError
+from wholebody.kernels.limits import braking_speed
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
 from wholebody.resources import robots_dir, tasks_dir
@@ -19,7 +20,6 @@ from wholebody.scenarios import load_scenario, run_scenario
 from wholebody.solvers import ProjectionSolver
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import AccelerationLimits, FrameTask
-from wholebody.kernels.limits import braking_speed
 
 DT = 0.01
 
@@ -31,14 +31,18 @@ def test_defaults_and_overrides_from_robot_toml(tmp_path, humanoid):
     d = tmp_path / "robot"
     shutil.copytree(robots_dir() / "mobile_humanoid", d)
     toml = d / "robot.toml"
-    toml.write_text(toml.read_text() + "\n[acceleration]\njoints = 8.0\nwheels = 30.0\n"
-                    "waist = 2.0\nwaist_yaw = 1.5\n")  # fmt: skip
+    toml.write_text(
+        toml.read_text() + "\n[acceleration]\njoints = 8.0\nwheels = 30.0\n"
+        "waist = 2.0\nwaist_yaw = 1.5\n"
+    )
     r = wholebody.load_robot(d)
     a = r.acceleration_limits
     assert np.all(a[wheels] == 30.0) and a[r.index("right_elbow_flexion")] == 8.0
     assert a[r.index("waist_pitch")] == 2.0 and a[r.index("waist_yaw")] == 1.5  # joint wins
-    for bad, message in (("waist = 0.0", "expected a number > 0"),
-                         ("wasit = 2.0", "not a group or joint of the robot")):  # fmt: skip
+    for bad, message in (
+        ("waist = 0.0", "expected a number > 0"),
+        ("wasit = 2.0", "not a group or joint of the robot"),
+    ):
         toml.write_text(toml.read_text().split("[acceleration]")[0] + f"[acceleration]\n{bad}\n")
         with pytest.raises(ConfigError, match=message):
             wholebody.load_robot(d)
@@ -87,8 +91,9 @@ def fast_reach(robot, solver, acceleration: bool):
     return Controller(robot, stack, solver, dt=DT, references=refs).run(q0, 1.0)
 
 
-@pytest.mark.parametrize("solver", [ProjectionSolver(), HierarchicalQPSolver()],
-                         ids=["projection", "hqp"])  # fmt: skip
+@pytest.mark.parametrize(
+    "solver", [ProjectionSolver(), HierarchicalQPSolver()], ids=["projection", "hqp"]
+)
 def test_no_step_changes_a_velocity_by_more_than_a_dt(humanoid, solver):
     a = humanoid.acceleration_limits
     free = fast_reach(humanoid, solver, acceleration=False)
@@ -96,8 +101,9 @@ def test_no_step_changes_a_velocity_by_more_than_a_dt(humanoid, solver):
     rate = lambda log: np.abs(np.diff(np.vstack([np.zeros(humanoid.nu), log.u]), axis=0)) / DT  # noqa: E731
     assert np.max(rate(free) / a) > 2.0  # the limits matter here
     assert np.max(rate(limited) / a) <= 1.0 + 1e-9
-    err = np.linalg.norm(limited.frame_positions["right_tool"][-1] - free.frame_positions[
-        "right_tool"][-1])  # fmt: skip
+    err = np.linalg.norm(
+        limited.frame_positions["right_tool"][-1] - free.frame_positions["right_tool"][-1]
+    )
     assert err < 2e-3  # and the hand still gets there
 
 

@@ -72,8 +72,7 @@ def test_mujoco_model_is_the_controllers_model(name):
         for j in range(1, robot.model.njoints):
             body = m.body(robot.model.names[j]).id
             np.testing.assert_allclose(d.xpos[body], data.oMi[j].translation, atol=1e-9)
-            np.testing.assert_allclose(d.xmat[body].reshape(3, 3), data.oMi[j].rotation,
-                                       atol=1e-9)  # fmt: skip
+            np.testing.assert_allclose(d.xmat[body].reshape(3, 3), data.oMi[j].rotation, atol=1e-9)
     q = _random_q(robot, rng)
     if robot.base.mobile:
         q[2:4] = (1.0, 0.0)  # yaw 0: the planar base's local velocities are the world's
@@ -82,8 +81,9 @@ def test_mujoco_model_is_the_controllers_model(name):
     mujoco.mj_fullM(m, d, M)
     dofs = plant.world.dofs
     armature = m.dof_armature[dofs]
-    np.testing.assert_allclose(M[np.ix_(dofs, dofs)] - np.diag(armature),
-                               pin.crba(robot.model, data, q), atol=1e-8)  # fmt: skip
+    np.testing.assert_allclose(
+        M[np.ix_(dofs, dofs)] - np.diag(armature), pin.crba(robot.model, data, q), atol=1e-8
+    )
     gravity = pin.computeGeneralizedGravity(robot.model, data, q)
     np.testing.assert_allclose(d.qfrc_bias[dofs], gravity, atol=1e-8)
 
@@ -145,14 +145,20 @@ def _reach_controller(robot, plant=None):
     goal = start.copy()
     goal[:3, 3] += (0.2, -0.1, 0.1)
     stack = paper_stack(robot, [hand], stiffness=0.1)
-    return Controller(robot, stack, ProjectionSolver(), dt=0.01, plant=plant,
-                      references={hand: MinimumJerkTrajectory(start, goal, 1.0)})  # fmt: skip
+    return Controller(
+        robot,
+        stack,
+        ProjectionSolver(),
+        dt=0.01,
+        plant=plant,
+        references={hand: MinimumJerkTrajectory(start, goal, 1.0)},
+    )
 
 
 def test_plant_protocol_and_a_stopping_plant():
-    """A plant that integrates exactly gives the kinematic run's log (to rounding); a plant that stops
-    ends the run with a log of the steps done and the reason in its metadata; an object
-    without ``step`` is refused."""
+    """A plant that integrates exactly gives the kinematic run's log (to rounding); a plant
+    that stops ends the run with a log of the steps done and the reason in its metadata; an
+    object without ``step`` is refused."""
     robot = wb.load_robot("mobile_humanoid")
 
     class Exact:
@@ -196,8 +202,11 @@ def test_the_grasp_welds_the_panel_to_the_hands(carry):
     spec, run = carry
     log, poses = run.log, run.object_poses["panel"]
     before = log.t < 5.0
-    np.testing.assert_allclose(poses[before][:, :3, 3], np.tile(spec.objects["panel"].position,
-                               (before.sum(), 1)), atol=1e-3)  # fmt: skip
+    np.testing.assert_allclose(
+        poses[before][:, :3, 3],
+        np.tile(spec.objects["panel"].position, (before.sum(), 1)),
+        atol=1e-3,
+    )
     carried = log.phase_mask("carry")
     hand = _frame_poses(run, "right_tool")
     rel = [np.linalg.solve(hand[k], poses[k]) for k in np.flatnonzero(carried)]
@@ -224,15 +233,18 @@ _runs: dict[tuple[str, str, str], object] = {}
 def _run(name: str, backend: str, sim: str):
     key = (name, backend, sim)
     if key not in _runs:
-        _runs[key] = run_scenario(load_scenario(tasks_dir() / f"{name}.toml"), backend=backend,
-                                  sim=sim)  # fmt: skip
+        _runs[key] = run_scenario(
+            load_scenario(tasks_dir() / f"{name}.toml"), backend=backend, sim=sim
+        )
     return _runs[key]
 
 
 def _hand_errors(run) -> dict[str, np.ndarray]:
     log = run.log
-    return {h: np.linalg.norm(log.frame_positions[h] - log.reference_positions[h], axis=1)
-            for h in log.frame_positions}  # fmt: skip
+    return {
+        h: np.linalg.norm(log.frame_positions[h] - log.reference_positions[h], axis=1)
+        for h in log.frame_positions
+    }
 
 
 @pytest.mark.slow
@@ -297,8 +309,9 @@ def test_an_actuator_too_weak_is_reported_not_diverging():
     run stops at the first joint held at its limit for the stall time, names it, and leaves a
     finite log of the steps done."""
     spec = load_scenario(tasks_dir() / "coordinated_carry.toml")
-    run = run_scenario(spec, sim="mujoco", sim_settings=SimSettings(effort_scale=0.1),
-                       duration_scale=0.4)  # fmt: skip
+    run = run_scenario(
+        spec, sim="mujoco", sim_settings=SimSettings(effort_scale=0.1), duration_scale=0.4
+    )
     reason = run.metrics["stopped"]
     assert reason is not None and reason.startswith("actuator limit too low"), reason
     assert "limit" in reason and " s" in reason
@@ -359,11 +372,23 @@ def test_cli_runs_under_physics_and_reports_a_stop(tmp_path, capsys):
     weak.mkdir()
     toml = (robots_dir() / "ur5" / "robot.toml").read_text()
     (weak / "robot.toml").write_text(toml + "\n[sim]\neffort_scale = 0.05\n")
-    scenario = (tasks_dir() / "ur5_reach.toml").read_text().replace('robot = "ur5"',
-                                                                    'robot = "weak"')  # fmt: skip
+    scenario = (
+        (tasks_dir() / "ur5_reach.toml").read_text().replace('robot = "ur5"', 'robot = "weak"')
+    )
     (tmp_path / "weak_reach.toml").write_text(scenario)
-    assert main(["run", str(tmp_path / "weak_reach.toml"), "--sim", "mujoco", "--out",
-                 str(tmp_path / "weak_run")]) == 1  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                str(tmp_path / "weak_reach.toml"),
+                "--sim",
+                "mujoco",
+                "--out",
+                str(tmp_path / "weak_run"),
+            ]
+        )
+        == 1
+    )
     err = capsys.readouterr().err
     assert "stopped early: actuator limit too low" in err, err
 
@@ -385,8 +410,9 @@ def test_live_view_moves_the_simulated_objects():
     scene = Scene()
     live = LiveView(scene, 0.01, realtime=False)  # type: ignore[arg-type]
     spec = load_scenario(tasks_dir() / "coordinated_carry.toml")
-    run = run_scenario(spec, sim="mujoco", duration_scale=0.6, on_step=live,
-                       on_objects=live.update_objects)  # fmt: skip
+    run = run_scenario(
+        spec, sim="mujoco", duration_scale=0.6, on_step=live, on_objects=live.update_objects
+    )
     assert run.metrics["stopped"] is None
     assert {path for path, _ in scene.moved} == {"scene/props/panel"}
     first, last = scene.moved[0][1], scene.moved[-1][1]  # on the shelf, then carried

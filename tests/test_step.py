@@ -56,11 +56,16 @@ def chained(robot, tasks):
     """The hands under a closed chain between them, a weighted posture below."""
     q0 = robot.home()
     chain = RelativeFrameTask(robot, "left_tool", "right_tool", kp=10.0, name="chain")
-    chain.set_target(np.linalg.solve(robot.frame_pose(q0, "left_tool"),
-                                     robot.frame_pose(q0, "right_tool")))  # fmt: skip
+    chain.set_target(
+        np.linalg.solve(robot.frame_pose(q0, "left_tool"), robot.frame_pose(q0, "right_tool"))
+    )
     posture = PostureTask(robot, kp=2.0, weight=1e-3)
-    return Stack(robot, [Level([chain]), Level(tasks), Level([posture])], limits(robot, 0.3),
-                 metric=np.r_[np.full(4, 0.01), np.ones(robot.nu - 4)])  # fmt: skip
+    return Stack(
+        robot,
+        [Level([chain]), Level(tasks), Level([posture])],
+        limits(robot, 0.3),
+        metric=np.r_[np.full(4, 0.01), np.ones(robot.nu - 4)],
+    )
 
 
 def reach(robot, tasks, rng, duration):
@@ -84,7 +89,10 @@ def pose_rows(robot, state, task):
     """A pose task's rows from Pinocchio (module docstring)."""
     if isinstance(task, RelativeFrameTask):
         Ma, Mb = state.placement(task.frame_a), state.placement(task.frame_b)
-        Ja, Jb = frame_jacobian(robot, state, task.frame_a), frame_jacobian(robot, state, task.frame_b)
+        Ja, Jb = (
+            frame_jacobian(robot, state, task.frame_a),
+            frame_jacobian(robot, state, task.frame_b),
+        )
         Ra, r = Ma.rotation, Mb.translation - Ma.translation
         skew = pin.skew(r)
         J = np.vstack([Ra.T @ (Jb[:3] - Ja[:3] + skew @ Ja[3:]), Ra.T @ (Jb[3:] - Ja[3:])])
@@ -104,8 +112,11 @@ def pose_rows(robot, state, task):
 @pytest.mark.parametrize("stack_name", ["hierarchy", "chained"])
 def test_rows_and_box_are_pinocchios_and_the_limits_definitions(humanoid, rng, stack_name):
     robot, tasks = humanoid, hands(humanoid)
-    stack = (Stack(robot, [tasks, [PostureTask(robot, weight=1e-3)]], limits(robot))
-             if stack_name == "hierarchy" else chained(robot, tasks))  # fmt: skip
+    stack = (
+        Stack(robot, [tasks, [PostureTask(robot, weight=1e-3)]], limits(robot))
+        if stack_name == "hierarchy"
+        else chained(robot, tasks)
+    )
     D = stack.scale
     for trial in range(3 if UNCOMPILED else 10):
         q = robot.random_configuration(rng, margin=0.02)
@@ -147,8 +158,9 @@ def test_rows_and_box_are_pinocchios_and_the_limits_definitions(humanoid, rng, s
         upper[finite] = np.minimum(upper[finite], brake_hi[finite])
         lower[finite] = np.maximum(lower[finite], -brake_lo[finite])
         crossed = lower > upper
-        lower[crossed] = upper[crossed] = np.where(lower[crossed] > 0, upper[crossed],
-                                                   lower[crossed])  # fmt: skip
+        lower[crossed] = upper[crossed] = np.where(
+            lower[crossed] > 0, upper[crossed], lower[crossed]
+        )
         np.testing.assert_allclose(problem.lower * D, lower, atol=1e-10, err_msg=f"trial {trial}")
         np.testing.assert_allclose(problem.upper * D, upper, atol=1e-10, err_msg=f"trial {trial}")
         np.testing.assert_allclose(problem.anchor * D, u_prev, atol=1e-12)
@@ -165,8 +177,11 @@ def test_one_call_step_is_the_loop_of_four_calls(humanoid, rng, solver_name, sta
     runs = []
     for fast in (True, False):
         tasks = hands(robot)
-        stack = (paper_stack(robot, tasks, acceleration=True) if stack_name == "paper"
-                 else chained(robot, tasks))  # fmt: skip
+        stack = (
+            paper_stack(robot, tasks, acceleration=True)
+            if stack_name == "paper"
+            else chained(robot, tasks)
+        )
         q, refs = reach(robot, tasks, np.random.default_rng(7), STEPS * DT)
         solver = SOLVERS[solver_name]()
         controller = Controller(robot, stack, solver, dt=DT, references=refs)
@@ -192,7 +207,9 @@ def test_one_call_step_is_the_loop_of_four_calls(humanoid, rng, solver_name, sta
     assert fast_status == slow_status
     # the projection to rounding; the HQP to its accuracy (1e-6: rounding-level differences
     # of the kinematics can take daqp along another active-set path)
-    np.testing.assert_allclose(fast_path, slow_path, atol=1e-8 if solver_name == "projection" else 1e-6)
+    np.testing.assert_allclose(
+        fast_path, slow_path, atol=1e-8 if solver_name == "projection" else 1e-6
+    )
     for a, b in zip(fast_int, slow_int, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-10)
     if stack_name == "chained":

@@ -1,16 +1,26 @@
 """``wholebody warmup``: compile every kernel now, once per machine, instead of at first use.
 
 The kernels (:mod:`wholebody.kernels`) compile on their first call and are cached on disk
-(see there for where); the first control step of a process otherwise pays the compilation
-(2.5 to 5.5 minutes measured on a 2-core machine, once) and later processes only load the cache
-(about a second). Warming up runs, on the bundled humanoid, a few steps of each solver on a
-stack that reaches every compiled path (frame, relative and posture tasks, limits, the arm
-energy with the shipped stiffness network, h1, manipulability, bounds active), the collision
-kernels (the humanoid's own pairs) and the DMP kernels.
+(see there for where); a later process only loads them (about a second). Warming up runs, on
+the bundled humanoid, a stack that reaches every compiled entry (frame, relative and posture
+tasks, a half-space, collision avoidance, the arm energy with the shipped stiffness network,
+h1, manipulability, position, velocity and acceleration limits) through both backends'
+control steps, the evaluation, the stack's advance, the collision distances and the DMP
+kernels.
+
+The work is split in two halves that compile in two processes at once (the machine's cores):
+the evaluation, the projection's step and the DMP kernels in one, the hierarchical QP's
+cascade, then its step (which finds the evaluation in the cache by then) in the other. The
+evaluation and the cascade are compiled as parts of the steps (:func:`wholebody.kernels.
+as_callees`), optimised once, in the steps. This process then loads everything from the
+cache.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,10 +28,12 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from wholebody.robot import Robot
+    from wholebody.solvers import Stack
 
 __all__ = ["Warmup", "warmup"]
 
 DT = 0.01
+HALVES = ("projection", "hqp")
 
 
 @dataclass(frozen=True)
@@ -33,53 +45,97 @@ class Warmup:
     compiled: bool  # False under NUMBA_DISABLE_JIT=1 (nothing to compile)
 
 
-def _steps(robot: Robot, solver: object, tight: bool) -> None:
-    """Three closed-loop steps of ``solver``, the hands moving: the paper's stack (h2 on) with
-    the closed chain above it, or (``tight``) a hierarchy whose velocity box binds."""
+def _stack(robot: Robot) -> Stack:
+    """A stack with every compiled kind of entry (module docstring)."""
+    import numpy as np
+
+    from wholebody.collision import Obstacle
     from wholebody.presets import PaperWeights, paper_stack
-    from wholebody.solvers import Level, Stack
-    from wholebody.tasks import (
-        FrameTask,
-        JointPositionLimits,
-        PostureTask,
-        RelativeFrameTask,
-        VelocityLimits,
-    )
+    from wholebody.tasks import CollisionAvoidance, FrameHalfSpace, FrameTask, RelativeFrameTask
 
     hands = [FrameTask(robot, "left_tool", kp=20.0), FrameTask(robot, "right_tool", kp=20.0)]
-    if tight:  # a box that binds on every step: the saturation and pinning paths
-        stack = Stack(robot, [Level(hands), Level([PostureTask(robot)])],
-                      [JointPositionLimits(robot), VelocityLimits(robot, scale=0.05)])  # fmt: skip
-    else:
-        chain = RelativeFrameTask(robot, "left_tool", "right_tool", kp=20.0, name="chain")
-        stack = paper_stack(robot, hands, weights=PaperWeights(manipulability=0.05),
-                            first=[chain])  # fmt: skip
+    chain = RelativeFrameTask(robot, "left_tool", "right_tool", kp=20.0, name="chain")
+    pose = np.eye(4)
+    pose[:3, 3] = (0.6, 0.0, 0.3)
+    board = Obstacle("warmup_board", "box", (0.3, 0.3, 0.02), pose)
+    above = FrameHalfSpace(robot, "right_tool", (0.0, 0.0, 1.0), 0.0)
+    stack = paper_stack(
+        robot, hands, weights=PaperWeights(manipulability=0.05), first=[chain], acceleration=True
+    )
+    stack.levels[0].entries = (
+        *stack.levels[0].entries,
+        above,
+        CollisionAvoidance(robot, obstacles=[board]),
+    )
+    return stack
+
+
+def _steps(robot: Robot, solver: object) -> None:
+    """A few steps of ``solver``: one-call steps, the loop of four calls and a logged run."""
+    from wholebody.control import Controller
+
+    stack = _stack(robot)
+    controller = Controller(robot, stack, solver, dt=DT)
     q = robot.home()
-    for k in range(3):
-        for hand in hands:
-            target = robot.frame_pose(q, hand.frame).copy()
-            target[:3, 3] += (0.05 * k, 0.0, 0.05)
-            hand.set_target(target)
-        state = robot.update(q)
-        result = solver.solve(stack, state, DT)  # type: ignore[attr-defined]
-        stack.advance(state, DT, result=result)
-        q = robot.integrate(q, result.u, DT)
+    for _ in range(2):
+        controller.step(q)
+        q = controller.q_next.copy()
+    controller.close()
+    state = robot.update(q)
+    result = solver.solve(stack, state, DT)  # type: ignore[attr-defined]
+    stack.advance(state, DT, result=result)
+    stack.evaluate(state, DT)
+    controller.run(q, 2 * DT)
 
 
-def warmup() -> Warmup:
-    """Compile (or load from the cache) every kernel of the package; safe to call again."""
+def _half(name: str) -> None:
+    """One half of the work (module docstring)."""
     import wholebody
-    from wholebody import kernels
-    from wholebody.collision import CollisionModel
+    from wholebody.kernels import as_callees
     from wholebody.planning import dmp
     from wholebody.solvers import ProjectionSolver
     from wholebody.solvers.hqp import HierarchicalQPSolver
 
-    start = time.perf_counter()
     robot = wholebody.load_robot("mobile_humanoid")
-    for tight in (False, True):
-        _steps(robot, ProjectionSolver(), tight)
-        _steps(robot, HierarchicalQPSolver("daqp"), tight)
-    CollisionModel(robot).distances(robot.update(robot.home()), 0.05)
-    dmp.warmup()
+    if name == "projection":
+        stack = _stack(robot)
+        with as_callees():  # the evaluation first, for both steps (the HQP's half loads it)
+            stack.evaluate(robot.update(robot.home()), DT)
+        _steps(robot, ProjectionSolver())
+        stack.levels[0].entries[-1].model.distances(robot.update(robot.home()), 0.05)
+        dmp.warmup()
+    else:
+        with as_callees():  # the cascade first, for the HQP's step
+            _cascade()
+        _steps(robot, HierarchicalQPSolver("daqp"))
+
+
+def _cascade() -> None:
+    """The cascade alone, on a small synthetic problem with its box active."""
+    import numpy as np
+
+    from wholebody.solvers.hqp import HierarchicalQPSolver
+    from wholebody.solvers.stack import LevelProblem, StackProblem
+
+    n = 4
+    rows = {"t": slice(0, 2)}
+    none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
+    level = LevelProblem("level", np.eye(n)[:2], np.array([3.0, -3.0]), *none, rows)
+    box = np.ones(n)
+    HierarchicalQPSolver().solve_problem(StackProblem([level], -box, box, np.ones(n), {}))
+
+
+def warmup(parallel: bool = True) -> Warmup:
+    """Compile (or load from the cache) every kernel of the package; safe to call again.
+    ``parallel``: the two halves in two processes at once (module docstring)."""
+    from wholebody import kernels
+
+    start = time.perf_counter()
+    if parallel and not kernels.DISABLED and (os.cpu_count() or 1) > 1:
+        code = "import sys; from wholebody.warmup import _half; _half(sys.argv[1])"
+        procs = [subprocess.Popen([sys.executable, "-c", code, half]) for half in HALVES]
+        for proc in procs:
+            proc.wait()  # (a half that failed is compiled here below, with its error)
+    for half in HALVES:
+        _half(half)
     return Warmup(time.perf_counter() - start, kernels.cache_directory(), not kernels.DISABLED)

@@ -68,8 +68,10 @@ def solve_many(
     robot, stack, solver = controller.robot, controller.stack, controller.solver
     Q = np.ascontiguousarray(Q, dtype=float)
     if Q.ndim != 2 or Q.shape[1] != robot.nq or not np.isfinite(Q).all():
-        raise DimensionError(f"Q must be N configurations of robot {robot.name!r} (N x "
-                             f"{robot.nq} finite numbers), got shape {Q.shape}")  # fmt: skip
+        raise DimensionError(
+            f"Q must be N configurations of robot {robot.name!r} (N x "
+            f"{robot.nq} finite numbers), got shape {Q.shape}"
+        )
     if not (isinstance(steps, int) and steps >= 1):
         raise DimensionError(f"steps must be a whole number >= 1, got {steps!r}")
     n = Q.shape[0]
@@ -77,14 +79,22 @@ def solve_many(
     plan.sync(None, controller.dt)
     buffers = plan.step_buffers(0)
     if plan.python or not buffers.movable:
-        raise WholebodyError("solve_many needs a stack whose entries are all compiled (no "
-                             "entry written in Python) and a robot whose joints the kernels "
-                             "move")  # fmt: skip
+        raise WholebodyError(
+            "solve_many needs a stack whose entries are all compiled (no "
+            "entry written in Python) and a robot whose joints the kernels "
+            "move"
+        )
     tasks = list(targets or {})
     refs = _references(plan, tasks, targets or {}, n)
     nF = plan.view(lay.F_PAR).size
-    batch = control.Batch(Q, refs, np.zeros((n, robot.nu)), np.zeros((n, robot.nq)),
-                          np.zeros(n, dtype=np.int64), np.zeros((n, nF)))  # fmt: skip
+    batch = control.Batch(
+        Q,
+        refs,
+        np.zeros((n, robot.nu)),
+        np.zeros((n, robot.nq)),
+        np.zeros(n, dtype=np.int64),
+        np.zeros((n, nF)),
+    )
     threads = min(n, threads or os.cpu_count() or 1)
     chunks = np.array_split(np.arange(n), threads)
     work = [(_copy(plan, tasks), _workspace(solver, plan), _kinematics(buffers)) for _ in chunks]
@@ -105,16 +115,19 @@ def solve_many(
     return BatchResult(batch.U, batch.Q_next, batch.status, _errors(plan, batch.params))
 
 
-def _references(plan: Plan, tasks: list[Task], targets: Mapping[Task, np.ndarray],
-                n: int) -> np.ndarray:  # fmt: skip
+def _references(
+    plan: Plan, tasks: list[Task], targets: Mapping[Task, np.ndarray], n: int
+) -> np.ndarray:
     """The targets as the kernel's reference samples (N, nR, REF_WIDTH): the pose row by row,
     a zero twist."""
     refs = np.zeros((n, len(tasks), REF_WIDTH))
     for r, task in enumerate(tasks):
         poses = np.asarray(targets[task], dtype=float)
         if poses.shape != (n, 4, 4) or not np.isfinite(poses).all():
-            raise DimensionError(f"targets[{getattr(task, 'name', task)!r}] must be {n} finite "
-                                 f"4x4 poses, got shape {poses.shape}")  # fmt: skip
+            raise DimensionError(
+                f"targets[{getattr(task, 'name', task)!r}] must be {n} finite "
+                f"4x4 poses, got shape {poses.shape}"
+            )
         refs[:, r, :16] = poses.reshape(n, 16)
     return refs
 
@@ -126,12 +139,15 @@ def _copy(plan: Plan, tasks: list[Task]) -> control.Arena:
     table = lay.view(arena.i, plan.h, lay.I_ENTRY, plan.view(lay.I_ENTRY).shape)
     table[:, lay.E_REF] = -1
     for r, task in enumerate(tasks):
-        rows = [e for e, rec in enumerate(plan.records)
-                if rec.entry is task and rec.packed is not None
-                and rec.packed.kind == lay.KIND_POSE]  # fmt: skip
+        rows = [
+            e
+            for e, rec in enumerate(plan.records)
+            if rec.entry is task and rec.packed is not None and rec.packed.kind == lay.KIND_POSE
+        ]
         if not rows:
-            raise WholebodyError(f"targets: {getattr(task, 'name', task)!r} is not a compiled "
-                                 "pose task of the stack")  # fmt: skip
+            raise WholebodyError(
+                f"targets: {getattr(task, 'name', task)!r} is not a compiled pose task of the stack"
+            )
         table[rows[0], lay.E_REF] = r
     return arena
 
@@ -148,8 +164,9 @@ def _workspace(solver: object, plan: Plan) -> control.Arena | None:
 def _kinematics(buffers: object) -> control.Kinematics:
     """A thread's own kinematics buffers (the packed model shared)."""
     own = buffers.own  # type: ignore[attr-defined]
-    return own._replace(J=np.zeros(own.J.shape[::-1]).T, oMf=own.oMf.copy(),
-                        oMi=own.oMi.copy(), v=own.v.copy())  # fmt: skip
+    return own._replace(
+        J=np.zeros(own.J.shape[::-1]).T, oMf=own.oMf.copy(), oMi=own.oMi.copy(), v=own.v.copy()
+    )
 
 
 def _errors(plan: Plan, params: np.ndarray) -> dict[str, np.ndarray]:

@@ -166,16 +166,21 @@ class Controller:
         self.monitors = list(monitors)
         for m in self.monitors:
             if not isinstance(m, Objective):
-                raise WholebodyError(f"monitors are objectives (ArmPotentialEnergy, "
-                                     f"JointLimitAvoidance, ...), got {m!r}")  # fmt: skip
+                raise WholebodyError(
+                    f"monitors are objectives (ArmPotentialEnergy, "
+                    f"JointLimitAvoidance, ...), got {m!r}"
+                )
         self.feedforward = feedforward
         if recovery is not None and recovery.main is not stack:
-            raise WholebodyError("recovery must be made for the controller's stack: "
-                                 "StallRecovery(robot, stack)")  # fmt: skip
+            raise WholebodyError(
+                "recovery must be made for the controller's stack: StallRecovery(robot, stack)"
+            )
         self.recovery = recovery
         if plant is not None and not callable(getattr(plant, "step", None)):
-            raise WholebodyError(f"plant must have step(q, u, dt) -> q (e.g. "
-                                 f"wholebody.sim.MujocoPlant), got {plant!r}")  # fmt: skip
+            raise WholebodyError(
+                f"plant must have step(q, u, dt) -> q (e.g. "
+                f"wholebody.sim.MujocoPlant), got {plant!r}"
+            )
         self.plant = plant
         self.threads = _thread_count(threads)
 
@@ -208,8 +213,7 @@ class Controller:
         if u0 is not None:
             u0 = np.asarray(u0, dtype=float)
             if u0.shape != (self.robot.nu,) or not np.isfinite(u0).all():
-                raise DimensionError(f"u0 must be {self.robot.nu} finite velocities, got "
-                                     f"{u0!r}")  # fmt: skip
+                raise DimensionError(f"u0 must be {self.robot.nu} finite velocities, got {u0!r}")
             self.stack.set_velocity(u0, self.dt)
 
     def step(self, q: np.ndarray) -> np.ndarray:
@@ -310,8 +314,7 @@ class Controller:
             rec.advance(state, self.dt, self.result)  # (the stack's advance: after the solve)
         self._k += 1
 
-    def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None,
-                 j: int) -> RobotState:  # fmt: skip
+    def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None, j: int) -> RobotState:
         """A step with the Python entries' own code around the kernel call, and Pinocchio's
         kinematics for them (the stack has entries written in Python, a recovery watches, or
         the robot has joints the kernels do not move: then the kernel reads Pinocchio's
@@ -474,9 +477,11 @@ def _thread_count(threads: object) -> int | None:
         return None
     if isinstance(threads, numbers.Integral) and not isinstance(threads, bool) and threads >= 1:
         return int(threads)
-    raise WholebodyError(f"threads must be a whole number >= 1 (BLAS threads in the control "
-                         f"loop) or None (the libraries' own setting), got "
-                         f"{threads!r}")  # fmt: skip
+    raise WholebodyError(
+        f"threads must be a whole number >= 1 (BLAS threads in the control "
+        f"loop) or None (the libraries' own setting), got "
+        f"{threads!r}"
+    )
 
 
 def _threads(count: int | None) -> contextlib.AbstractContextManager[object]:
@@ -530,8 +535,16 @@ class _Recorder:
         self.arms = {m.arm.name: np.zeros((n, 6)) for m in self.energies}
         self.values = {m.name: np.zeros(n) for m in self.others}
 
-    def record(self, k: int, t: float, q: np.ndarray, state: RobotState, plan: Plan,
-               solve_time: float, own: bool = True) -> None:  # fmt: skip
+    def record(
+        self,
+        k: int,
+        t: float,
+        q: np.ndarray,
+        state: RobotState,
+        plan: Plan,
+        solve_time: float,
+        own: bool = True,
+    ) -> None:
         """Step ``k``'s row from the solve's outcome in ``plan``'s arena; ``own``: solved with
         the controller's stack (else a retreat's, whose level residuals are not the stack's:
         NaN)."""
@@ -628,8 +641,10 @@ def _progress(
             if now - self.last >= every and self.k < n:
                 self.last = now
                 extra = f", {self.postfix}" if self.postfix else ""
-                self._line(f"{self.k}/{n} steps ({100 * self.k / n:.0f} %), "
-                           f"{now - self.start:.0f} s{extra}")  # fmt: skip
+                self._line(
+                    f"{self.k}/{n} steps ({100 * self.k / n:.0f} %), "
+                    f"{now - self.start:.0f} s{extra}"
+                )
 
         def set_postfix_str(self, text: str) -> None:
             self.postfix = text

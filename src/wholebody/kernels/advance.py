@@ -52,8 +52,9 @@ def saturation_flags(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
 
 
 @kernel
-def advance_entries(f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float, u: np.ndarray,
-                    what: int) -> None:  # fmt: skip
+def advance_entries(
+    f: np.ndarray, i: np.ndarray, h: np.ndarray, dt: float, u: np.ndarray, what: int
+) -> None:
     """The compiled entries' step after a solve: the pose tasks' integrals (ADVANCE_TASKS,
     with the flags of ``I_SATURATED``) and the acceleration limits' memory (ADVANCE_MEMORY:
     ``u``, rad/s and m/s)."""

@@ -224,9 +224,16 @@ CA_HEAD = 5
 
 
 @kernel
-def collision_entry(J: np.ndarray, oMf: np.ndarray, par: np.ndarray, ints: np.ndarray,
-                    act: np.ndarray, act_a: np.ndarray, C: np.ndarray,
-                    cb: np.ndarray) -> None:  # fmt: skip
+def collision_entry(
+    J: np.ndarray,
+    oMf: np.ndarray,
+    par: np.ndarray,
+    ints: np.ndarray,
+    act: np.ndarray,
+    act_a: np.ndarray,
+    C: np.ndarray,
+    cb: np.ndarray,
+) -> None:
     """A compiled :class:`~wholebody.tasks.CollisionAvoidance`'s rows ``C`` (max_rows x nu,
     unscaled) and bounds ``cb`` (2 x max_rows) from its blocks (above): the velocity damper
     ``d' >= -speed (d - safety) / (influence - safety)`` on the closest pairs within the
@@ -242,8 +249,7 @@ def collision_entry(J: np.ndarray, oMf: np.ndarray, par: np.ndarray, ints: np.nd
     model = PackedCollision(shapes, kinds, support, pairs, act, act_a)
     index = np.zeros(m, np.int64)
     safety, influence, speed = par[CA_SAFETY], par[CA_INFLUENCE], par[CA_SPEED]
-    n, near = collision_rows(J, oMf, model, np.zeros((0, RESULT_WIDTH)), influence, C, found,
-                             index)  # fmt: skip
+    n, near = collision_rows(J, oMf, model, np.zeros((0, RESULT_WIDTH)), influence, C, found, index)
     par[CA_WRITTEN], par[CA_WITHIN] = n, near
     for r in range(m):
         par[at + r] = index[r] if r < n else -1.0

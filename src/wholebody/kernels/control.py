@@ -106,8 +106,9 @@ def _out(a: Arena, batch: Batch, s: int, q: np.ndarray) -> None:
 
 
 @kernel
-def projection_run(a: Arena, kin: Kinematics, batch: Batch, par: np.ndarray, steps: int,
-                   what: int) -> None:  # fmt: skip
+def projection_run(
+    a: Arena, kin: Kinematics, batch: Batch, par: np.ndarray, steps: int, what: int
+) -> None:
     """The projection backend over a batch (module docstring); ``par``: its settings."""
     saved = fvec(a.f, a.h, lay.F_PAR).copy() if what & RESET else np.empty(0)
     q = np.empty(batch.Q.shape[1])
@@ -126,8 +127,16 @@ def projection_run(a: Arena, kin: Kinematics, batch: Batch, par: np.ndarray, ste
 
 
 @kernel
-def hqp_run(a: Arena, w: Arena, kin: Kinematics, batch: Batch, par: np.ndarray,
-            settings: np.ndarray, steps: int, what: int) -> None:  # fmt: skip
+def hqp_run(
+    a: Arena,
+    w: Arena,
+    kin: Kinematics,
+    batch: Batch,
+    par: np.ndarray,
+    settings: np.ndarray,
+    steps: int,
+    what: int,
+) -> None:
     """The hierarchical QP over a batch (module docstring), daqp solving its QPs; ``w``: the
     cascade's workspace, ``par``, ``settings``: its and daqp's settings."""
     saved = fvec(a.f, a.h, lay.F_PAR).copy() if what & RESET else np.empty(0)

@@ -66,9 +66,18 @@ def evaluate(
     dt = fvec(f, h, lay.F_SCALARS)[0]
     act = imat(i, h, lay.I_ACT)
     pos = imat(i, h, lay.I_POS)
-    frame_kinematics(J, oMf, ivec(i, h, lay.I_FRAME), imat(i, h, lay.I_SUPPORT), act[0],
-                     act[1], fvec(f, h, lay.F_ACT_A), ften(f, h, lay.F_KIN_J),
-                     fmat(f, h, lay.F_KIN_P), ften(f, h, lay.F_KIN_R))  # fmt: skip
+    frame_kinematics(
+        J,
+        oMf,
+        ivec(i, h, lay.I_FRAME),
+        imat(i, h, lay.I_SUPPORT),
+        act[0],
+        act[1],
+        fvec(f, h, lay.F_ACT_A),
+        ften(f, h, lay.F_KIN_J),
+        fmat(f, h, lay.F_KIN_P),
+        ften(f, h, lay.F_KIN_R),
+    )
     joint_positions(q, pos[0], pos[1], fvec(f, h, lay.F_JP))
     entries = imat(i, h, lay.I_ENTRY)
     for e in range(entries.shape[0]):
@@ -89,8 +98,7 @@ def evaluate(
 
 
 @kernel
-def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
-          refs: np.ndarray) -> None:  # fmt: skip
+def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, refs: np.ndarray) -> None:
     """A compiled task's rows: a pose task (a frame, or a frame relative to another; its
     target and twist from its reference if it follows one) or a posture task."""
     par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
@@ -119,8 +127,15 @@ def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray,
 
 
 @kernel
-def _inequality(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, dt: float,
-                J: np.ndarray, oMf: np.ndarray) -> None:  # fmt: skip
+def _inequality(
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    entry: np.ndarray,
+    dt: float,
+    J: np.ndarray,
+    oMf: np.ndarray,
+) -> None:
     """A compiled inequality task's rows and bounds (unscaled): a half-space, or collision
     avoidance (from Pinocchio's ``data.J`` and ``data.oMf``)."""
     par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
@@ -130,13 +145,27 @@ def _inequality(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, 
     if entry[lay.E_KIND] == lay.KIND_COLLISION:
         rows = row + entry[lay.E_ROWS]
         act = imat(i, h, lay.I_ACT)
-        collision_entry(J, oMf, par, ints, act, fvec(f, h, lay.F_ACT_A),
-                        fmat(f, h, lay.F_C)[row:rows], cb[:, row:rows])  # fmt: skip
+        collision_entry(
+            J,
+            oMf,
+            par,
+            ints,
+            act,
+            fvec(f, h, lay.F_ACT_A),
+            fmat(f, h, lay.F_C)[row:rows],
+            cb[:, row:rows],
+        )
         return
     frame = ints[0]
-    cb[0, row] = half_space_row(ften(f, h, lay.F_KIN_J)[frame], fmat(f, h, lay.F_KIN_P)[frame],
-                                par[0:3], par[3], par[4], dt,
-                                fmat(f, h, lay.F_C)[row])  # fmt: skip
+    cb[0, row] = half_space_row(
+        ften(f, h, lay.F_KIN_J)[frame],
+        fmat(f, h, lay.F_KIN_P)[frame],
+        par[0:3],
+        par[3],
+        par[4],
+        dt,
+        fmat(f, h, lay.F_C)[row],
+    )
     cb[1, row] = np.inf
 
 
@@ -159,9 +188,14 @@ def _objective(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray) -
         arm_energy(P6, R6, J6, par[:AE_WIDTH], par[AE_WIDTH + ARM_PARTS :], grad, parts)
         out[1] = parts[0]
     elif kind == lay.KIND_H1:
-        out[1] = joint_limit_avoidance(fvec(f, h, lay.F_JP), par[:nu], par[nu : 2 * nu],
-                                       par[2 * nu :], grad,
-                                       fmat(f, h, lay.F_OBJ_CURV)[slot])  # fmt: skip
+        out[1] = joint_limit_avoidance(
+            fvec(f, h, lay.F_JP),
+            par[:nu],
+            par[nu : 2 * nu],
+            par[2 * nu :],
+            grad,
+            fmat(f, h, lay.F_OBJ_CURV)[slot],
+        )
     else:  # KIND_H2: ints = frame count, frames, then the (nu, nu) support mask
         n = ints[0]
         Js = np.empty((n, 6, nu))

@@ -39,11 +39,11 @@ from wholebody.kernels.linalg import (
 
 __all__ = [
     "Free",
+    "free_rank",
     "leftover",
     "level_step",
     "lift",
     "project_free",
-    "free_rank",
     "restrict",
     "row_norm2",
 ]
@@ -68,8 +68,16 @@ def _damping(s: float, eps: float, lam: float) -> float:
 
 
 @kernel
-def _damped_solve(Vt: np.ndarray, U: np.ndarray, s: np.ndarray, squared: bool, keep: np.ndarray,
-                  R: np.ndarray, eps: float, lam: float) -> np.ndarray:  # fmt: skip
+def _damped_solve(
+    Vt: np.ndarray,
+    U: np.ndarray,
+    s: np.ndarray,
+    squared: bool,
+    keep: np.ndarray,
+    R: np.ndarray,
+    eps: float,
+    lam: float,
+) -> np.ndarray:
     """``V_k diag(g) U_k^T R`` over the kept indices ``k`` (``keep``): the damped
     pseudo-inverse of ``M = U diag(sigma) V^T`` applied to ``R`` (m x c), with ``g = sigma /
     (sigma^2 + mu(sigma))``, or from eigenvalues ``s = sigma^2`` of ``M M^T`` (``squared``,
@@ -109,8 +117,9 @@ def _rows_not_kept(Vt: np.ndarray, keep: np.ndarray, count: int) -> np.ndarray:
 
 
 @kernel
-def _gram_step(M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float, lam: float,
-               rank_tol: float) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _gram_step(
+    M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float, lam: float, rank_tol: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The reference's ``_gram_step`` on ``M`` (m x r, the level's rows on its free
     directions): ``M^+_damped R`` (R: m x k) and a basis (r x .) of the directions it leaves
     unused, from the SVD of M where the reference's rows are tall (``tall``) or the
@@ -152,8 +161,9 @@ def _gram_step(M: np.ndarray, R: np.ndarray, tall: bool, exact: bool, eps: float
 
 
 @kernel
-def _solve_ls(M: np.ndarray, R: np.ndarray, eps: float, lam: float,
-              rank_tol: float) -> tuple[np.ndarray, np.ndarray, int]:  # fmt: skip
+def _solve_ls(
+    M: np.ndarray, R: np.ndarray, eps: float, lam: float, rank_tol: float
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Damped least squares ``Y = M^+_damped R`` (R: m x 2), the null-space basis of M and
     its rank, from the SVD."""
     m, n = M.shape
@@ -296,8 +306,15 @@ def _exceeds(G: np.ndarray, Linv: np.ndarray, eps: float) -> bool:
 
 
 @kernel
-def level_step(A: np.ndarray, R: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray,
-          par: np.ndarray, sns: bool):  # fmt: skip
+def level_step(
+    A: np.ndarray,
+    R: np.ndarray,
+    Z: np.ndarray,
+    is_mask: bool,
+    mask: np.ndarray,
+    par: np.ndarray,
+    sns: bool,
+):
     """A level's least-squares step on its free directions (``Z``, ``is_mask``, ``mask``:
     see :func:`restrict`), ``Zb`` (n x r): ``(Y, M, Nf, route, rank)`` with ``Y = Zb
     M^+_damped R`` (``M = A Zb``, R: m x k), what :func:`leftover` needs for the basis of
@@ -346,8 +363,9 @@ def level_step(A: np.ndarray, R: np.ndarray, Z: np.ndarray, is_mask: bool, mask:
 
 
 @kernel
-def leftover(Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: np.ndarray,
-              route: int) -> np.ndarray:  # fmt: skip
+def leftover(
+    Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: np.ndarray, route: int
+) -> np.ndarray:
     """The basis (n x .) of the free directions a level's step leaves (see :func:`level_step`):
     those that ``M = A Zb`` does not move, none, or the given ``N``."""
     if route == ROUTE_WIDE:
@@ -355,4 +373,3 @@ def leftover(Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: n
     if route == ROUTE_ALL:
         return np.zeros((mask.shape[0], 0))
     return N
-

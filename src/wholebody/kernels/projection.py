@@ -46,8 +46,16 @@ Rows = namedtuple("Rows", ["A", "b", "reference", "identity"])
 
 
 @kernel
-def _level(rows: Rows, u0: np.ndarray, free: Free, sat: np.ndarray, box: Box, need_next: bool,
-           sns: bool, par: np.ndarray):  # fmt: skip
+def _level(
+    rows: Rows,
+    u0: np.ndarray,
+    free: Free,
+    sat: np.ndarray,
+    box: Box,
+    need_next: bool,
+    sns: bool,
+    par: np.ndarray,
+):
     """One level on top of the levels above (their solution ``u0``, the free directions and
     the joints saturated so far): ``(u, free left, saturated, scale)``."""
     A, b, ids = rows.A, rows.b, rows.identity
@@ -93,8 +101,16 @@ def _widened(lo: np.ndarray, hi: np.ndarray) -> Box:
 
 
 @kernel
-def _pass(f: np.ndarray, i: np.ndarray, h: np.ndarray, held: Rows, box: Box, u_c: np.ndarray,
-          sns: bool, par: np.ndarray) -> np.ndarray:  # fmt: skip
+def _pass(
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    held: Rows,
+    box: Box,
+    u_c: np.ndarray,
+    sns: bool,
+    par: np.ndarray,
+) -> np.ndarray:
     """One pass over the held rows' level (if any) and the stack's levels, for ``d = u - u_c``
     (right-hand sides shifted by ``A u_c``): box-free, or with SNS (``sns``; the levels'
     scale factors into ``F_LEVEL_OUT``). Returns ``d``."""
@@ -146,8 +162,9 @@ def _solve(f: np.ndarray, i: np.ndarray, h: np.ndarray, held: Rows, par: np.ndar
 
 
 @kernel
-def _violated(C: np.ndarray, cb: np.ndarray, u: np.ndarray, held: np.ndarray,
-              value: np.ndarray, tol: float) -> bool:  # fmt: skip
+def _violated(
+    C: np.ndarray, cb: np.ndarray, u: np.ndarray, held: np.ndarray, value: np.ndarray, tol: float
+) -> bool:
     """Hold the inequality rows ``u`` violates beyond ``tol (1 + |bound|)`` that are not held
     yet, at the bound they cross (``value``); whether there was one. Rows with no finite bound
     are never held."""
@@ -219,8 +236,9 @@ def project(f: np.ndarray, i: np.ndarray, h: np.ndarray, par: np.ndarray) -> Non
 
 
 @kernel
-def _held_unmet(C: np.ndarray, held: np.ndarray, value: np.ndarray, u: np.ndarray,
-                tol: float) -> bool:  # fmt: skip
+def _held_unmet(
+    C: np.ndarray, held: np.ndarray, value: np.ndarray, u: np.ndarray, tol: float
+) -> bool:
     """Mark the held rows that miss their bound by more than ``tol (1 + |bound|)`` (the box
     kept them from it) HELD_UNMET, the others HELD_MET; whether there is one."""
     some = False
@@ -233,8 +251,16 @@ def _held_unmet(C: np.ndarray, held: np.ndarray, value: np.ndarray, u: np.ndarra
 
 
 @kernel
-def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: float,
-            u_free: np.ndarray, sns: bool, value: np.ndarray) -> None:  # fmt: skip
+def _report(
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    u: np.ndarray,
+    tol: float,
+    u_free: np.ndarray,
+    sns: bool,
+    value: np.ndarray,
+) -> None:
     """Residuals, met tasks, active bounds and status at the scaled solution ``u``.
 
     INFEASIBLE when a task of the first level is unmet, or a held inequality row is
@@ -266,11 +292,13 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
             t1 += 1
         lev_out[k, 0] = 0.0
         if r1 > r0:
-            lev_out[k, 0] = level_report(A[r0:r1], b[r0:r1], rows[1, r0:r1], u, tasks[t0:t1],
-                                         r0, res[t0:t1])  # fmt: skip
+            lev_out[k, 0] = level_report(
+                A[r0:r1], b[r0:r1], rows[1, r0:r1], u, tasks[t0:t1], r0, res[t0:t1]
+            )
             if sns:
-                level_report(A[r0:r1], b[r0:r1], rows[1, r0:r1], u_free, tasks[t0:t1], r0,
-                             free_res[t0:t1])  # fmt: skip
+                level_report(
+                    A[r0:r1], b[r0:r1], rows[1, r0:r1], u_free, tasks[t0:t1], r0, free_res[t0:t1]
+                )
         for t in range(t0, t1):
             met = res[t, 0] <= tol * (1.0 + res[t, 2])  # (a NaN residual is not met)
             infeasible[t] = 0 if met or tasks[t, 2] == tasks[t, 1] else 1
@@ -290,18 +318,32 @@ def _report(f: np.ndarray, i: np.ndarray, h: np.ndarray, u: np.ndarray, tol: flo
     for r in range(held.shape[0]):
         some_held = some_held or held[r] != 0
     held_unmet = some_held and _held_unmet(fmat(f, h, lay.F_C), held, value, u, tol)
-    status = STATUS_OK
-    if out[lay.OUT_FAILED]:
-        status = STATUS_FAILED
-    elif top_unmet or held_unmet:
-        status = STATUS_INFEASIBLE
-    elif limited:
-        status = STATUS_BOUNDS if some_held else STATUS_INFEASIBLE
-    elif _any_below_one(lev_out[:, 1]):
-        status = STATUS_SCALED
-    elif any_active:
-        status = STATUS_BOUNDS
-    out[lay.OUT_STATUS] = status
+    out[lay.OUT_STATUS] = _status(
+        out[lay.OUT_FAILED] != 0,
+        top_unmet or held_unmet,
+        limited,
+        some_held,
+        _any_below_one(lev_out[:, 1]),
+        any_active,
+    )
+
+
+@kernel
+def _status(
+    failed: bool, unmet: bool, limited: bool, held: bool, scaled: bool, active: bool
+) -> int:
+    """The status (:func:`_report`): FAILED; INFEASIBLE where a task of the first level or a
+    held row is unmet, or the box limited a task (BOUNDS_ACTIVE with rows held: they took
+    the freedom); SCALED; BOUNDS_ACTIVE; OK."""
+    if failed:
+        return STATUS_FAILED
+    if unmet:
+        return STATUS_INFEASIBLE
+    if limited:
+        return STATUS_BOUNDS if held else STATUS_INFEASIBLE
+    if scaled:
+        return STATUS_SCALED
+    return STATUS_BOUNDS if active else STATUS_OK
 
 
 @kernel

@@ -24,10 +24,10 @@ from wholebody.kernels.pinv import (
     FIXED,
     ROUTE_ALL,
     Free,
+    free_rank,
     leftover,
     level_step,
     project_free,
-    free_rank,
     row_norm2,
 )
 
@@ -158,8 +158,15 @@ def _guard(u0: np.ndarray, u: np.ndarray, box: Box) -> np.ndarray:
 
 
 @kernel
-def saturate(A: np.ndarray, b: np.ndarray, u0: np.ndarray, free: Free, sat: np.ndarray,
-             box: Box, par: np.ndarray):  # fmt: skip
+def saturate(
+    A: np.ndarray,
+    b: np.ndarray,
+    u0: np.ndarray,
+    free: Free,
+    sat: np.ndarray,
+    box: Box,
+    par: np.ndarray,
+):
     """SNS for one level of tasks (rows ``A u = b``) on top of ``u0`` and the free directions
     the levels above leave: ``(u, free left, saturated joints, scale)``. The rank the level
     needs is that of its first factorisation."""
@@ -199,8 +206,9 @@ def saturate(A: np.ndarray, b: np.ndarray, u0: np.ndarray, free: Free, sat: np.n
 
 
 @kernel
-def saturate_identity(b: np.ndarray, s: float, u0: np.ndarray, free: Free, sat: np.ndarray,
-                      box: Box):  # fmt: skip
+def saturate_identity(
+    b: np.ndarray, s: float, u0: np.ndarray, free: Free, sat: np.ndarray, box: Box
+):
     """SNS for a level of objectives only (rows ``s I``): its move is ``F b / s`` on the
     free directions ``F`` (joints with ``F_jj <= 1e-18`` held exactly); it leaves nothing
     free: ``(u, free left, saturated joints, scale)``."""

@@ -51,14 +51,25 @@ class Workspace:
         nv = n + p_max
         rows = n + P + p_max
         shapes = {
-            kernel.W_X: (n,), kernel.W_BOX: (4, n), kernel.W_Z: (n, n), kernel.W_INH: (P, n),
-            kernel.W_INHB: (2, P), kernel.W_XC: (n,), kernel.W_CV: (m_max,),
-            kernel.W_M: (m_max, n), kernel.W_NULL: (n, n), kernel.W_SCAL: (8,),
-            kernel.W_H: (nv * nv,), kernel.W_G: (2, nv), kernel.W_QC: (rows * nv,),
-            kernel.W_QB: (4, max(rows, nv)), kernel.W_Y: (2, max(n, m_max)),
-            kernel.W_STATE: (kernel.S_WIDTH,), kernel.W_REPORT: (L, kernel.R_WIDTH),
+            kernel.W_X: (n,),
+            kernel.W_BOX: (4, n),
+            kernel.W_Z: (n, n),
+            kernel.W_INH: (P, n),
+            kernel.W_INHB: (2, P),
+            kernel.W_XC: (n,),
+            kernel.W_CV: (m_max,),
+            kernel.W_M: (m_max, n),
+            kernel.W_NULL: (n, n),
+            kernel.W_SCAL: (8,),
+            kernel.W_H: (nv * nv,),
+            kernel.W_G: (2, nv),
+            kernel.W_QC: (rows * nv,),
+            kernel.W_QB: (4, max(rows, nv)),
+            kernel.W_Y: (2, max(n, m_max)),
+            kernel.W_STATE: (kernel.S_WIDTH,),
+            kernel.W_REPORT: (L, kernel.R_WIDTH),
             kernel.W_LIMITED: (T + Pt,),
-        }  # fmt: skip
+        }
         self.f, self.i, self.h = lay.build(shapes, kernel.N_WFLOAT, kernel.N_WREGIONS)
         self._shapes = shapes
         self.arena = arena
@@ -102,19 +113,34 @@ def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     """The cascade on the evaluated ``arena`` (see the module docstring); its outcome is in
     the arena and the workspace."""
     if solver.in_kernel:
-        first_call("hqp", "the hierarchical QP kernels", kernel.cascade, arena.f, arena.i,
-                   arena.h, ws.f, ws.i, ws.h, solver.parameters(),
-                   solver._daqp_settings)  # fmt: skip
+        first_call(
+            "hqp",
+            "the hierarchical QP kernels",
+            kernel.cascade,
+            arena.f,
+            arena.i,
+            arena.h,
+            ws.f,
+            ws.i,
+            ws.h,
+            solver.parameters(),
+            solver._daqp_settings,
+        )
     elif _READY:
         _cascade(solver, arena, ws)
     else:
-        first_call("hqp stages", "the hierarchical QP kernels", _compile_then, solver, arena,
-                   ws)  # fmt: skip
+        first_call("hqp stages", "the hierarchical QP kernels", _compile_then, solver, arena, ws)
 
 
-def run_steps(solver: HierarchicalQPSolver, plan: Plan, ws: Workspace,
-              kinematics: control.Kinematics, batch: control.Batch, steps: int,
-              what: int) -> None:  # fmt: skip
+def run_steps(
+    solver: HierarchicalQPSolver,
+    plan: Plan,
+    ws: Workspace,
+    kinematics: control.Kinematics,
+    batch: control.Batch,
+    steps: int,
+    what: int,
+) -> None:
     """Whole steps on the synced ``plan`` (:mod:`wholebody.kernels.control`): one kernel
     call with daqp; with another engine one state and one step, the engine's QPs between the
     kernel stages."""
@@ -125,11 +151,22 @@ def run_steps(solver: HierarchicalQPSolver, plan: Plan, ws: Workspace,
     if what & (control.KINEMATICS | control.RESET):
         solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (refused)
     q = batch.Q[0]
-    first_call("evaluate", "the control kernels", evaluate, plan.f, plan.i, plan.h,
-               kinematics.J, kinematics.oMf, q, batch.refs[0])  # fmt: skip
+    first_call(
+        "evaluate",
+        "the control kernels",
+        evaluate,
+        plan.f,
+        plan.i,
+        plan.h,
+        kinematics.J,
+        kinematics.oMf,
+        q,
+        batch.refs[0],
+    )
     run(solver, plan, ws)
-    first_call("after", "the control kernels", control.after, arena, kinematics, q,
-               batch.Q_next[0], what)  # fmt: skip
+    first_call(
+        "after", "the control kernels", control.after, arena, kinematics, q, batch.Q_next[0], what
+    )
     batch.U[0] = plan.view(lay.F_U)[1]
     if not what & control.INTEGRATE:
         batch.Q_next[0] = q
@@ -147,9 +184,15 @@ def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> 
     if not kernels.DISABLED:
         a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver.parameters())
         sol, w = ws.padded(None), (ws.f, ws.i, ws.h)
-        stages = ((kernel.begin, a), (kernel.advance, a), (kernel.finish, a),
-                  (kernel.after_qp, (*a, sol, True)), (kernel.proximal, (*a, sol, True)),
-                  (kernel.tie_done, (*w, sol, True)), (kernel.bump, (*w, 1)))  # fmt: skip
+        stages = (
+            (kernel.begin, a),
+            (kernel.advance, a),
+            (kernel.finish, a),
+            (kernel.after_qp, (*a, sol, True)),
+            (kernel.proximal, (*a, sol, True)),
+            (kernel.tie_done, (*w, sol, True)),
+            (kernel.bump, (*w, 1)),
+        )
         for stage, args in stages:
             stage.compile(tuple(numba.typeof(v) for v in args))
     _READY = True
@@ -201,8 +244,11 @@ def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> SolverR
     out.infeasible += extra
     report = ws.report
     names = arena.level_names
-    qps = [f"{names[k]}: {int(report[k, kernel.R_ITER])} it" for k in range(len(names))
-           if report[k, kernel.R_QP]]  # fmt: skip
+    qps = [
+        f"{names[k]}: {int(report[k, kernel.R_ITER])} it"
+        for k in range(len(names))
+        if report[k, kernel.R_QP]
+    ]
     msg = [f"{solver.engine_name}: " + ("; ".join(qps) if qps else "no QP needed"), *failures]
     if out.infeasible:
         msg.append("infeasible: " + ", ".join(f"{lv}/{t}" for lv, t in out.infeasible))
@@ -222,8 +268,9 @@ def _limited_names(arena: Arena, ws: Workspace, k: int) -> list[str]:
     names = [arena.task_names[t] for t in range(T) if tasks[t, 0] == k and limited[t]]
     if report[k, kernel.R_OBJBAD]:
         names.append("objectives")
-    names += [row[3] for j, row in enumerate(arena.inequality_rows)
-              if row[0] == k and limited[T + j]]  # fmt: skip
+    names += [
+        row[3] for j, row in enumerate(arena.inequality_rows) if row[0] == k and limited[T + j]
+    ]
     if report[k, kernel.R_FAIL] == kernel.FAIL_NONFINITE and not names:
         names = [arena.level_names[k]]
     return names
@@ -259,8 +306,9 @@ def _failures(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> list
             out.append(f"{level}: {_FAILURE[code]}")
     if st[kernel.S_TIEFAIL]:
         status = QPStatus(int(st[kernel.S_TIESTATUS])).name.lower()
-        out.append(f"minimum-norm tie-break: {status} ({solver.engine_name}); kept the last "
-                   "level's answer")  # fmt: skip
+        out.append(
+            f"minimum-norm tie-break: {status} ({solver.engine_name}); kept the last level's answer"
+        )
     return out
 
 
@@ -272,11 +320,18 @@ def reports(arena: Arena, ws: Workspace) -> list[LevelReport]:
     for k, name in enumerate(arena.level_names):
         row = report[k].tolist()
         qp = bool(row[kernel.R_QP])
-        out.append(LevelReport(
-            name, free=row[kernel.R_FREE], rank=row[kernel.R_RANK], qp=qp,
-            engine_status=QPStatus(row[kernel.R_STATUS]) if qp else None,
-            iterations=row[kernel.R_ITER], residual=float(residuals[k]),
-            retries=row[kernel.R_RETRIES], limited=_limited_names(arena, ws, k),
-            failed=bool(row[kernel.R_FAILED]),
-        ))  # fmt: skip
+        out.append(
+            LevelReport(
+                name,
+                free=row[kernel.R_FREE],
+                rank=row[kernel.R_RANK],
+                qp=qp,
+                engine_status=QPStatus(row[kernel.R_STATUS]) if qp else None,
+                iterations=row[kernel.R_ITER],
+                residual=float(residuals[k]),
+                retries=row[kernel.R_RETRIES],
+                limited=_limited_names(arena, ws, k),
+                failed=bool(row[kernel.R_FAILED]),
+            )
+        )
     return out

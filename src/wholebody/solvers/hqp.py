@@ -159,12 +159,16 @@ class HierarchicalQPSolver(Solver):
         warm_start: bool = True,
         engine_settings: dict[str, Any] | None = None,
     ) -> None:
-        for label, value in (("tolerance", tolerance), ("rank_tolerance", rank_tolerance),
-                             ("regularization", regularization),
-                             ("bound_relaxation", bound_relaxation)):  # fmt: skip
+        for label, value in (
+            ("tolerance", tolerance),
+            ("rank_tolerance", rank_tolerance),
+            ("regularization", regularization),
+            ("bound_relaxation", bound_relaxation),
+        ):
             if not (np.isfinite(value) and value > 0):
-                raise SolverError(f"HierarchicalQPSolver: {label} must be finite and > 0, "
-                                  f"got {value!r}")  # fmt: skip
+                raise SolverError(
+                    f"HierarchicalQPSolver: {label} must be finite and > 0, got {value!r}"
+                )
         self.engine_name = str(engine).lower()
         self.engine_settings = dict(engine_settings or {})
         self.warm_start = bool(warm_start)
@@ -215,15 +219,21 @@ class HierarchicalQPSolver(Solver):
         """The Python engine workspace of level ``k`` (the last one, ``k`` = the number of
         levels, serves the final tie-break)."""
         while len(self._engines) <= k:
-            self._engines.append(make_engine(self.engine_name, warm_start=self.warm_start,
-                                             **self.engine_settings))  # fmt: skip
+            self._engines.append(
+                make_engine(self.engine_name, warm_start=self.warm_start, **self.engine_settings)
+            )
         return self._engines[k]
 
     def parameters(self) -> np.ndarray:
         """The settings as the kernels read them."""
-        self._par[:] = (self.tolerance, self.rank_tolerance, self.regularization,
-                        self.bound_relaxation, self.active_tolerance,
-                        self.proximal_steps)  # fmt: skip
+        self._par[:] = (
+            self.tolerance,
+            self.rank_tolerance,
+            self.regularization,
+            self.bound_relaxation,
+            self.active_tolerance,
+            self.proximal_steps,
+        )
         return self._par
 
     def workspace(self, arena: Arena) -> compiled_hqp.Workspace:
@@ -251,26 +261,50 @@ class HierarchicalQPSolver(Solver):
         plan.last_result = result
         return result
 
-    def run(self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch,
-            steps: int, what: int) -> None:  # fmt: skip
+    def run(
+        self,
+        plan: Plan,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+    ) -> None:
         """Whole steps on the synced ``plan``: one kernel call with daqp
         (:func:`wholebody.kernels.control.hqp_run`), else the stages with the engine's QPs
         between them (one state, one step; :mod:`wholebody.solvers.compiled_hqp`)."""
         ws = self.workspace(plan)
         compiled_hqp.run_steps(self, plan, ws, kinematics, batch, steps, what)
 
-    def kernel_run(self, arena: control.Arena, kinematics: control.Kinematics,
-                   batch: control.Batch, steps: int, what: int,
-                   workspace: control.Arena | None) -> None:  # fmt: skip
+    def kernel_run(
+        self,
+        arena: control.Arena,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+        workspace: control.Arena | None,
+    ) -> None:
         """:func:`wholebody.kernels.control.hqp_run` on an arena and the cascade's workspace
         (a plan's, or copies of them: a thread's share of a batch); daqp only."""
         if not self.in_kernel:
-            raise SolverError(f"HierarchicalQPSolver({self.engine_name!r}): a batch, several "
-                              "steps in one call or the compiled kinematics need the engine "
-                              "'daqp' (the QPs are then solved inside the kernel)")  # fmt: skip
-        first_call("hqp", "the hierarchical QP kernels", control.hqp_run, arena, workspace,
-                   kinematics, batch, self.parameters(), self._daqp_settings, steps,
-                   what)  # fmt: skip
+            raise SolverError(
+                f"HierarchicalQPSolver({self.engine_name!r}): a batch, several "
+                "steps in one call or the compiled kinematics need the engine "
+                "'daqp' (the QPs are then solved inside the kernel)"
+            )
+        first_call(
+            "hqp",
+            "the hierarchical QP kernels",
+            control.hqp_run,
+            arena,
+            workspace,
+            kinematics,
+            batch,
+            self.parameters(),
+            self._daqp_settings,
+            steps,
+            what,
+        )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
         """Solve an evaluated stack (rows in scaled coordinates)."""

@@ -49,8 +49,9 @@ def sqrt_weights(task: Task, w: object) -> np.ndarray:
     try:
         wa = np.broadcast_to(np.asarray(w, dtype=float), (task.dim,))
     except (TypeError, ValueError) as exc:
-        raise DimensionError(f"{task.name}: weight must be a number or {task.dim} numbers, "
-                             f"got {w!r}") from exc  # fmt: skip
+        raise DimensionError(
+            f"{task.name}: weight must be a number or {task.dim} numbers, got {w!r}"
+        ) from exc
     if not (np.all(np.isfinite(wa)) and np.all(wa >= 0)):
         raise DimensionError(f"{task.name}: weights must be finite and >= 0, got {w!r}")
     return np.sqrt(wa)
@@ -95,8 +96,14 @@ class Arena:
         report the per-level scale factors, else ones)."""
         if self._outputs is None:
             v = self.view
-            self._outputs = (v(lay.I_OUT), v(lay.F_U), v(lay.F_LEVEL_OUT), v(lay.F_TASK_RES),
-                             v(lay.I_INFEASIBLE), v(lay.I_ACTIVE))  # fmt: skip
+            self._outputs = (
+                v(lay.I_OUT),
+                v(lay.F_U),
+                v(lay.F_LEVEL_OUT),
+                v(lay.F_TASK_RES),
+                v(lay.I_INFEASIBLE),
+                v(lay.I_ACTIVE),
+            )
         out, U, lev, res, infeasible, active = self._outputs
         flags = infeasible.tolist()
         plain = res[:, 1].tolist()
@@ -146,21 +153,39 @@ class ProblemArena(Arena):
         tasks = []  # (level, start, stop, name)
         k = 0
         for li, lp in enumerate(levels):
-            rows = sorted((sl.start, sl.stop, name) for name, sl in lp.task_rows.items()
-                          if name != OBJECTIVES and sl.stop > sl.start)  # fmt: skip
+            rows = sorted(
+                (sl.start, sl.stop, name)
+                for name, sl in lp.task_rows.items()
+                if name != OBJECTIVES and sl.stop > sl.start
+            )
             tasks += [(li, k + a, k + z, name) for a, z, name in rows]
             k += lp.A.shape[0]
         L = len(levels)
-        super().__init__({
-            lay.F_METRIC: (2, n), lay.F_ROW: (2, K), lay.F_LEVEL: (L, 4), lay.F_A: (K, n),
-            lay.F_B: (K,), lay.F_C: (P, n), lay.F_CB: (2, P), lay.F_BOX: (2, n),
-            lay.F_ANCHOR: (n,), lay.F_U: (2, n), lay.F_LEVEL_OUT: (L, 2),
-            lay.F_TASK_RES: (len(tasks), 3), lay.I_LEVEL: (L, lay.LEVEL_INTS),
-            lay.I_TASK: (len(tasks), 3), lay.I_OUT: (lay.OUT_INTS,), lay.I_ACTIVE: (n,),
-            lay.I_INFEASIBLE: (len(tasks),), lay.I_SATURATED: (len(tasks),),
-            lay.I_INEQ: (sum(len(lp.inequality_rows) for lp in levels), 3), lay.I_HELD: (P,),
-            lay.I_UNMET0: (len(tasks),),
-        })  # fmt: skip
+        super().__init__(
+            {
+                lay.F_METRIC: (2, n),
+                lay.F_ROW: (2, K),
+                lay.F_LEVEL: (L, 4),
+                lay.F_A: (K, n),
+                lay.F_B: (K,),
+                lay.F_C: (P, n),
+                lay.F_CB: (2, P),
+                lay.F_BOX: (2, n),
+                lay.F_ANCHOR: (n,),
+                lay.F_U: (2, n),
+                lay.F_LEVEL_OUT: (L, 2),
+                lay.F_TASK_RES: (len(tasks), 3),
+                lay.I_LEVEL: (L, lay.LEVEL_INTS),
+                lay.I_TASK: (len(tasks), 3),
+                lay.I_OUT: (lay.OUT_INTS,),
+                lay.I_ACTIVE: (n,),
+                lay.I_INFEASIBLE: (len(tasks),),
+                lay.I_SATURATED: (len(tasks),),
+                lay.I_INEQ: (sum(len(lp.inequality_rows) for lp in levels), 3),
+                lay.I_HELD: (P,),
+                lay.I_UNMET0: (len(tasks),),
+            }
+        )
         v = self.view
         metric = v(lay.F_METRIC)
         metric[0] = problem.scale
@@ -201,8 +226,7 @@ class _Record:
 
     __slots__ = ("block", "cat", "entry", "key", "level", "packed", "row", "rows", "slot")
 
-    def __init__(self, entry: Entry, cat: int, level: int, row: int, rows: int,
-                 slot: int) -> None:  # fmt: skip
+    def __init__(self, entry: Entry, cat: int, level: int, row: int, rows: int, slot: int) -> None:
         self.entry, self.cat, self.level = entry, cat, level
         self.row, self.rows, self.slot = row, rows, slot
         self.packed = None
@@ -225,8 +249,9 @@ class Plan(Arena):
         super().__init__(self._shapes())
         self.inequality_rows = self._inequality_rows
         self._fill()
-        self.reported = [(t, r.entry.name, self.levels[r.level].name)
-                         for t, r in enumerate(self.tasks) if r.rows]  # fmt: skip
+        self.reported = [
+            (t, r.entry.name, self.levels[r.level].name) for t, r in enumerate(self.tasks) if r.rows
+        ]
         self.task_names = [r.entry.name for r in self.tasks]
         self.level_names = [lv.name for lv in self.levels]
         self._problem: StackProblem | None = None
@@ -282,8 +307,7 @@ class Plan(Arena):
         self.compiled = [r for r in self.records if r.packed is not None]
         self.python = [r for r in self.records if r.packed is None]
 
-    def _add(self, entry: Entry, cat: int, level: int, row: int, rows: int,
-             slot: int) -> _Record:  # fmt: skip
+    def _add(self, entry: Entry, cat: int, level: int, row: int, rows: int, slot: int) -> _Record:
         rec = _Record(entry, cat, level, row, rows, slot)
         self.records.append(rec)
         return rec
@@ -296,21 +320,45 @@ class Plan(Arena):
         nF = sum(r.packed.floats.size for r in self.compiled)
         nI = sum(r.packed.ints.size for r in self.compiled)
         return {
-            lay.F_SCALARS: (4,), lay.F_ACT_A: (E,), lay.F_KIN_J: (F, 6, nu),
-            lay.F_KIN_P: (F, 3), lay.F_KIN_R: (F, 3, 3), lay.F_JP: (nu,), lay.F_PAR: (nF,),
-            lay.F_OBJ: (nO, 2), lay.F_OBJ_GRAD: (nO, nu), lay.F_OBJ_CURV: (nO, nu),
-            lay.F_BOXES: (len(self.constraints), 2, nu), lay.F_METRIC: (2, nu),
-            lay.F_ROW: (2, self.K), lay.F_LEVEL: (L, 4), lay.F_A: (self.K, nu),
-            lay.F_B: (self.K,), lay.F_C: (self.P, nu), lay.F_CB: (2, self.P),
-            lay.F_BOX: (2, nu), lay.F_ANCHOR: (nu,), lay.F_U: (2, nu), lay.F_LEVEL_OUT: (L, 2),
-            lay.F_TASK_RES: (T, 3), lay.I_FRAME: (F,), lay.I_SUPPORT: (F, nv),
-            lay.I_ACT: (2, E), lay.I_POS: (2, nu),
-            lay.I_ENTRY: (len(self.records), lay.ENTRY_INTS), lay.I_PAR: (nI,),
-            lay.I_LEVEL: (L, lay.LEVEL_INTS), lay.I_TASK: (T, 3), lay.I_OUT: (lay.OUT_INTS,),
-            lay.I_ACTIVE: (nu,), lay.I_INFEASIBLE: (T,), lay.I_SATURATED: (T,),
-            lay.I_INEQ: (len(self._inequality_rows), 3), lay.I_HELD: (self.P,),
+            lay.F_SCALARS: (4,),
+            lay.F_ACT_A: (E,),
+            lay.F_KIN_J: (F, 6, nu),
+            lay.F_KIN_P: (F, 3),
+            lay.F_KIN_R: (F, 3, 3),
+            lay.F_JP: (nu,),
+            lay.F_PAR: (nF,),
+            lay.F_OBJ: (nO, 2),
+            lay.F_OBJ_GRAD: (nO, nu),
+            lay.F_OBJ_CURV: (nO, nu),
+            lay.F_BOXES: (len(self.constraints), 2, nu),
+            lay.F_METRIC: (2, nu),
+            lay.F_ROW: (2, self.K),
+            lay.F_LEVEL: (L, 4),
+            lay.F_A: (self.K, nu),
+            lay.F_B: (self.K,),
+            lay.F_C: (self.P, nu),
+            lay.F_CB: (2, self.P),
+            lay.F_BOX: (2, nu),
+            lay.F_ANCHOR: (nu,),
+            lay.F_U: (2, nu),
+            lay.F_LEVEL_OUT: (L, 2),
+            lay.F_TASK_RES: (T, 3),
+            lay.I_FRAME: (F,),
+            lay.I_SUPPORT: (F, nv),
+            lay.I_ACT: (2, E),
+            lay.I_POS: (2, nu),
+            lay.I_ENTRY: (len(self.records), lay.ENTRY_INTS),
+            lay.I_PAR: (nI,),
+            lay.I_LEVEL: (L, lay.LEVEL_INTS),
+            lay.I_TASK: (T, 3),
+            lay.I_OUT: (lay.OUT_INTS,),
+            lay.I_ACTIVE: (nu,),
+            lay.I_INFEASIBLE: (T,),
+            lay.I_SATURATED: (T,),
+            lay.I_INEQ: (len(self._inequality_rows), 3),
+            lay.I_HELD: (self.P,),
             lay.I_UNMET0: (T,),
-        }  # fmt: skip
+        }
 
     def _fill(self) -> None:
         """The constants: frames, kinematics tables, the entry table, levels, tasks; every
@@ -326,8 +374,20 @@ class Plan(Arena):
         f0 = i0 = 0
         for e, rec in enumerate(self.records):
             row = table[e]
-            row[:] = (rec.cat, lay.KIND_PYTHON, rec.level, rec.row, rec.rows, rec.slot, -1,
-                      0, 0, 0, 0, 0)  # fmt: skip
+            row[:] = (
+                rec.cat,
+                lay.KIND_PYTHON,
+                rec.level,
+                rec.row,
+                rec.rows,
+                rec.slot,
+                -1,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
             packed = rec.packed
             if packed is None:
                 continue
@@ -341,8 +401,7 @@ class Plan(Arena):
             f0, i0 = f0 + nf, i0 + ni
         levels = v(lay.I_LEVEL)
         for li, (row0, tasks_end, row_end, ineq0, ineq_end) in enumerate(self.level_rows):
-            levels[li] = (row0, tasks_end, row_end, ineq0, ineq_end,
-                          bool(self.levels[li].tasks))  # fmt: skip
+            levels[li] = (row0, tasks_end, row_end, ineq0, ineq_end, bool(self.levels[li].tasks))
         v(lay.I_TASK)[:] = [(r.level, r.row, r.row + r.rows) for r in self.tasks] or np.zeros(
             (0, 3)
         )
@@ -406,8 +465,12 @@ class Plan(Arena):
         made a new one): copy it back in, or lay the stack out anew if it changed shape."""
         params = rec.entry._params
         packed = rec.entry.pack(_Probe(self._frames))
-        if (packed is None or packed.kind != rec.packed.kind or params.size != rec.block.size
-                or not np.array_equal(packed.ints, rec.packed.ints)):  # fmt: skip
+        if (
+            packed is None
+            or packed.kind != rec.packed.kind
+            or params.size != rec.block.size
+            or not np.array_equal(packed.ints, rec.packed.ints)
+        ):
             self.stale = True
             return
         rec.block[:] = params
@@ -424,13 +487,16 @@ class Plan(Arena):
             rec.key = w
             return
         sw = sqrt_weights(rec.entry, w)
-        rec.key = w if rec.packed is not None else (
-            float(w) if isinstance(w, (float, int)) else np.array(w, float)
+        rec.key = (
+            w
+            if rec.packed is not None
+            else (float(w) if isinstance(w, (float, int)) else np.array(w, float))
         )
         rw = self._row_weights
         rw[0, rec.row : rec.row + rec.rows] = sw
-        rw[1, rec.row : rec.row + rec.rows] = np.divide(1.0, sw, out=np.zeros_like(sw),
-                                                        where=sw > 0)  # fmt: skip
+        rw[1, rec.row : rec.row + rec.rows] = np.divide(
+            1.0, sw, out=np.zeros_like(sw), where=sw > 0
+        )
         row0, tasks_end = self.level_rows[rec.level][:2]
         weighted = rw[0, row0:tasks_end]
         weighted = weighted[weighted > 0.0]
@@ -481,8 +547,9 @@ class Plan(Arena):
     def evaluate(self, state: RobotState, dt: float) -> None:
         """Sync and evaluate every row and the box at ``state`` (scaled, in the arena)."""
         self.sync(state, dt)
-        first_call("evaluate", "the control kernels", evaluate, *self.kernel_args(state),
-                   NO_REFERENCES)  # fmt: skip
+        first_call(
+            "evaluate", "the control kernels", evaluate, *self.kernel_args(state), NO_REFERENCES
+        )
         self.evaluated = state.stamp
 
     # ------------------------------------------------------------------ after a solve
@@ -508,17 +575,31 @@ class Plan(Arena):
             for li, (level, (row0, tasks_end, row_end, ineq0, ineq_end)) in enumerate(
                 zip(self.levels, self.level_rows, strict=True)
             ):
-                rows = {r.entry.name: slice(r.row - row0, r.row + r.rows - row0)
-                        for r in self.tasks if r.level == li}  # fmt: skip
+                rows = {
+                    r.entry.name: slice(r.row - row0, r.row + r.rows - row0)
+                    for r in self.tasks
+                    if r.level == li
+                }
                 if level.objectives:
                     rows[OBJECTIVES] = slice(tasks_end - row0, row_end - row0)
-                irows = {name: slice(a - ineq0, z - ineq0)
-                         for lv, a, z, name in self._inequality_rows if lv == li}  # fmt: skip
-                levels.append(LevelProblem(level.name, self._A[row0:row_end],
-                                           self._b[row0:row_end], self._C[ineq0:ineq_end],
-                                           self._CB[0, ineq0:ineq_end],
-                                           self._CB[1, ineq0:ineq_end], rows, irows,
-                                           unweight=rw[1, row0:row_end]))  # fmt: skip
+                irows = {
+                    name: slice(a - ineq0, z - ineq0)
+                    for lv, a, z, name in self._inequality_rows
+                    if lv == li
+                }
+                levels.append(
+                    LevelProblem(
+                        level.name,
+                        self._A[row0:row_end],
+                        self._b[row0:row_end],
+                        self._C[ineq0:ineq_end],
+                        self._CB[0, ineq0:ineq_end],
+                        self._CB[1, ineq0:ineq_end],
+                        rows,
+                        irows,
+                        unweight=rw[1, row0:row_end],
+                    )
+                )
             box = self.view(lay.F_BOX)
             self._problem = StackProblem(levels, box[0], box[1], self.stack.scale, {})
         problem = self._problem
@@ -545,8 +626,9 @@ class Plan(Arena):
             elif rec.packed.kind == lay.KIND_ARM:
                 parts = rec.block[AE_WIDTH : AE_WIDTH + ARM_PARTS]
                 value, gravity, spring, alpha, stiff, rho = parts.tolist()
-                out[o.name] = ArmEnergyValue(value, grads[j].copy(), None, gravity, spring,
-                                             alpha, stiff, rho)  # fmt: skip
+                out[o.name] = ArmEnergyValue(
+                    value, grads[j].copy(), None, gravity, spring, alpha, stiff, rho
+                )
             else:
                 curv = curvs[j].copy() if rec.packed.curvature else None
                 out[o.name] = ObjectiveValue(float(self._obj[j, 1]), grads[j].copy(), curv)
@@ -581,9 +663,14 @@ class StepBuffers:
         except ModelError:  # joints the kernels do not move: Pinocchio's kinematics only
             model_i, model_f = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 15))
             self.movable = False
-        self.own = control.Kinematics(model_i, model_f, np.zeros((robot.nv, 6)).T,
-                                      np.zeros((model.nframes, 12)),
-                                      np.zeros((model.njoints, 12)), np.zeros(robot.nv))  # fmt: skip
+        self.own = control.Kinematics(
+            model_i,
+            model_f,
+            np.zeros((robot.nv, 6)).T,
+            np.zeros((model.nframes, 12)),
+            np.zeros((model.njoints, 12)),
+            np.zeros(robot.nv),
+        )
         self.references = references
         self.batch = control.Batch(
             np.zeros((1, robot.nq)),

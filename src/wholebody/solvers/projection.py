@@ -152,8 +152,13 @@ class ProjectionSolver(Solver):
         saturate: bool = True,
     ) -> None:
         values = (damping, singular_threshold, rank_tolerance, tolerance)
-        if not (all(math.isfinite(v) for v in values) and damping >= 0 and singular_threshold > 0
-                and rank_tolerance > 0 and tolerance > 0):  # fmt: skip
+        if not (
+            all(math.isfinite(v) for v in values)
+            and damping >= 0
+            and singular_threshold > 0
+            and rank_tolerance > 0
+            and tolerance > 0
+        ):
             raise SolverError(
                 "ProjectionSolver: damping >= 0 and positive thresholds required, all finite; "
                 f"got damping={damping}, singular_threshold={singular_threshold}, "
@@ -168,8 +173,13 @@ class ProjectionSolver(Solver):
 
     def parameters(self) -> np.ndarray:
         """The settings as the kernel reads them."""
-        self._par[:] = (self.damping, self.singular_threshold, self.rank_tolerance,
-                        self.tolerance, bool(self.saturate))  # fmt: skip
+        self._par[:] = (
+            self.damping,
+            self.singular_threshold,
+            self.rank_tolerance,
+            self.tolerance,
+            bool(self.saturate),
+        )
         return self._par
 
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
@@ -184,28 +194,56 @@ class ProjectionSolver(Solver):
         plan.last_result = result
         return result
 
-    def run(self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch,
-            steps: int, what: int) -> None:  # fmt: skip
+    def run(
+        self,
+        plan: Plan,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+    ) -> None:
         """Whole steps in one kernel call (:func:`wholebody.kernels.control.projection_run`)
         on the synced ``plan``."""
         arena = plan.step_buffers(batch.refs.shape[1]).arena
         self.kernel_run(arena, kinematics, batch, steps, what, None)
 
-    def kernel_run(self, arena: control.Arena, kinematics: control.Kinematics,
-                   batch: control.Batch, steps: int, what: int,
-                   workspace: control.Arena | None) -> None:  # fmt: skip
+    def kernel_run(
+        self,
+        arena: control.Arena,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+        workspace: control.Arena | None,
+    ) -> None:
         """:func:`wholebody.kernels.control.projection_run` on an arena (a plan's, or a copy
         of it: a thread's share of a batch); ``workspace``: unused (the HQP's)."""
-        first_call("projection", "the projection kernels", control.projection_run, arena,
-                   kinematics, batch, self.parameters(), steps, what)  # fmt: skip
+        first_call(
+            "projection",
+            "the projection kernels",
+            control.projection_run,
+            arena,
+            kinematics,
+            batch,
+            self.parameters(),
+            steps,
+            what,
+        )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:
         """Solve an evaluated stack (rows in scaled coordinates, e.g. ``stack.evaluate()``'s
         or a synthetic one)."""
         start = time.perf_counter()
         arena = ProblemArena(problem)
-        first_call("projection", "the projection kernels", kernel.project, arena.f, arena.i,
-                   arena.h, self.parameters())  # fmt: skip
+        first_call(
+            "projection",
+            "the projection kernels",
+            kernel.project,
+            arena.f,
+            arena.i,
+            arena.h,
+            self.parameters(),
+        )
         return self.result(arena, time.perf_counter() - start)
 
     def result(self, arena: Arena, solve_time: float, stack: Stack | None = None) -> SolverResult:
@@ -227,8 +265,7 @@ _MESSAGES = {
 }
 
 
-def _held_report(arena: Arena, result: SolverResult, held: np.ndarray,
-                 stack: Stack | None) -> None:  # fmt: skip
+def _held_report(arena: Arena, result: SolverResult, held: np.ndarray, stack: Stack | None) -> None:
     """The held rows into ``result``: their names in the message with the tasks they
     limited (unmet now, met before any row was held), the unmet ones in ``infeasible``."""
     names = _row_names(arena, stack)

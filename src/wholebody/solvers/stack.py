@@ -49,6 +49,7 @@ Entry = Task | InequalityTask | Objective
 OBJECTIVES = "objectives"
 """The name of a level's objective rows in :attr:`LevelProblem.task_rows`."""
 
+
 @dataclass
 class Level:
     """One priority level.
@@ -126,8 +127,11 @@ class LevelProblem:
 
     def __post_init__(self) -> None:
         # The tasks' rows tile the top of A (the objectives' rows, if any, come last).
-        rows = sorted((sl.start, sl.stop, nm) for nm, sl in self.task_rows.items()
-                      if nm != OBJECTIVES and sl.stop > sl.start)  # fmt: skip
+        rows = sorted(
+            (sl.start, sl.stop, nm)
+            for nm, sl in self.task_rows.items()
+            if nm != OBJECTIVES and sl.stop > sl.start
+        )
         self._names = [nm for _, _, nm in rows]
         ends = [0, *(stop for _, stop, _ in rows)][: len(rows)]
         if any(start != end for (start, _, _), end in zip(rows, ends, strict=True)):
@@ -307,8 +311,10 @@ class Stack:
             if level.objectives and not np.isfinite(level.gain):
                 raise WholebodyError(f"{level.name}: gain must be finite, got {level.gain}")
             if level.objectives and not 0.0 <= level.objective_weight < np.inf:
-                raise WholebodyError(f"{level.name}: objective_weight must be finite and >= 0, "
-                                     f"got {level.objective_weight}")  # fmt: skip
+                raise WholebodyError(
+                    f"{level.name}: objective_weight must be finite and >= 0, "
+                    f"got {level.objective_weight}"
+                )
         for c in self.constraints:
             if not isinstance(c, Constraint):
                 raise WholebodyError(f"{c!r} is not a Constraint")
@@ -376,8 +382,9 @@ class Stack:
         coordinates, see the module docstring), by the compiled plan. The arrays are views of
         the plan's arena that the next evaluation overwrites."""
         plan = self.synced_plan(state, dt)
-        first_call("evaluate", "the control kernels", evaluate, *plan.kernel_args(state),
-                   NO_REFERENCES)  # fmt: skip
+        first_call(
+            "evaluate", "the control kernels", evaluate, *plan.kernel_args(state), NO_REFERENCES
+        )
         plan.evaluated = state.stamp
         problem = plan.problem()
         problem.objective_values = plan.objective_values()
@@ -404,8 +411,10 @@ class Stack:
         other.
         """
         if result is not None and saturated is not None:
-            raise WholebodyError("Stack.advance: give result= (per-task anti-windup) or "
-                                 "saturated= (one flag for every task), not both")  # fmt: skip
+            raise WholebodyError(
+                "Stack.advance: give result= (per-task anti-windup) or "
+                "saturated= (one flag for every task), not both"
+            )
         plan = self._evaluated_plan(state, dt)
         what = ADVANCE_TASKS
         if result is not None:
@@ -418,8 +427,9 @@ class Stack:
         if u is not None:
             plan.view(lay.F_U)[1] = u
             what |= ADVANCE_MEMORY
-        first_call("advance", "the control kernels", advance, plan.f, plan.i, plan.h,
-                   float(dt), what)  # fmt: skip
+        first_call(
+            "advance", "the control kernels", advance, plan.f, plan.i, plan.h, float(dt), what
+        )
         plan.advance_python(state, dt, u)
 
     def _evaluated_plan(self, state: RobotState, dt: float) -> Plan:
@@ -453,8 +463,9 @@ class Stack:
         (:mod:`wholebody.kernels.advance`)."""
         plan = self._evaluated_plan(state, self._last_dt())
         self._outcome(plan, result)
-        first_call("advance", "the control kernels", advance, plan.f, plan.i, plan.h, 1.0,
-                   ADVANCE_FLAGS)  # fmt: skip
+        first_call(
+            "advance", "the control kernels", advance, plan.f, plan.i, plan.h, 1.0, ADVANCE_FLAGS
+        )
         flags = plan.view(lay.I_SATURATED).tolist()
         return {r.entry.name: bool(flags[r.slot]) for r in plan.tasks}
 

@@ -123,13 +123,13 @@ class ArmPotentialEnergy(Objective):
         if not smoothing > 0 or not fade > 0:
             raise DimensionError(f"{self.name}: smoothing and fade must be > 0")
         if reference not in ("shoulder", "world"):
-            raise DimensionError(f"{self.name}: reference must be 'shoulder' or 'world', "
-                                 f"got {reference!r}")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: reference must be 'shoulder' or 'world', got {reference!r}"
+            )
         self.side = 1.0 if self.arm.side == "left" else -1.0
         self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
         arm = self.arm
-        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame,
-                        arm.forearm.frame)  # fmt: skip
+        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame, arm.forearm.frame)
         self._frames_base = (*self._frames, robot.base_frame)
         self._settings = (float(smoothing), float(fade), reference)
         self.stiffness = stiffness  # (lays out the parameter block)
@@ -212,8 +212,11 @@ class ArmPotentialEnergy(Objective):
     def pack(self, packer: Packer) -> Packed | None:
         """Compiled where the kernels evaluate the stiffness (a constant or a packed network)
         and each segment is one link (see the module docstring)."""
-        if (self.extra_bodies or self._params[AE_NET] == AE_GIVEN
-                or not self.compiled_as(ArmPotentialEnergy, "evaluate", "_energy")):  # fmt: skip
+        if (
+            self.extra_bodies
+            or self._params[AE_NET] == AE_GIVEN
+            or not self.compiled_as(ArmPotentialEnergy, "evaluate", "_energy")
+        ):
             return None
         frames = self._frames_base if self.network() is not None else self._frames
         ints = [packer.frame(f) for f in frames] + [-1] * (6 - len(frames))
@@ -223,8 +226,15 @@ class ArmPotentialEnergy(Objective):
         grad = np.empty(self.robot.nu)
         parts = self._energy(state, state.jacobians(self._frames_base), grad)
         value, gravity, spring, alpha, k, rho = parts.tolist()
-        return ArmEnergyValue(value=value, gradient=grad, gravity=gravity, spring=spring,
-                              arm_angle=alpha, stiffness=k, rho=rho)  # fmt: skip
+        return ArmEnergyValue(
+            value=value,
+            gradient=grad,
+            gravity=gravity,
+            spring=spring,
+            arm_angle=alpha,
+            stiffness=k,
+            rho=rho,
+        )
 
     def parts(self, state: RobotState) -> np.ndarray:
         """``(value, gravity, spring, arm_angle, stiffness, rho)`` (J, J, J, rad, N m/rad, m)
@@ -280,8 +290,12 @@ class ArmPotentialEnergy(Objective):
             return False
         a, b = self.stiffness, other.stiffness
         same_k = a is b or (type(a) is type(b) is ConstantStiffness and a.k == b.k)
-        return (same_k and self.arm is other.arm and self.robot is other.robot
-                and self._settings == other._settings)  # fmt: skip
+        return (
+            same_k
+            and self.arm is other.arm
+            and self.robot is other.robot
+            and self._settings == other._settings
+        )
 
 
 _NO_JACOBIAN = np.zeros((6, 6, 0))  # parts(): the gradient has no columns

@@ -141,7 +141,7 @@ class Compiled:
         """From now on keep the parameter block in ``block``, a stack's copy of it."""
         self._params = block
 
-    def check_step(self, dt: float) -> None:  # noqa: B027 - a hook
+    def check_step(self, dt: float) -> None:
         """Raise an error naming the entry if it cannot take a step of ``dt`` s (the stack
         asks whenever ``dt`` changes)."""
 
@@ -162,8 +162,7 @@ def check_weight(weight: object, name: str) -> float | np.ndarray:
     """A weight: a finite number >= 0 or a 1-D array of them (read-only), or DimensionError
     naming the owner."""
     if isinstance(weight, bool):
-        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row, got "
-                             f"{weight!r}")  # fmt: skip
+        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row, got {weight!r}")
     if isinstance(weight, (int, float, np.floating, np.integer)):
         w = float(weight)
         if not (math.isfinite(w) and w >= 0):
@@ -172,11 +171,13 @@ def check_weight(weight: object, name: str) -> float | np.ndarray:
     try:
         arr = np.array(weight, dtype=float)
     except (TypeError, ValueError):
-        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row, got "
-                             f"{weight!r}") from None  # fmt: skip
+        raise DimensionError(
+            f"{name}: weight must be a number >= 0 or one per row, got {weight!r}"
+        ) from None
     if arr.ndim != 1 or not (np.all(np.isfinite(arr)) and np.all(arr >= 0)):
-        raise DimensionError(f"{name}: weight must be a number >= 0 or one per row (finite, "
-                             f">= 0), got {weight!r}")  # fmt: skip
+        raise DimensionError(
+            f"{name}: weight must be a number >= 0 or one per row (finite, >= 0), got {weight!r}"
+        )
     arr.setflags(write=False)
     return arr
 
@@ -336,5 +337,7 @@ def check_rows(name: str, J: np.ndarray, v: np.ndarray, shape: tuple[int, ...]) 
     DimensionError naming the task."""
     J, v = np.asarray(J), np.asarray(v)
     if J.shape != shape or v.shape != shape[:1]:
-        raise DimensionError(f"task {name!r}: compute() returned J {J.shape} and v {v.shape}; "
-                             f"expected J {shape} and v ({shape[0]},) (dim x nu)")  # fmt: skip
+        raise DimensionError(
+            f"task {name!r}: compute() returned J {J.shape} and v {v.shape}; "
+            f"expected J {shape} and v ({shape[0]},) (dim x nu)"
+        )

@@ -64,16 +64,26 @@ class CollisionAvoidance(InequalityTask):
         more pairs are that close).
     """
 
-    def __init__(self, robot: Robot, model: CollisionModel | None = None, *,
-                 obstacles: Sequence[Obstacle] = (), safety: float = 0.01,
-                 influence: float = 0.05, speed: float = 0.5, max_rows: int = 32,
-                 name: str = "collision") -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        model: CollisionModel | None = None,
+        *,
+        obstacles: Sequence[Obstacle] = (),
+        safety: float = 0.01,
+        influence: float = 0.05,
+        speed: float = 0.5,
+        max_rows: int = 32,
+        name: str = "collision",
+    ) -> None:
         if not (math.isfinite(safety) and math.isfinite(influence) and 0 <= safety < influence):
-            raise DimensionError(f"{name}: need 0 <= safety < influence (m), got {safety} and "
-                                 f"{influence}")  # fmt: skip
+            raise DimensionError(
+                f"{name}: need 0 <= safety < influence (m), got {safety} and {influence}"
+            )
         if not (math.isfinite(speed) and speed > 0) or int(max_rows) < 1:
-            raise DimensionError(f"{name}: speed must be > 0 m/s and max_rows >= 1, got {speed} "
-                                 f"and {max_rows}")  # fmt: skip
+            raise DimensionError(
+                f"{name}: speed must be > 0 m/s and max_rows >= 1, got {speed} and {max_rows}"
+            )
         self.name = name
         self.robot = robot
         self.model = model or CollisionModel(robot, obstacles, safety=safety)
@@ -95,9 +105,11 @@ class CollisionAvoidance(InequalityTask):
         """A step of ``dt`` s must not cross the safety distance: ``speed dt <= influence -
         safety``, or DimensionError."""
         if self.speed * dt > self.influence - self.safety:
-            raise DimensionError(f"{self.name}: speed * dt = {self.speed * dt:.3g} m exceeds "
-                                 f"influence - safety = {self.influence - self.safety:.3g} m: "
-                                 "a step could cross the safety distance")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: speed * dt = {self.speed * dt:.3g} m exceeds "
+                f"influence - safety = {self.influence - self.safety:.3g} m: "
+                "a step could cross the safety distance"
+            )
 
     def compute(self, state: RobotState, dt: float) -> InequalityRows:
         self.check_step(dt)
@@ -117,9 +129,12 @@ class CollisionAvoidance(InequalityTask):
         """Once: more pairs within the influence than rows."""
         if within > self.max_rows and not self._warned:
             self._warned = True
-            warnings.warn(f"{self.name}: {within} pairs within {self.influence} m but "
-                          f"max_rows = {self.max_rows}: the farthest {within - self.max_rows}"
-                          " have no row (raise max_rows)", stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"{self.name}: {within} pairs within {self.influence} m but "
+                f"max_rows = {self.max_rows}: the farthest {within - self.max_rows}"
+                " have no row (raise max_rows)",
+                stacklevel=3,
+            )
 
     def _record(self, near: list[PairDistance]) -> None:
         """The rows' pairs into the block, as the kernel writes them."""
@@ -133,7 +148,11 @@ class CollisionAvoidance(InequalityTask):
             if r < written:
                 pair = near[r]
                 par[CA_HEAD + r * RESULT_WIDTH : CA_HEAD + (r + 1) * RESULT_WIDTH] = (
-                    pair.distance, *pair.point_a, *pair.point_b, *pair.normal)
+                    pair.distance,
+                    *pair.point_a,
+                    *pair.point_b,
+                    *pair.normal,
+                )
 
     @property
     def pairs(self) -> list[PairDistance]:
@@ -170,10 +189,13 @@ class CollisionAvoidance(InequalityTask):
         par[CA_SAFETY], par[CA_INFLUENCE], par[CA_SPEED] = self.safety, self.influence, self.speed
         par[CA_HEAD + m * (RESULT_WIDTH + 1) :] = packed.shapes.ravel()
         self._params = par
-        ints = np.concatenate([[S, P], packed.kinds.ravel(), packed.support.ravel(),
-                               packed.pairs.ravel()]).astype(np.int64)  # fmt: skip
+        ints = np.concatenate(
+            [[S, P], packed.kinds.ravel(), packed.support.ravel(), packed.pairs.ravel()]
+        ).astype(np.int64)
         return Packed(KIND_COLLISION, par, ints)
 
     def __repr__(self) -> str:
-        return (f"CollisionAvoidance({self.name!r}, {len(self.model.pairs)} pairs, safety "
-                f"{self.safety} m, influence {self.influence} m)")  # fmt: skip
+        return (
+            f"CollisionAvoidance({self.name!r}, {len(self.model.pairs)} pairs, safety "
+            f"{self.safety} m, influence {self.influence} m)"
+        )

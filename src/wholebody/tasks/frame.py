@@ -128,8 +128,9 @@ class PoseTask(Task):
         weight: float | Sequence[float],
     ) -> None:
         if not (position or orientation):
-            raise DimensionError(f"{type(self).__name__}: track the position, the orientation "
-                                 "or both")  # fmt: skip
+            raise DimensionError(
+                f"{type(self).__name__}: track the position, the orientation or both"
+            )
         self.robot = robot
         self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
         self.rows.setflags(write=False)
@@ -232,8 +233,9 @@ class PoseTask(Task):
         """The (6,) error at ``state`` and the current target: that of the last rows when
         they were computed there (by a stack's kernel or by this task), else computed."""
         if self._params[POSE_STAMP] != state.stamp or not state.valid:
-            self.write_rows(state, np.empty((self.rows.size, self.robot.nu)),
-                            np.empty(self.rows.size))  # fmt: skip
+            self.write_rows(
+                state, np.empty((self.rows.size, self.robot.nu)), np.empty(self.rows.size)
+            )
         return self._params[POSE_ERROR : POSE_ERROR + 6]
 
     def error(self, state: RobotState) -> np.ndarray:
@@ -254,8 +256,9 @@ class PoseTask(Task):
     def _pack(self, packer: Packer, fa: int, fb: int) -> Packed | None:
         """The kernel's view of this task tracking frame ``fb`` (relative to ``fa``, -1: the
         world), unless a subclass changed what it computes."""
-        if not self.compiled_as(PoseTask, "compute", "write_rows", "error", "advance",
-                                "_full_error"):  # fmt: skip
+        if not self.compiled_as(
+            PoseTask, "compute", "write_rows", "error", "advance", "_full_error"
+        ):
             return None
         ints = np.zeros(POSE_INTS, dtype=np.int64)
         ints[POSE_FA], ints[POSE_FB], ints[POSE_NROWS] = fa, fb, self.rows.size
@@ -299,9 +302,16 @@ class FrameTask(PoseTask):
         weight: float | Sequence[float] = 1.0,
     ) -> None:
         self.frame = robot.frame(frame)
-        super().__init__(robot, name or self.frame.name, position=position,
-                         orientation=orientation, kp=kp, ki=ki, integral_limit=integral_limit,
-                         weight=weight)  # fmt: skip
+        super().__init__(
+            robot,
+            name or self.frame.name,
+            position=position,
+            orientation=orientation,
+            kp=kp,
+            ki=ki,
+            integral_limit=integral_limit,
+            weight=weight,
+        )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         R, p = state.rotation_translation(self.frame)

@@ -90,8 +90,9 @@ class FrameHalfSpace(InequalityTask):
     def compute(self, state: RobotState, dt: float) -> InequalityRows:
         C = np.empty((1, self.robot.nu))
         p = state.rotation_translation(self.frame)[1]
-        lower = half_space_row(state.jacobian(self.frame), p, self.normal, self.offset,
-                               self.gain, dt, C[0])  # fmt: skip
+        lower = half_space_row(
+            state.jacobian(self.frame), p, self.normal, self.offset, self.gain, dt, C[0]
+        )
         return InequalityRows(C, np.array([lower]), np.array([np.inf]))
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
@@ -100,8 +101,11 @@ class FrameHalfSpace(InequalityTask):
     def pack(self, packer: Packer) -> Packed | None:
         if not self.compiled_as(FrameHalfSpace, "compute"):
             return None
-        return Packed(KIND_HALF_SPACE, self._params.copy(),
-                      np.array([packer.frame(self.frame)], dtype=np.int64))  # fmt: skip
+        return Packed(
+            KIND_HALF_SPACE,
+            self._params.copy(),
+            np.array([packer.frame(self.frame)], dtype=np.int64),
+        )
 
     def __repr__(self) -> str:
         return f"FrameHalfSpace({self.name!r}, normal={self.normal}, offset={self.offset})"

@@ -30,14 +30,21 @@ class JointPositionLimits(Constraint):
         Distance (rad, m) kept from each limit.
     """
 
-    def __init__(self, robot: Robot, *, gain: float = 0.5, margin: float = 0.0,
-                 name: str = "joint_position_limits") -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        gain: float = 0.5,
+        margin: float = 0.0,
+        name: str = "joint_position_limits",
+    ) -> None:
         if not 0 < gain <= 1:
             raise DimensionError(f"{name}: gain must be in (0, 1], got {gain}")
         lower, upper = robot.position_limits
         if not margin >= 0 or np.any(upper - lower <= 2 * margin):
-            raise DimensionError(f"{name}: margin {margin} must be >= 0 and smaller than half "
-                                 "of every joint range")  # fmt: skip
+            raise DimensionError(
+                f"{name}: margin {margin} must be >= 0 and smaller than half of every joint range"
+            )
         self.robot, self.name = robot, name
         self._margin = float(margin)
         # the kernel's block: lower + margin, upper - margin, gain
@@ -73,8 +80,7 @@ class JointPositionLimits(Constraint):
 class VelocityLimits(Constraint):
     """``|u| <= scale * v_max`` (URDF velocity limits; base limits from robot.toml)."""
 
-    def __init__(self, robot: Robot, *, scale: float = 1.0,
-                 name: str = "velocity_limits") -> None:  # fmt: skip
+    def __init__(self, robot: Robot, *, scale: float = 1.0, name: str = "velocity_limits") -> None:
         if not scale > 0:
             raise DimensionError(f"{name}: scale must be > 0, got {scale}")
         self.name = name
@@ -116,8 +122,9 @@ class AccelerationLimits(Constraint):
     smoothness, and that step exceeds ``a_max`` on that joint.
     """
 
-    def __init__(self, robot: Robot, *, scale: float = 1.0,
-                 name: str = "acceleration_limits") -> None:  # fmt: skip
+    def __init__(
+        self, robot: Robot, *, scale: float = 1.0, name: str = "acceleration_limits"
+    ) -> None:
         if not (isinstance(scale, (int, float)) and 0 < scale < np.inf):
             raise DimensionError(f"{name}: scale must be a finite number > 0, got {scale!r}")
         self.name = name

@@ -41,8 +41,14 @@ class JointLimitAvoidance(Objective):
         with finite limits); a name is a group's before a joint's.
     """
 
-    def __init__(self, robot: Robot, joints: Sequence[str | int] | None = None, *,
-                 weight: float = 1.0, name: str = "joint_limit_avoidance") -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        joints: Sequence[str | int] | None = None,
+        *,
+        weight: float = 1.0,
+        name: str = "joint_limit_avoidance",
+    ) -> None:
         lower, upper = robot.position_limits
         limited = np.isfinite(lower) & np.isfinite(upper)
         if isinstance(joints, str):  # one group or joint name
@@ -62,8 +68,14 @@ class JointLimitAvoidance(Objective):
                         "an actuated joint"
                         + (f" (did you mean {', '.join(map(repr, close))}?)" if close else "")
                     )
-            parts = [[int(j)] if isinstance(j, (int, np.integer)) else robot.groups[j].indices
-                     if j in robot.groups else [robot.index(j)] for j in joints]  # fmt: skip
+            parts = [
+                [int(j)]
+                if isinstance(j, (int, np.integer))
+                else robot.groups[j].indices
+                if j in robot.groups
+                else [robot.index(j)]
+                for j in joints
+            ]
             idx = np.unique(np.concatenate(parts)).astype(int)
             if not np.all(limited[idx]):
                 bad = [robot.actuated_joints[i] for i in idx if not limited[i]]
@@ -115,8 +127,14 @@ class Manipulability(Objective):
     To maximise manipulability give it a **negative** weight (the paper's ``-w3 h2``).
     """
 
-    def __init__(self, robot: Robot, frames: Sequence[str | Frame], *, weight: float = -1.0,
-                 name: str = "manipulability") -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        frames: Sequence[str | Frame],
+        *,
+        weight: float = -1.0,
+        name: str = "manipulability",
+    ) -> None:
         if isinstance(frames, (str, Frame)):  # one frame, not its characters
             frames = [frames]
         if not frames:
@@ -125,8 +143,10 @@ class Manipulability(Objective):
         self.robot = robot
         self.frames = [robot.frame(f) for f in frames]
         if 6 * len(self.frames) > robot.nu:
-            raise DimensionError(f"{name}: {6 * len(self.frames)} rows exceed nu = {robot.nu}; "
-                                 "J J^T is always singular")  # fmt: skip
+            raise DimensionError(
+                f"{name}: {6 * len(self.frames)} rows exceed nu = {robot.nu}; "
+                "J J^T is always singular"
+            )
         check_off_wheels(robot, self.frames)
         self.support = actuated_support_mask(robot)
         """(nu, nu): ``support[l, k]``, column l supports column k (read-only)."""

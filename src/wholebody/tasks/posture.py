@@ -99,8 +99,9 @@ class PostureTask(Task):
         try:
             kp = np.broadcast_to(np.asarray(value, float), self.indices.shape)
         except (TypeError, ValueError) as exc:
-            raise DimensionError(f"{self.name}: kp must be a number or {self.dim} numbers, "
-                                 f"got {value!r}") from exc  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: kp must be a number or {self.dim} numbers, got {value!r}"
+            ) from exc
         if not np.all(np.isfinite(kp)) or np.any(kp < 0):
             raise DimensionError(f"{self.name}: kp must be finite and >= 0")
         self._params[self.dim : 2 * self.dim] = kp
@@ -114,8 +115,10 @@ class PostureTask(Task):
         """Reference positions, one per joint of the task (rad, m)."""
         t = np.asarray(target, dtype=float)
         if t.shape != self.indices.shape or not np.all(np.isfinite(t)):
-            raise DimensionError(f"{self.name}: target must be {self.indices.size} finite "
-                                 f"values, got shape {t.shape}")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: target must be {self.indices.size} finite "
+                f"values, got shape {t.shape}"
+            )
         self._params[: self.dim] = t
 
     def error(self, state: RobotState) -> np.ndarray:

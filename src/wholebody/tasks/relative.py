@@ -56,9 +56,16 @@ class RelativeFrameTask(PoseTask):
     ) -> None:
         self.frame_a = robot.frame(frame_a)
         self.frame_b = robot.frame(frame_b)
-        super().__init__(robot, name or f"{self.frame_a.name}->{self.frame_b.name}",
-                         position=position, orientation=orientation, kp=kp, ki=ki,
-                         integral_limit=integral_limit, weight=weight)  # fmt: skip
+        super().__init__(
+            robot,
+            name or f"{self.frame_a.name}->{self.frame_b.name}",
+            position=position,
+            orientation=orientation,
+            kp=kp,
+            ki=ki,
+            integral_limit=integral_limit,
+            weight=weight,
+        )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         Ra, pa = state.rotation_translation(self.frame_a)
@@ -67,8 +74,7 @@ class RelativeFrameTask(PoseTask):
         p = np.empty(3)
         R = np.empty((3, 3))
         Ja, Jb = state.jacobian(self.frame_a), state.jacobian(self.frame_b)
-        relative_pose(Ja, pa, np.ascontiguousarray(Ra), Jb, pb, np.ascontiguousarray(Rb), J, p,
-                      R)  # fmt: skip
+        relative_pose(Ja, pa, np.ascontiguousarray(Ra), Jb, pb, np.ascontiguousarray(Rb), J, p, R)
         return J, p, R
 
     def relative_pose(self, state: RobotState) -> np.ndarray:
@@ -121,17 +127,27 @@ class RelativePositionTask(PoseTask):
         self.frame_a = robot.frame(frame_a)
         self.frame_b = robot.frame(frame_b)
         self.axes = self.frame_a if axes is None else robot.frame(axes)
-        super().__init__(robot, name or f"{self.frame_a.name}->{self.frame_b.name}",
-                         position=True, orientation=False, kp=kp, ki=ki,
-                         integral_limit=integral_limit, weight=weight)  # fmt: skip
+        super().__init__(
+            robot,
+            name or f"{self.frame_a.name}->{self.frame_b.name}",
+            position=True,
+            orientation=False,
+            kp=kp,
+            ki=ki,
+            integral_limit=integral_limit,
+            weight=weight,
+        )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         Rc = state.rotation(self.axes)
         r = state.position(self.frame_b) - state.position(self.frame_a)
         skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
         J = np.zeros((6, self.robot.nu))
-        J[:3] = Rc.T @ (state.jacobian(self.frame_b)[:3] - state.jacobian(self.frame_a)[:3]
-                        + skew @ state.jacobian(self.axes)[3:])  # fmt: skip
+        J[:3] = Rc.T @ (
+            state.jacobian(self.frame_b)[:3]
+            - state.jacobian(self.frame_a)[:3]
+            + skew @ state.jacobian(self.axes)[3:]
+        )
         return J, Rc.T @ r, np.eye(3)
 
     def relative_position(self, state: RobotState) -> np.ndarray:

@@ -33,7 +33,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from wholebody.errors import DimensionError
 from wholebody.planning._checks import as_array, as_positive, as_vector
@@ -288,6 +287,8 @@ def _uniform(
     T = float(t[-1] - t[0])
     h = T / (N - 1)
     if longest - shortest > 1e-9 * h:  # non-uniform: resample onto a uniform grid
+        from scipy.interpolate import CubicSpline  # (imported when used)
+
         X = CubicSpline(t - t[0], X, axis=0)(np.linspace(0.0, T, N))
     return X, h, T
 

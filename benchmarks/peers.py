@@ -94,6 +94,7 @@ import numpy as np
 import pinocchio as pin
 
 import wholebody
+from wholebody.control import Controller
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.resources import robots_dir
 from wholebody.robot import robot_catalogue
@@ -279,21 +280,21 @@ class WholebodyCase(Case):
         self.solver = (
             ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
         )
+        self.controller = Controller(robot, self.stack, self.solver, dt=DT)
         self.reset()
 
     def reset(self) -> None:
         self.q = self.setup.q0.copy()
         self.u = np.zeros(self.robot.nu)
-        self.stack.reset()
+        self.controller.reset()
 
     def step(self, targets):
+        """The one-call step: the targets set, then :meth:`Controller.step` (kinematics,
+        solve, integrals, integration in one kernel call)."""
         for hand, target in zip(self.hands, targets, strict=True):
             hand.set_target(target)
-        state = self.robot.update(self.q)
-        result = self.solver.solve(self.stack, state, DT)
-        self.stack.advance(state, DT, result=result)
-        self.u = result.u
-        self.q = self.robot.integrate(self.q, result.u, DT)
+        self.u = self.controller.step(self.q)
+        self.q = self.controller.q_next.copy()
 
     def hand_positions(self):
         state = self.robot.update(self.q)

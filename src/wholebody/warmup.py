@@ -125,13 +125,26 @@ def _cascade() -> None:
     HierarchicalQPSolver().solve_problem(StackProblem([level], -box, box, np.ones(n), {}))
 
 
+def _cached() -> bool:
+    """Whether both steps are in the cache, up to date (numba's index of each is for the
+    kernels' current sources); False where numba's cache internals are not the known ones."""
+    from wholebody.kernels import control
+
+    for run in (control.projection_run, control.hqp_run):
+        index = getattr(getattr(run._cache, "_cache_file", None), "_load_index", None)
+        if index is None or not index():
+            return False
+    return True
+
+
 def warmup(parallel: bool = True) -> Warmup:
     """Compile (or load from the cache) every kernel of the package; safe to call again.
-    ``parallel``: the two halves in two processes at once (module docstring)."""
+    ``parallel``: the two halves in two processes at once (module docstring), unless both
+    steps are in the cache already (then this process only loads everything)."""
     from wholebody import kernels
 
     start = time.perf_counter()
-    if parallel and not kernels.DISABLED and (os.cpu_count() or 1) > 1:
+    if parallel and not _cached() and not kernels.DISABLED and (os.cpu_count() or 1) > 1:
         code = "import sys; from wholebody.warmup import _half; _half(sys.argv[1])"
         procs = [subprocess.Popen([sys.executable, "-c", code, half]) for half in HALVES]
         for proc in procs:

@@ -44,7 +44,12 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
     """Run the campaign's missing cases into ``out``: on ``workers`` local processes
     (default: every core) or, with ``ray``, as Ray tasks (``address`` of a cluster, or a
     local instance). Results are written one file per case as each ends; on Ctrl-C the
-    table and report of the finished cases are written before the interrupt goes on."""
+    table and report of the finished cases are written before the interrupt goes on.
+
+    The kernels are compiled (or loaded) here first (:func:`wholebody.warmup.warmup`), into
+    the cache every worker on this machine reads: the workers load them instead of each
+    compiling them at once. A cluster's other nodes use their own installation's cache
+    (``wholebody warmup`` on each, or ``NUMBA_CACHE_DIR`` on a shared disk)."""
     from wholebody.sweep.executors import run_local, run_ray
     from wholebody.sweep.report import write_report
 
@@ -67,6 +72,10 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
             store.table(results)
             last_table = time.perf_counter()
 
+    if todo:  # compiled (or loaded) once here: the workers then load the shared cache
+        from wholebody.warmup import warmup
+
+        warmup()
     try:
         if ray:
             run_ray(campaign, todo, address, on_result, workers)

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Time one full control step of the paper's robot, per backend, in one interleaved run.
 
-A step is: kinematics at q, the hand targets, the stack (both hand tasks, both arm energies,
-h1, h2 where the stack has them), the solve and the integration: what a real controller
-does every period. Every case follows the same target sequence (both hands on
-minimum-jerk reaches, repeated), its own state evolving. Two schedules, both in the same run
+A step is: the hand targets (``set_target``), then ``Controller.step``: kinematics at q, the
+stack (both hand tasks, both arm energies, h1, h2 where the stack has them), the solve, the
+integrals and the integration in one kernel call: what a real controller does every period.
+Every case follows the same target sequence (both hands on minimum-jerk reaches, repeated),
+its own state evolving. Two schedules, both in the same run
 (as in ``benchmarks/peers.py``):
 
 * **step-interleaved** (cold): the cases take turns step by step, so every step starts after
@@ -56,6 +57,7 @@ import numpy as np
 import pinocchio as pin
 
 import wholebody
+from wholebody.control import Controller
 from wholebody.planning.dual_arm import CoordinatedTrajectory
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import PaperWeights, paper_metric, paper_stack
@@ -207,7 +209,8 @@ def run(steps: int, repeat: int) -> None:
     for name, factory in CASES:
         hands = [FrameTask(robot, "left_tool", kp=20.0), FrameTask(robot, "right_tool", kp=20.0)]
         stack, solver = factory(robot, hands)
-        runs.append({"name": name, "stack": stack, "solver": solver, "hands": hands,
+        controller = Controller(robot, stack, solver, dt=DT)
+        runs.append({"name": name, "stack": stack, "controller": controller, "hands": hands,
                      "cold": [], "warm": []})  # fmt: skip
     samples = [forth_and_back(refs, k * DT) for k in range(steps)]
 
@@ -221,18 +224,16 @@ def run(steps: int, repeat: int) -> None:
         """Steps ``ks`` of case ``r`` from its current state (``r["q"]``)."""
         if "peer" in r:
             return peer_steps(r["peer"], r["targets"], ks, out)
-        hands, stack, solver = r["hands"], r["stack"], r["solver"]
+        hands, controller = r["hands"], r["controller"]
         q = r["q"]
         for k in ks:
             start = time.perf_counter()
             for hand, (pose, twist) in zip(hands, samples[k], strict=True):
                 hand.set_target(pose, twist)
-            state = robot.update(q)
-            result = solver.solve(stack, state, DT)
-            stack.advance(state, DT, result=result)
-            q = robot.integrate(q, result.u, DT)
+            controller.step(q)
+            q = controller.q_next.copy()
             out.append(time.perf_counter() - start)
-            r["bounds"] = r.get("bounds", 0) + result.limit_hit
+            r["bounds"] = r.get("bounds", 0) + controller.result.limit_hit  # untimed
         r["q"] = q
 
     def reset(r: dict) -> None:
@@ -240,7 +241,7 @@ def run(steps: int, repeat: int) -> None:
         if "peer" in r:
             r["peer"].reset()
         else:
-            r["stack"].reset()
+            r["controller"].reset()
 
     interleave(runs, steps, repeat, steps_of, reset)
     print(

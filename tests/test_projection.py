@@ -405,9 +405,20 @@ def test_the_unsaturated_solution_starts_from_zero_when_the_box_excludes_it(huma
     assert tested >= 3
 
 
-@pytest.mark.parametrize("name", ["damping", "singular_threshold", "rank_tolerance", "tolerance"])
+PARAMETERS = ("damping", "singular_threshold", "rank_tolerance", "tolerance")
+
+
+@pytest.mark.parametrize("name", PARAMETERS)
 def test_non_finite_parameters_are_refused(name):
     from wholebody.errors import SolverError
 
-    with pytest.raises(SolverError, match=f"{name}=nan"):
+    with pytest.raises(SolverError, match=f"{name} must be a finite float"):
         ProjectionSolver(**{name: float("nan")})
+    solver = ProjectionSolver()
+    before = getattr(solver, name)
+    for bad in (float("inf"), -1.0, "x"):  # checked when set, the setting kept
+        with pytest.raises(SolverError, match=name):
+            setattr(solver, name, bad)
+    assert getattr(solver, name) == before
+    setattr(solver, name, 0.5)
+    assert solver.parameters()[list(PARAMETERS).index(name)] == 0.5

@@ -44,7 +44,7 @@ from wholebody.control.log import ArmTrace, RunLog
 from wholebody.control.recovery import StallRecovery
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.kernels import layout as lay
-from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS
+from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS, Batch
 from wholebody.kernels.evaluate import REF_WIDTH
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot, RobotState
@@ -57,6 +57,8 @@ from wholebody.tasks.base import Objective, Task
 from wholebody.tasks.frame import FrameTask
 
 __all__ = ["Controller", "Plant", "ReferenceTask"]
+
+_F64 = np.dtype(np.float64)
 
 
 @runtime_checkable
@@ -190,9 +192,12 @@ class Controller:
         self._bound: Plan | None = None  # the plan the references are bound to
         self._plan: Plan | None = None  # the plan of the last step
         self._fast = False
+        self._call: Callable[[], None] | None = None  # the kernel call of a step (bound)
+        self._batch: Batch | None = None  # its batch
         self._limits: object | None = None
         self._plan_of_step: Plan | None = None
         self._u = np.zeros(robot.nu)
+        self._q_next = np.zeros(robot.nq)
         self.solve_time = 0.0
         """Wall time (s) of the last step's kernel call (or calls)."""
 
@@ -227,7 +232,11 @@ class Controller:
         until :meth:`close`."""
         if self._limits is None and self.threads is not None:
             self._limits = threadpool_limits(self.threads)
-        self._step(self._checked(q), None)
+        q = self._checked(q)
+        if self._call is None or self.stack.plan() is not self._bound:
+            self._step(q, None)
+        else:
+            self._call_step(q)
         return self._u.copy()
 
     @property
@@ -236,7 +245,7 @@ class Controller:
         the next step)."""
         if self._plan is None:
             raise WholebodyError("Controller.q_next: no step was taken yet")
-        return self._plan.step_buffers(len(self.references)).batch.Q_next[0]
+        return self._q_next
 
     @property
     def result(self) -> SolverResult:
@@ -274,11 +283,33 @@ class Controller:
 
     def _checked(self, q: np.ndarray) -> np.ndarray:
         """``q`` as the kernel takes it: nq finite numbers."""
-        if q.__class__ is not np.ndarray or q.shape != (self.robot.nq,) or q.dtype != float:
+        if q.__class__ is not np.ndarray or q.dtype is not _F64 or q.shape != self._q_next.shape:
             q = self.robot.check_configuration(q)
         if not math.isfinite(q.dot(q)):
             raise DimensionError(f"configuration of robot {self.robot.name!r} is not finite: {q}")
         return q
+
+    def _call_step(self, q: np.ndarray) -> None:
+        """:meth:`_step` where the last step was one kernel call on the same plan: the same
+        call again (:meth:`Solver.stepper <wholebody.solvers.base.Solver.stepper>`)."""
+        plan = self._bound
+        j = self._k % _BLOCK
+        if j == 0:
+            self._sample(self._k)
+        batch = self._batch
+        batch.Q[0] = q
+        if self.references:
+            batch.refs[0] = self._refs[j]  # type: ignore[index]
+        start = time.perf_counter()
+        plan.sync(None, self.dt)  # type: ignore[union-attr]
+        if plan.stale:  # type: ignore[union-attr]
+            self._bound = None
+            return self._step(q, None)
+        self._call()  # type: ignore[misc]
+        self.solve_time = time.perf_counter() - start
+        plan.evaluated = -1.0  # type: ignore[union-attr]
+        plan.last_result = None  # type: ignore[union-attr]
+        self._k += 1
 
     def _step(self, q: np.ndarray, state: RobotState | None) -> None:
         """The step of :meth:`step` (module docstring), ``state`` the kinematics at ``q`` if
@@ -302,14 +333,19 @@ class Controller:
             if plan.stale:  # an entry changed shape: lay the stack out anew, then step
                 self._bound = None
                 return self._step(q, state)
-            self.solver.run(plan, buffers.own, batch, 1, KINEMATICS | ADVANCE | INTEGRATE)
+            what = KINEMATICS | ADVANCE | INTEGRATE
+            self.solver.run(plan, buffers.own, batch, 1, what)
             plan.evaluated = -1.0 if state is None else state.stamp
+            if state is None:  # the next step is the same call
+                self._call = self.solver.stepper(plan, buffers.own, batch, what)
+                self._batch = batch
         else:
             state = self._general(plan, q, state, j)
             plan = self._plan_of_step
         self.solve_time = time.perf_counter() - start
         plan.last_result = None
-        self._plan, self._u = plan, plan.step_buffers(len(self.references)).batch.U[0]
+        batch = plan.step_buffers(len(self.references)).batch
+        self._plan, self._u, self._q_next = plan, batch.U[0], batch.Q_next[0]
         if rec is not None:
             rec.advance(state, self.dt, self.result)  # (the stack's advance: after the solve)
         self._k += 1
@@ -359,6 +395,7 @@ class Controller:
         movable = plan.step_buffers(len(self.references)).movable
         self._fast = movable and not plan.python and not self._python_refs
         self._bound = plan
+        self._call = None
 
     def _sample(self, k0: int) -> None:
         """Each reference's poses at steps ``k0 .. k0 + block - 1`` and its twists at the

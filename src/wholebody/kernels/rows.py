@@ -29,10 +29,11 @@ __all__ = [
     "pose_rows",
     "posture_rows",
     "relative_pose",
+    "set_target",
 ]
 
 
-POSE_FINE, POSE_NON_FINITE, POSE_LAST_ROW, POSE_NOT_ROTATION = 0, 1, 2, 3
+POSE_FINE, POSE_NON_FINITE, POSE_LAST_ROW, POSE_NOT_ROTATION, TWIST_NON_FINITE = 0, 1, 2, 3, 4
 
 
 @kernel
@@ -58,6 +59,28 @@ def pose_defect(T: np.ndarray) -> int:
             g = T[0, a] * T[0, b] + T[1, a] * T[1, b] + T[2, a] * T[2, b]
             if abs(g - (1.0 if a == b else 0.0)) > 1e-6:
                 return POSE_NOT_ROTATION
+    return POSE_FINE
+
+
+@kernel
+def set_target(par: np.ndarray, T: np.ndarray, twist: np.ndarray) -> int:
+    """A pose task's target ``T`` (4x4) and twist (6,) into its parameter block ``par`` when
+    :func:`pose_defect` finds the pose fine and the twist is finite (then POSE_FINE);
+    otherwise nothing is written and the defect is returned (TWIST_NON_FINITE for the
+    twist). Setting a target forgets the last error (it was for another target)."""
+    defect = pose_defect(T)
+    if defect != POSE_FINE:
+        return defect
+    for k in range(6):
+        if not math.isfinite(twist[k]):
+            return TWIST_NON_FINITE
+    for i in range(4):
+        for j in range(4):
+            par[POSE_TARGET + 4 * i + j] = T[i, j]
+    for k in range(6):
+        par[POSE_TWIST + k] = twist[k]
+    par[POSE_HAS] = TARGET_SET
+    par[POSE_STAMP] = -1.0
     return POSE_FINE
 
 

@@ -17,6 +17,7 @@ rest.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -41,6 +42,7 @@ __all__ = ["Arena", "Plan", "ProblemArena", "is_compiled", "sqrt_weights"]
 Entry = Task | InequalityTask | Objective | Constraint
 _WARM: dict[str, bool] = {}  # whether a kernel entry point ran in this process
 NO_REFERENCES = np.zeros((0, REF_WIDTH))
+_PARAMS = operator.attrgetter("_params")
 
 
 def sqrt_weights(task: Task, w: object) -> np.ndarray:
@@ -249,6 +251,10 @@ class Plan(Arena):
         super().__init__(self._shapes())
         self.inequality_rows = self._inequality_rows
         self._fill()
+        self._compiled_entries = [r.entry for r in self.compiled]
+        self._blocks = [r.block for r in self.compiled]  # (an entry's block while it is ours)
+        self._dt: float | None = None  # the step the entries were checked for
+        self._gains: list[tuple[float, float]] | None = None  # the levels' as written
         self.reported = [
             (t, r.entry.name, self.levels[r.level].name) for t, r in enumerate(self.tasks) if r.rows
         ]
@@ -434,21 +440,23 @@ class Plan(Arena):
         computes them: then every entry must be compiled)."""
         stack = self.stack
         scalars = self._scalars
-        if dt != scalars[0]:
+        if dt != self._dt:
             for rec in self.records:
                 rec.entry.check_step(dt)
-        scalars[0], scalars[2] = dt, -1.0 if state is None else state.stamp
+            scalars[0] = self._dt = dt
+        scalars[2] = -1.0 if state is None else state.stamp
         if stack._scale_version != self.metric_version:
             metric = self.view(lay.F_METRIC)
             metric[0], metric[1] = stack.scale, stack._scale_sq
             self.metric_version = stack._scale_version
-        lf = self._level_f
-        for li, level in enumerate(self.levels):
-            lf[li, lay.LEVEL_GAIN] = level.gain
-            lf[li, lay.LEVEL_OBJECTIVE_WEIGHT] = level.objective_weight
-        for rec in self.compiled:
-            if rec.entry._params is not rec.block:
-                self._readopt(rec)
+        gains = [(level.gain, level.objective_weight) for level in self.levels]
+        if gains != self._gains:
+            self._level_f[:, lay.LEVEL_GAIN : lay.LEVEL_OBJECTIVE_WEIGHT + 1] = gains
+            self._gains = gains
+        if not all(map(operator.is_, map(_PARAMS, self._compiled_entries), self._blocks)):
+            for rec in self.compiled:
+                if rec.entry._params is not rec.block:
+                    self._readopt(rec)
         for rec in self.tasks:
             if rec.packed is not None and rec.entry.weight is not rec.key:
                 self._weigh(rec, rec.entry.weight)

@@ -97,8 +97,9 @@ Everything runs in one kernel call after the stack's evaluation
 
 from __future__ import annotations
 
-import math
+import functools
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -106,9 +107,16 @@ from wholebody.errors import SolverError
 from wholebody.kernels import control
 from wholebody.kernels import layout as lay
 from wholebody.kernels import projection as kernel
-from wholebody.kernels.pinv import PAR_WIDTH
+from wholebody.kernels.pinv import (
+    PAR_DAMPING,
+    PAR_RANK,
+    PAR_SATURATE,
+    PAR_THRESHOLD,
+    PAR_TOLERANCE,
+    PAR_WIDTH,
+)
 from wholebody.robot import RobotState
-from wholebody.solvers.base import Solver
+from wholebody.solvers.base import Setting, Solver
 from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
@@ -151,35 +159,21 @@ class ProjectionSolver(Solver):
         tolerance: float = 1e-6,
         saturate: bool = True,
     ) -> None:
-        values = (damping, singular_threshold, rank_tolerance, tolerance)
-        if not (
-            all(math.isfinite(v) for v in values)
-            and damping >= 0
-            and singular_threshold > 0
-            and rank_tolerance > 0
-            and tolerance > 0
-        ):
-            raise SolverError(
-                "ProjectionSolver: damping >= 0 and positive thresholds required, all finite; "
-                f"got damping={damping}, singular_threshold={singular_threshold}, "
-                f"rank_tolerance={rank_tolerance}, tolerance={tolerance}"
-            )
+        self._par = np.zeros(PAR_WIDTH)
         self.damping = damping
         self.singular_threshold = singular_threshold
         self.rank_tolerance = rank_tolerance
         self.tolerance = tolerance
         self.saturate = saturate
-        self._par = np.zeros(PAR_WIDTH)
+
+    damping = Setting(PAR_DAMPING, valid=lambda v: v >= 0, rule=">= 0")
+    singular_threshold = Setting(PAR_THRESHOLD, valid=lambda v: v > 0, rule="> 0")
+    rank_tolerance = Setting(PAR_RANK, valid=lambda v: v > 0, rule="> 0")
+    tolerance = Setting(PAR_TOLERANCE, valid=lambda v: v > 0, rule="> 0")
+    saturate = Setting(PAR_SATURATE, bool)
 
     def parameters(self) -> np.ndarray:
         """The settings as the kernel reads them."""
-        self._par[:] = (
-            self.damping,
-            self.singular_threshold,
-            self.rank_tolerance,
-            self.tolerance,
-            bool(self.saturate),
-        )
         return self._par
 
     def solve(self, stack: Stack, state: RobotState, dt: float) -> SolverResult:
@@ -228,6 +222,16 @@ class ProjectionSolver(Solver):
             self.parameters(),
             steps,
             what,
+        )
+
+    def stepper(
+        self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
+    ) -> Callable[[], None]:
+        """The kernel call of one step with its arguments bound (the settings are read from
+        their vector at each call)."""
+        arena = plan.step_buffers(batch.refs.shape[1]).arena
+        return functools.partial(
+            control.projection_run, arena, kinematics, batch, self._par, 1, what
         )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:

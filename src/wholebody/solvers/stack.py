@@ -28,6 +28,7 @@ entry packs itself into one arena, and one kernel call computes every row, gradi
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -48,6 +49,9 @@ Entry = Task | InequalityTask | Objective
 
 OBJECTIVES = "objectives"
 """The name of a level's objective rows in :attr:`LevelProblem.task_rows`."""
+
+
+_ENTRIES = operator.attrgetter("entries")
 
 
 @dataclass
@@ -329,17 +333,14 @@ class Stack:
         if plan is None:
             return
         levels, limits = self.levels, self.constraints
-        if len(levels) != len(plan.levels) or len(limits) != len(plan.constraints):
+        if not (
+            len(levels) == len(plan.levels)
+            and len(limits) == len(plan.constraints)
+            and all(map(operator.is_, levels, plan.levels))
+            and all(map(operator.is_, map(_ENTRIES, levels), plan.entries))
+            and all(map(operator.is_, limits, plan.constraints))
+        ):
             self._relayout()
-            return
-        for level, old, entries in zip(levels, plan.levels, plan.entries, strict=True):
-            if level is not old or level.entries is not entries:
-                self._relayout()
-                return
-        for c, old in zip(limits, plan.constraints, strict=True):
-            if c is not old:
-                self._relayout()
-                return
 
     @property
     def current_plan(self) -> Plan | None:

@@ -39,6 +39,7 @@ from wholebody.kernels.layout import KIND_POSE
 from wholebody.kernels.rows import (
     POSE_ERROR,
     POSE_FA,
+    POSE_FINE,
     POSE_FB,
     POSE_HAS,
     POSE_INTEGRAL,
@@ -57,6 +58,7 @@ from wholebody.kernels.rows import (
     TARGET_SET,
     advance_integral,
     pose_rows,
+    set_target,
 )
 from wholebody.robot import Frame, Robot, RobotState
 from wholebody.tasks.base import Packed, Packer, Task, TaskRows
@@ -72,6 +74,14 @@ __all__ = [
 
 _NO_TWIST = np.zeros(6)
 _NO_TWIST.setflags(write=False)
+_ZERO_TWIST = np.zeros(6)  # (writable: the kernels' array type; never written)
+
+
+def _plain(a: np.ndarray) -> bool:
+    """Whether ``a`` is of the array type the kernels are compiled for (C-contiguous and
+    writable; another would compile them again)."""
+    flags = a.flags
+    return flags.c_contiguous and flags.writeable
 
 
 def check_twist(twist: np.ndarray | None, what: str) -> np.ndarray:
@@ -200,9 +210,24 @@ class PoseTask(Task):
     def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
         """Target pose (4x4 or SE3) and twist ``[v (m/s), w (rad/s)]`` (zero when omitted), in
         the task's axes (see the subclass)."""
+        try:
+            T = float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, "pose")
+            t = _ZERO_TWIST if twist is None else float_array(twist, "twist")
+        except DimensionError:
+            T = t = _NO_TWIST  # (the checks below raise with the task's name)
+        if (
+            T.shape == (4, 4)
+            and t.shape == (6,)
+            and _plain(T)
+            and _plain(t)
+            and set_target(self._params, T, t) == POSE_FINE
+        ):  # checked and written by one kernel call
+            return
+        T = check_pose(pose, f"{self.name}: target pose")
+        t = check_twist(twist, f"{self.name}: target twist")
         par = self._params
-        par[POSE_TARGET : POSE_TARGET + 16] = check_pose(pose, f"{self.name}: target pose").ravel()
-        par[POSE_TWIST : POSE_TWIST + 6] = check_twist(twist, f"{self.name}: target twist")
+        par[POSE_TARGET : POSE_TARGET + 16] = T.ravel()
+        par[POSE_TWIST : POSE_TWIST + 6] = t
         par[POSE_HAS] = TARGET_SET
         par[POSE_STAMP] = -1.0  # the last error was for another target
 

@@ -16,8 +16,7 @@ import numba
 import numpy as np
 
 from wholebody import kernels
-from wholebody.kernels import control
-from wholebody.kernels import hqp as kernel
+from wholebody.kernels import control, hqp, hqp_state
 from wholebody.kernels import layout as lay
 from wholebody.kernels.evaluate import evaluate
 from wholebody.solvers.level_report import LevelReport
@@ -31,8 +30,8 @@ if TYPE_CHECKING:
 __all__ = ["Workspace", "run"]
 
 _FAILURE = {
-    kernel.FAIL_DECOMPOSITION: "decomposition failed (LAPACK); level skipped",
-    kernel.FAIL_STEP: "decomposition failed (non-finite step); level skipped",
+    hqp_state.FAIL_DECOMPOSITION: "decomposition failed (LAPACK); level skipped",
+    hqp_state.FAIL_STEP: "decomposition failed (non-finite step); level skipped",
 }
 
 
@@ -51,45 +50,49 @@ class Workspace:
         nv = n + p_max
         rows = n + P + p_max
         shapes = {
-            kernel.W_X: (n,),
-            kernel.W_BOX: (4, n),
-            kernel.W_Z: (n, n),
-            kernel.W_INH: (P, n),
-            kernel.W_INHB: (2, P),
-            kernel.W_XC: (n,),
-            kernel.W_CV: (m_max,),
-            kernel.W_M: (m_max, n),
-            kernel.W_NULL: (n, n),
-            kernel.W_SCAL: (8,),
-            kernel.W_H: (nv * nv,),
-            kernel.W_G: (2, nv),
-            kernel.W_QC: (rows * nv,),
-            kernel.W_QB: (4, max(rows, nv)),
-            kernel.W_Y: (2, max(n, m_max)),
-            kernel.W_STATE: (kernel.S_WIDTH,),
-            kernel.W_REPORT: (L, kernel.R_WIDTH),
-            kernel.W_LIMITED: (T + Pt,),
+            hqp_state.W_X: (n,),
+            hqp_state.W_BOX: (4, n),
+            hqp_state.W_Z: (n * n,),
+            hqp_state.W_INH: (P, n),
+            hqp_state.W_INHB: (2, P),
+            hqp_state.W_XC: (n,),
+            hqp_state.W_CV: (m_max,),
+            hqp_state.W_M: (m_max * n,),
+            hqp_state.W_NULL: (n * n,),
+            hqp_state.W_SCAL: (8,),
+            hqp_state.W_H: (nv * nv,),
+            hqp_state.W_G: (2, nv),
+            hqp_state.W_QC: (rows * nv,),
+            hqp_state.W_QB: (4, max(rows, nv)),
+            hqp_state.W_Y: (2, max(n, m_max)),
+            hqp_state.W_STATE: (hqp_state.S_WIDTH,),
+            hqp_state.W_REPORT: (L, hqp_state.R_WIDTH),
+            hqp_state.W_LIMITED: (T + Pt,),
         }
-        self.f, self.i, self.h = lay.build(shapes, kernel.N_WFLOAT, kernel.N_WREGIONS)
+        self.f, self.i, self.h = lay.build(shapes, hqp_state.N_WFLOAT, hqp_state.N_WREGIONS)
         self._shapes = shapes
         self.arena = arena
-        self.state = self.view(kernel.W_STATE)
-        self.report = self.view(kernel.W_REPORT)
-        self.limited = self.view(kernel.W_LIMITED)
+        self.state = self.view(hqp_state.W_STATE)
+        self.report = self.view(hqp_state.W_REPORT)
+        self.limited = self.view(hqp_state.W_LIMITED)
         self.record = control.Arena(self.f, self.i, self.h)
-        self._H, self._g = self.view(kernel.W_H), self.view(kernel.W_G)
-        self._Q, self._qb = self.view(kernel.W_QC), self.view(kernel.W_QB)
+        self._H, self._g = self.view(hqp_state.W_H), self.view(hqp_state.W_G)
+        self._Q, self._qb = self.view(hqp_state.W_QC), self.view(hqp_state.W_QB)
         self._nv = nv
 
     def view(self, region: int) -> np.ndarray:
-        arena = self.f if region < kernel.N_WFLOAT else self.i
+        arena = self.f if region < hqp_state.N_WFLOAT else self.i
         return lay.view(arena, self.h, region, self._shapes[region])
 
     def qp(self) -> tuple[np.ndarray, ...]:
         """The QP the kernels set up, as the engine takes it: ``H, g, C, lower, upper`` and
         the box ``lb, ub`` (None where the problem has none)."""
         st = self.state
-        nv, rows, has_box = int(st[kernel.S_NV]), int(st[kernel.S_NROWS]), st[kernel.S_HASBOX]
+        nv, rows, has_box = (
+            int(st[hqp_state.S_NV]),
+            int(st[hqp_state.S_NROWS]),
+            st[hqp_state.S_HASBOX],
+        )
         qb = self._qb
         lb = qb[2, :nv] if has_box else None
         ub = qb[3, :nv] if has_box else None
@@ -116,7 +119,7 @@ def run(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
         first_call(
             "hqp",
             "the hierarchical QP kernels",
-            kernel.cascade,
+            hqp.cascade,
             arena.f,
             arena.i,
             arena.h,
@@ -185,13 +188,13 @@ def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> 
         a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver.parameters())
         sol, w = ws.padded(None), (ws.f, ws.i, ws.h)
         stages = (
-            (kernel.begin, a),
-            (kernel.advance, a),
-            (kernel.finish, a),
-            (kernel.after_qp, (*a, sol, True)),
-            (kernel.proximal, (*a, sol, True)),
-            (kernel.tie_done, (*w, sol, True)),
-            (kernel.bump, (*w, 1)),
+            (hqp.begin, a),
+            (hqp.advance, a),
+            (hqp.finish, a),
+            (hqp.after_qp, (*a, sol, True)),
+            (hqp.proximal, (*a, sol, True)),
+            (hqp.tie_done, (*w, sol, True)),
+            (hqp.bump, (*w, 1)),
         )
         for stage, args in stages:
             stage.compile(tuple(numba.typeof(v) for v in args))
@@ -202,37 +205,37 @@ def _compile_then(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> 
 def _cascade(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> None:
     """The cascade's stages driven from Python, the QPs solved by the solver's engine."""
     a = (arena.f, arena.i, arena.h, ws.f, ws.i, ws.h, solver.parameters())
-    code = kernel.begin(*a)
+    code = hqp.begin(*a)
     report = ws.report
     L = report.shape[0]
-    while code != kernel.DONE:
-        if code == kernel.NEXT:
-            code = kernel.advance(*a)
+    while code != hqp.DONE:
+        if code == hqp.NEXT:
+            code = hqp.advance(*a)
             continue
-        k = int(ws.state[kernel.S_K])
-        if code == kernel.NEED_TIE:
+        k = int(ws.state[hqp_state.S_K])
+        if code == hqp.NEED_TIE:
             sol, ok = _solve(solver.engine(L), ws)
-            ws.state[kernel.S_TIESTATUS] = int(sol.status)
-            code = kernel.tie_done(ws.f, ws.i, ws.h, ws.padded(sol.x if ok else None), ok)
+            ws.state[hqp_state.S_TIESTATUS] = int(sol.status)
+            code = hqp.tie_done(ws.f, ws.i, ws.h, ws.padded(sol.x if ok else None), ok)
             continue
         engine = solver.engine(k)
-        if code == kernel.NEED_QP:
+        if code == hqp.NEED_QP:
             for attempt in range(3):
                 if attempt:  # ill-conditioned and degenerate: retry cold, 100x more Tikhonov
                     engine.reset()
-                    kernel.bump(ws.f, ws.i, ws.h, attempt)
-                    report[k, kernel.R_RETRIES] += 1
+                    hqp.bump(ws.f, ws.i, ws.h, attempt)
+                    report[k, hqp_state.R_RETRIES] += 1
                 sol, ok = _solve(engine, ws)
-                report[k, kernel.R_STATUS] = int(sol.status)
-                report[k, kernel.R_ITER] += sol.iterations
+                report[k, hqp_state.R_STATUS] = int(sol.status)
+                report[k, hqp_state.R_ITER] += sol.iterations
                 if ok:
                     break
-            code = kernel.after_qp(*a, ws.padded(sol.x if ok else None), ok)
+            code = hqp.after_qp(*a, ws.padded(sol.x if ok else None), ok)
         else:  # NEED_PROXIMAL
             sol, ok = _solve(engine, ws)
-            report[k, kernel.R_ITER] += sol.iterations
-            code = kernel.proximal(*a, ws.padded(sol.x if ok else None), ok)
-    kernel.finish(*a)
+            report[k, hqp_state.R_ITER] += sol.iterations
+            code = hqp.proximal(*a, ws.padded(sol.x if ok else None), ok)
+    hqp.finish(*a)
 
 
 def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> SolverResult:
@@ -245,14 +248,14 @@ def result(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> SolverR
     report = ws.report
     names = arena.level_names
     qps = [
-        f"{names[k]}: {int(report[k, kernel.R_ITER])} it"
+        f"{names[k]}: {int(report[k, hqp_state.R_ITER])} it"
         for k in range(len(names))
-        if report[k, kernel.R_QP]
+        if report[k, hqp_state.R_QP]
     ]
     msg = [f"{solver.engine_name}: " + ("; ".join(qps) if qps else "no QP needed"), *failures]
     if out.infeasible:
         msg.append("infeasible: " + ", ".join(f"{lv}/{t}" for lv, t in out.infeasible))
-    clip = float(ws.view(kernel.W_SCAL)[kernel.C_CLIP])
+    clip = float(ws.view(hqp_state.W_SCAL)[hqp_state.C_CLIP])
     if clip > 10 * solver.bound_relaxation:
         msg.append(f"clipped u by {clip:.2e} (scaled units) to the box")
     out.message = "; ".join(msg)
@@ -266,24 +269,24 @@ def _limited_names(arena: Arena, ws: Workspace, k: int) -> list[str]:
     T = len(arena.task_names)
     tasks = arena.view(lay.I_TASK)
     names = [arena.task_names[t] for t in range(T) if tasks[t, 0] == k and limited[t]]
-    if report[k, kernel.R_OBJBAD]:
+    if report[k, hqp_state.R_OBJBAD]:
         names.append("objectives")
     names += [
         row[3] for j, row in enumerate(arena.inequality_rows) if row[0] == k and limited[T + j]
     ]
-    if report[k, kernel.R_FAIL] == kernel.FAIL_NONFINITE and not names:
+    if report[k, hqp_state.R_FAIL] == hqp_state.FAIL_NONFINITE and not names:
         names = [arena.level_names[k]]
     return names
 
 
 def _inequality_infeasible(arena: Arena, ws: Workspace) -> list[tuple[str, str]]:
-    """Inequality tasks left violated, and those of a skipped level (the reference's order:
-    per level, a skipped level's others first)."""
+    """Inequality tasks left violated, and those of a skipped level: per level, a skipped
+    level's other inequality tasks first, then those violated or with non-finite rows."""
     out: list[tuple[str, str]] = []
     T = len(arena.task_names)
     for k, level in enumerate(arena.level_names):
         rows = [(j, row[3]) for j, row in enumerate(arena.inequality_rows) if row[0] == k]
-        if ws.report[k, kernel.R_FAILED]:
+        if ws.report[k, hqp_state.R_FAILED]:
             out += [(level, name) for j, name in rows if not ws.limited[T + j]]
         out += [(level, name) for j, name in rows if ws.limited[T + j]]
     return out
@@ -292,20 +295,20 @@ def _inequality_infeasible(arena: Arena, ws: Workspace) -> list[tuple[str, str]]
 def _failures(solver: HierarchicalQPSolver, arena: Arena, ws: Workspace) -> list[str]:
     st, report = ws.state, ws.report
     out = []
-    if st[kernel.S_BOXBAD]:
+    if st[hqp_state.S_BOXBAD]:
         out.append("the box is empty or not a number (NaN bounds): u = 0")
     for k, level in enumerate(arena.level_names):
-        code = int(report[k, kernel.R_FAIL])
-        if code == kernel.FAIL_NONFINITE:
+        code = int(report[k, hqp_state.R_FAIL])
+        if code == hqp_state.FAIL_NONFINITE:
             bad = ", ".join(_limited_names(arena, ws, k))
             out.append(f"{level}: non-finite rows from {bad}; level skipped")
-        elif code == kernel.FAIL_ENGINE:
-            status = QPStatus(int(report[k, kernel.R_STATUS])).name.lower()
+        elif code == hqp_state.FAIL_ENGINE:
+            status = QPStatus(int(report[k, hqp_state.R_STATUS])).name.lower()
             out.append(f"{level}: {status} ({solver.engine_name}); level left unsolved")
         elif code:
             out.append(f"{level}: {_FAILURE[code]}")
-    if st[kernel.S_TIEFAIL]:
-        status = QPStatus(int(st[kernel.S_TIESTATUS])).name.lower()
+    if st[hqp_state.S_TIEFAIL]:
+        status = QPStatus(int(st[hqp_state.S_TIESTATUS])).name.lower()
         out.append(
             f"minimum-norm tie-break: {status} ({solver.engine_name}); kept the last level's answer"
         )
@@ -319,19 +322,19 @@ def reports(arena: Arena, ws: Workspace) -> list[LevelReport]:
     out = []
     for k, name in enumerate(arena.level_names):
         row = report[k].tolist()
-        qp = bool(row[kernel.R_QP])
+        qp = bool(row[hqp_state.R_QP])
         out.append(
             LevelReport(
                 name,
-                free=row[kernel.R_FREE],
-                rank=row[kernel.R_RANK],
+                free=row[hqp_state.R_FREE],
+                rank=row[hqp_state.R_RANK],
                 qp=qp,
-                engine_status=QPStatus(row[kernel.R_STATUS]) if qp else None,
-                iterations=row[kernel.R_ITER],
+                engine_status=QPStatus(row[hqp_state.R_STATUS]) if qp else None,
+                iterations=row[hqp_state.R_ITER],
                 residual=float(residuals[k]),
-                retries=row[kernel.R_RETRIES],
+                retries=row[hqp_state.R_RETRIES],
                 limited=_limited_names(arena, ws, k),
-                failed=bool(row[kernel.R_FAILED]),
+                failed=bool(row[hqp_state.R_FAILED]),
             )
         )
     return out

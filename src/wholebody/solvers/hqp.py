@@ -29,10 +29,12 @@ higher level's residual, and every level, including the first, respects the box.
 
 How it is solved
 ----------------
-Level by level, in the null space of the levels above (:mod:`wholebody.kernels.hqp`): each
-level's unconstrained least-squares candidate, exact, by a complete orthogonal decomposition
-(rank-deficient levels, such as two hands plus the closed chain between them, solve without
-error); where the candidate leaves the box or an inequality row, one QP for that level
+Level by level, in the null space of the levels above (the stages in
+:mod:`wholebody.kernels.hqp`, the least squares in :mod:`wholebody.kernels.lsq`, a level's QP
+and polish in :mod:`wholebody.kernels.hqp_level`): each level's unconstrained least-squares
+candidate, exact, by a complete orthogonal decomposition (rank-deficient levels, such as two
+hands plus the closed chain between them, solve without error); where the candidate leaves the
+box or an inequality row, one QP for that level
 (``min 1/2 ||M y - c||^2 + d/2 ||y||^2 + 1/2 ||s||^2`` in the free coordinates ``y``, with a
 Tikhonov term ``d = regularization * sigma_max^2`` and slacks ``s`` of the level's inequality
 rows), made exact by a polish on the active face (the level's least squares solved on the face
@@ -103,9 +105,8 @@ from typing import Any
 import numpy as np
 
 from wholebody.errors import SolverError
-from wholebody.kernels import control
+from wholebody.kernels import control, hqp_state
 from wholebody.kernels import daqp as dk
-from wholebody.kernels import hqp as hqp_kernel
 from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Solver
@@ -189,7 +190,7 @@ class HierarchicalQPSolver(Solver):
         self.qp_time = 0.0
         """Wall time (s) of the last solve (the stack's evaluation included: one kernel call
         with daqp)."""
-        self._par = np.zeros(hqp_kernel.PAR_WIDTH)
+        self._par = np.zeros(hqp_state.PAR_WIDTH)
         self._workspace: compiled_hqp.Workspace | None = None
         self._levels: list[LevelReport] | None = []
 

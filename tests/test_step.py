@@ -249,3 +249,36 @@ def test_step_many_gives_each_state_its_own_steps(humanoid, rng, solver_name):
         for task in tasks:
             np.testing.assert_allclose(batch.errors[task.name][s], task.error(state), atol=1e-9)
     controller.close()
+
+
+@pytest.mark.parametrize("engine", ["osqp", "proxsuite"])
+def test_controller_step_with_an_engine_solving_in_python(humanoid, engine):
+    """With an engine outside the kernel the step is the kernel's kinematics, the cascade's
+    stages around the engine's QPs and the kernel's integration: the same steps as the 4-call
+    loop with that engine, and as daqp's to the engines' accuracy."""
+    robot = humanoid
+    paths = []
+    for fast, name in ((True, engine), (False, engine), (True, "daqp")):
+        tasks = hands(robot)
+        stack = Stack(robot, [tasks, [PostureTask(robot, weight=1e-3)]], limits(robot))
+        q, refs = reach(robot, tasks, np.random.default_rng(3), 10 * DT)
+        solver = HierarchicalQPSolver(name)
+        controller = Controller(robot, stack, solver, dt=DT, references=refs)
+        path = []
+        for k in range(10):
+            if fast:
+                u = controller.step(q)
+                q = controller.q_next.copy()
+            else:
+                for task, traj in refs.items():
+                    task.set_target(traj.sample(k * DT).pose, traj.sample((k + 0.5) * DT).twist)
+                state = robot.update(q)
+                result = solver.solve(stack, state, DT)
+                stack.advance(state, DT, result=result)
+                u = result.u
+                q = robot.integrate(q, u, DT)
+            path.append(np.r_[u, q])
+        controller.close()
+        paths.append(np.array(path))
+    np.testing.assert_allclose(paths[0], paths[1], atol=1e-6)
+    np.testing.assert_allclose(paths[0], paths[2], atol=1e-3)

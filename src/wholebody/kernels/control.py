@@ -50,6 +50,7 @@ __all__ = [
     "Kinematics",
     "after",
     "hqp_run",
+    "kinematics",
     "projection_run",
 ]
 
@@ -90,7 +91,7 @@ def _begin(a: Arena, saved: np.ndarray, what: int) -> None:
 
 
 @kernel
-def _state(kin: Kinematics, q: np.ndarray, what: int) -> None:
+def kinematics(kin: Kinematics, q: np.ndarray, what: int) -> None:
     """The kinematics of ``q`` where the kernel computes them (``KINEMATICS``)."""
     if what & KINEMATICS:
         forward_kinematics(kin.model_i, kin.model_f, q, kin.oMi, kin.oMf, kin.J)
@@ -119,7 +120,7 @@ def projection_run(
         for k in range(steps):
             if k:
                 q[:] = q_next
-            _state(kin, q, what)
+            kinematics(kin, q, what)
             evaluate(a.f, a.i, a.h, kin.J, kin.oMf, q, batch.refs[s])
             project(a.f, a.i, a.h, par)
             after(a, kin, q, q_next, what)
@@ -148,7 +149,7 @@ def hqp_run(
         for k in range(steps):
             if k:
                 q[:] = q_next
-            _state(kin, q, what)
+            kinematics(kin, q, what)
             evaluate(a.f, a.i, a.h, kin.J, kin.oMf, q, batch.refs[s])
             cascade(a.f, a.i, a.h, w.f, w.i, w.h, par, settings)
             after(a, kin, q, q_next, what)

@@ -151,9 +151,9 @@ def run_steps(
     if solver.in_kernel or batch.Q.shape[0] != 1 or steps != 1:
         solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (daqp only)
         return
-    if what & (control.KINEMATICS | control.RESET):
-        solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (refused)
     q = batch.Q[0]
+    if what & control.KINEMATICS:
+        first_call("kinematics", "the control kernels", control.kinematics, kinematics, q, what)
     first_call(
         "evaluate",
         "the control kernels",

@@ -99,7 +99,9 @@ levels (:mod:`wholebody.solvers.qpsolvers_engine`; no workspace is kept between 
 
 from __future__ import annotations
 
+import functools
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -109,7 +111,7 @@ from wholebody.kernels import control, hqp_state
 from wholebody.kernels import daqp as dk
 from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
-from wholebody.solvers.base import Solver
+from wholebody.solvers.base import Setting, Solver
 from wholebody.solvers.level_report import LevelReport
 from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
 from wholebody.solvers.qp import QPEngine, make_engine
@@ -118,6 +120,10 @@ from wholebody.solvers.stack import Stack, StackProblem
 
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
 
+
+
+def _positive(value: float) -> bool:
+    return value > 0
 
 class HierarchicalQPSolver(Solver):
     """Strict lexicographic priorities with hard bounds at every level (see module docstring).
@@ -160,16 +166,7 @@ class HierarchicalQPSolver(Solver):
         warm_start: bool = True,
         engine_settings: dict[str, Any] | None = None,
     ) -> None:
-        for label, value in (
-            ("tolerance", tolerance),
-            ("rank_tolerance", rank_tolerance),
-            ("regularization", regularization),
-            ("bound_relaxation", bound_relaxation),
-        ):
-            if not (np.isfinite(value) and value > 0):
-                raise SolverError(
-                    f"HierarchicalQPSolver: {label} must be finite and > 0, got {value!r}"
-                )
+        self._par = np.zeros(hqp_state.PAR_WIDTH)
         self.engine_name = str(engine).lower()
         self.engine_settings = dict(engine_settings or {})
         self.warm_start = bool(warm_start)
@@ -177,20 +174,16 @@ class HierarchicalQPSolver(Solver):
         self.in_kernel = self.engine_name == "daqp"
         """Whether the QPs are solved inside the kernel (daqp), not in Python."""
         self._daqp_settings = self._settings() if self.in_kernel else np.zeros(0)
-        self.tolerance = float(tolerance)
-        self.rank_tolerance = float(rank_tolerance)
-        self.regularization = float(regularization)
-        self.bound_relaxation = float(bound_relaxation)
+        self.tolerance = tolerance
+        self.rank_tolerance = rank_tolerance
+        self.regularization = regularization
+        self.bound_relaxation = bound_relaxation
         self.proximal_steps = 3
-        """Most proximal-point QPs after a level's QP whose answer fails the level's
-        optimality conditions."""
         self.active_tolerance = 1e-7
-        """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
         self._engines: list[QPEngine] = []
         self.qp_time = 0.0
         """Wall time (s) of the last solve (the stack's evaluation included: one kernel call
         with daqp)."""
-        self._par = np.zeros(hqp_state.PAR_WIDTH)
         self._workspace: compiled_hqp.Workspace | None = None
         self._levels: list[LevelReport] | None = []
 
@@ -225,23 +218,27 @@ class HierarchicalQPSolver(Solver):
             )
         return self._engines[k]
 
+    tolerance = Setting(hqp_state.P_TOL, valid=_positive, rule="> 0")
+    rank_tolerance = Setting(hqp_state.P_RANK, valid=_positive, rule="> 0")
+    regularization = Setting(hqp_state.P_REG, valid=_positive, rule="> 0")
+    bound_relaxation = Setting(hqp_state.P_RELAX, valid=_positive, rule="> 0")
+    active_tolerance = Setting(hqp_state.P_ACT, valid=_positive, rule="> 0")
+    """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
+    proximal_steps = Setting(hqp_state.P_PROX, int, valid=lambda v: v >= 0, rule=">= 0")
+    """Most proximal-point QPs after a level's QP whose answer fails the level's optimality
+    conditions."""
+
     def parameters(self) -> np.ndarray:
         """The settings as the kernels read them."""
-        self._par[:] = (
-            self.tolerance,
-            self.rank_tolerance,
-            self.regularization,
-            self.bound_relaxation,
-            self.active_tolerance,
-            self.proximal_steps,
-        )
         return self._par
 
     def workspace(self, arena: Arena) -> compiled_hqp.Workspace:
-        """The cascade's workspace for ``arena`` (made again for a new arena)."""
-        ws = self._workspace
-        if ws is None or ws.arena is not arena:
-            ws = self._workspace = compiled_hqp.Workspace(arena)
+        """The cascade's workspace for ``arena`` (kept with the arena, made at its first
+        solve), which then holds the last solve's report."""
+        ws = arena.workspaces.get("hqp")
+        if ws is None:
+            ws = arena.workspaces["hqp"] = compiled_hqp.Workspace(arena)
+        self._workspace = ws
         return ws
 
     # ------------------------------------------------------------------ public
@@ -289,9 +286,8 @@ class HierarchicalQPSolver(Solver):
         (a plan's, or copies of them: a thread's share of a batch); daqp only."""
         if not self.in_kernel:
             raise SolverError(
-                f"HierarchicalQPSolver({self.engine_name!r}): a batch, several "
-                "steps in one call or the compiled kinematics need the engine "
-                "'daqp' (the QPs are then solved inside the kernel)"
+                f"HierarchicalQPSolver({self.engine_name!r}): a batch or several steps in "
+                "one call need the engine 'daqp' (the QPs are then solved inside the kernel)"
             )
         first_call(
             "hqp",
@@ -305,6 +301,19 @@ class HierarchicalQPSolver(Solver):
             self._daqp_settings,
             steps,
             what,
+        )
+
+    def stepper(
+        self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
+    ) -> Callable[[], None]:
+        """The kernel call of one step with its arguments bound (daqp; another engine's step
+        is the cascade's stages with its QPs in between)."""
+        if not self.in_kernel:
+            return super().stepper(plan, kinematics, batch, what)
+        arena = plan.step_buffers(batch.refs.shape[1]).arena
+        ws = self.workspace(plan).record
+        return functools.partial(
+            control.hqp_run, arena, ws, kinematics, batch, self._par, self._daqp_settings, 1, what
         )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:

@@ -80,6 +80,8 @@ class Arena:
         self.f, self.i, self.h = lay.build(full)
         self._shapes_of = full
         self._outputs: tuple[np.ndarray, ...] | None = None
+        self.workspaces: dict[str, Any] = {}
+        """A solver's own buffers for these arenas, by solver (the HQP's cascade state)."""
         self.reported: list[tuple[int, str, str]] = []
         """``(task index, task name, level name)`` of the equality tasks a result reports."""
         self.inequality_rows: list[tuple[int, int, int, str]] = []

@@ -36,7 +36,7 @@ from wholebody.tasks import FrameTask
 from wholebody.warmup import warmup
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import control_step  # noqa: E402
+import control_step
 
 ROOT = Path(__file__).resolve().parents[1]
 BACKENDS = ("projection", "hqp")
@@ -108,17 +108,21 @@ def main() -> None:
 def report(times: dict[tuple[str, str], list[float]]) -> None:
     """The table and the ratios (module docstring)."""
     med = {key: float(np.median(t)) * 1e6 for key, t in times.items()}
-    print(f"{'case':42s} {'backend':10s} {'steps':>6s} {'median us':>10s} {'p99 us':>9s} "
-          f"{'p99/med':>8s} {'x paper':>8s}")  # fmt: skip
+    head = f"{'case':42s} {'backend':10s} {'steps':>6s} {'median us':>10s} {'p99 us':>9s}"
+    print(f"{head} {'p99/med':>8s} {'x paper':>8s}")
     for (label, backend), t in times.items():
-        p99 = float(np.percentile(t, 99)) * 1e6
-        print(f"{label:42s} {backend:10s} {len(t):6d} {med[label, backend]:10.1f} {p99:9.1f} "
-              f"{p99 / med[label, backend]:8.2f} {med[label, backend] / med['paper', backend]:8.2f}")  # fmt: skip
+        m, p99 = med[label, backend], float(np.percentile(t, 99)) * 1e6
+        ratio = m / med["paper", backend]
+        row = f"{label:42s} {backend:10s} {len(t):6d} {m:10.1f} {p99:9.1f}"
+        print(f"{row} {p99 / m:8.2f} {ratio:8.2f}")
     print()
     shelf, carry, tiago = "reach_under_shelf", "coordinated_carry", "tiago_dual_carry"
     for backend in BACKENDS:
-        worst = max((m / med["paper", backend], label) for (label, b), m in med.items()
-                    if b == backend and label != "paper")  # fmt: skip
+        worst = max(
+            (m / med["paper", backend], label)
+            for (label, b), m in med.items()
+            if b == backend and label != "paper"
+        )
         print(
             f"{backend}: worst scenario median {worst[0]:.2f}x the paper stack's ({worst[1]}; "
             "target <= 2)"

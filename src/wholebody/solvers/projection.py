@@ -103,7 +103,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from wholebody.errors import SolverError
 from wholebody.kernels import control
 from wholebody.kernels import layout as lay
 from wholebody.kernels import projection as kernel

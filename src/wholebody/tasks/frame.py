@@ -39,8 +39,8 @@ from wholebody.kernels.layout import KIND_POSE
 from wholebody.kernels.rows import (
     POSE_ERROR,
     POSE_FA,
-    POSE_FINE,
     POSE_FB,
+    POSE_FINE,
     POSE_HAS,
     POSE_INTEGRAL,
     POSE_INTS,

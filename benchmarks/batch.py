@@ -69,10 +69,14 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     robot = wb.load_robot("mobile_humanoid")
-    print(f"{args.n} states of mobile_humanoid (nu = {robot.nu}), {args.steps} step(s) each; "
-          f"{os.cpu_count()} cores, {platform.machine()}, Python {platform.python_version()}")
-    print(f"{'backend':12s} {'sequential s':>13s} {'batched s':>10s} {'states/s seq':>13s} "
-          f"{'states/s batch':>15s} {'ratio':>6s} {'max |dq|':>9s}")
+    print(
+        f"{args.n} states of mobile_humanoid (nu = {robot.nu}), {args.steps} step(s) each; "
+        f"{os.cpu_count()} cores, {platform.machine()}, Python {platform.python_version()}"
+    )
+    print(
+        f"{'backend':12s} {'sequential s':>13s} {'batched s':>10s} {'states/s seq':>13s} "
+        f"{'states/s batch':>15s} {'ratio':>6s} {'max |dq|':>9s}"
+    )
     for name, solver in (("projection", wb.ProjectionSolver()), ("hqp", HierarchicalQPSolver())):
         controller, Q, targets = setup(robot, solver, args.n)
         sequential(controller, Q[:2], {t: p[:2] for t, p in targets.items()}, 1)  # warm
@@ -90,8 +94,10 @@ def main() -> None:
         controller.close()
         s, b = float(np.median(seq)), float(np.median(bat))
         gap = float(np.abs(batch.q - q_seq).max())
-        print(f"{name:12s} {s:13.3f} {b:10.3f} {args.n / s:13.0f} {args.n / b:15.0f} "
-              f"{s / b:6.2f} {gap:9.1e}")
+        print(
+            f"{name:12s} {s:13.3f} {b:10.3f} {args.n / s:13.0f} {args.n / b:15.0f} "
+            f"{s / b:6.2f} {gap:9.1e}"
+        )
 
 
 if __name__ == "__main__":

@@ -248,9 +248,7 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
     levels = [LevelProblem("L0", row, np.array([-3.5]), *none, {"t0": slice(0, 1)}, {}),
               LevelProblem("L1", 1.2 * row, np.array([4.77]), *none, {"t1": slice(0, 1)}, {})]  # fmt: skip
     box = np.array([-1.0, -np.inf, -1.0]), np.array([1.0, np.inf, 1.0])
-    r = HierarchicalQPSolver(engine).solve_problem(
-        StackProblem(levels, *box, np.ones(3), {})
-    )
+    r = HierarchicalQPSolver(engine).solve_problem(StackProblem(levels, *box, np.ones(3), {}))
     assert r.level_residuals[0] < 1e-6 and ("L0", "t0") not in r.infeasible
     A = np.array([[0.7432992844579642, 1.3956691799968912, -1.6596900207256087],
                   [-2.857295096361623, -5.371464595273765, 6.373232673829478],
@@ -259,9 +257,7 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
     lo = np.array([-112.4481878597328, -200.88631992778832, -5.382834797819274])
     hi = np.array([209.79712291742493, 238.5391295942699, 10.781618844429781])
     level = LevelProblem("L0", A, b, *none, {"t": slice(0, 3)}, {})
-    r = HierarchicalQPSolver(engine).solve_problem(
-        StackProblem([level], lo, hi, np.ones(3), {})
-    )
+    r = HierarchicalQPSolver(engine).solve_problem(StackProblem([level], lo, hi, np.ones(3), {}))
     assert np.linalg.norm(A @ r.u - b) == pytest.approx(0.0261061, abs=1e-6)
 
 

@@ -206,9 +206,7 @@ def two_hands(robot, q, ki=5.0):
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
-def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(
-    humanoid, solver
-):
+def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(humanoid, solver):
     """The left elbow is pinned at rest: a bound is active at every step. The right hand's
     rows do not move that joint, so its integral keeps integrating; the left hand's do, so
     its integral stays frozen at 0. (One flag for all, ``result.limit_hit``, froze both.)"""

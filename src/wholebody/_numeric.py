@@ -29,6 +29,7 @@ __all__ = [
     "ones",
 ]
 
+
 def float_array(value: object, what: str) -> np.ndarray:
     """``value`` as a float array (itself when it already is one); strings and other
     non-numbers give a :class:`DimensionError` naming ``what`` (numpy would parse ``"1.5"``

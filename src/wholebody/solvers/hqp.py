@@ -121,9 +121,9 @@ from wholebody.solvers.stack import Stack, StackProblem
 __all__ = ["HierarchicalQPSolver", "LevelReport"]
 
 
-
 def _positive(value: float) -> bool:
     return value > 0
+
 
 class HierarchicalQPSolver(Solver):
     """Strict lexicographic priorities with hard bounds at every level (see module docstring).

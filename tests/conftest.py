@@ -43,6 +43,7 @@ EQUIVALENCE = [
     "test_daqp_kernel.py",
     "test_forward_kernel.py",
     "test_collision_kernel.py",
+    "test_arm_energy_links.py",
 ]
 _MODE = "WHOLEBODY_NUMBA_MODE"
 _background: dict[str, object] = {}

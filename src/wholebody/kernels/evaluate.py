@@ -24,7 +24,6 @@ from wholebody.kernels.layout import fmat, ften, fvec, imat, ivec
 from wholebody.kernels.limits import acceleration_box, position_box, velocity_box
 from wholebody.kernels.objectives import (
     AE_WIDTH,
-    ARM_PARTS,
     arm_energy,
     joint_limit_avoidance,
     manipulability,
@@ -178,15 +177,9 @@ def _objective(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray) -
     out, grad = fmat(f, h, lay.F_OBJ)[slot], fmat(f, h, lay.F_OBJ_GRAD)[slot]
     KJ, KP, KR = ften(f, h, lay.F_KIN_J), fmat(f, h, lay.F_KIN_P), ften(f, h, lay.F_KIN_R)
     nu = grad.shape[0]
-    if kind == lay.KIND_ARM:
-        P6, R6, J6 = np.zeros((6, 3)), np.zeros((6, 3, 3)), np.zeros((6, 6, nu))
-        for j in range(6):
-            fr = ints[j]
-            if fr >= 0:
-                P6[j], R6[j], J6[j] = KP[fr], KR[fr], KJ[fr]
-        parts = par[AE_WIDTH : AE_WIDTH + ARM_PARTS]
-        arm_energy(P6, R6, J6, par[:AE_WIDTH], par[AE_WIDTH + ARM_PARTS :], grad, parts)
-        out[1] = parts[0]
+    if kind == lay.KIND_ARM:  # ints: the frames' rows (AF_*), par: the block (AE_*)
+        arm_energy(KP, KR, KJ, ints, par, grad)
+        out[1] = par[AE_WIDTH]  # the first of its parts, the value
     elif kind == lay.KIND_H1:
         out[1] = joint_limit_avoidance(
             fvec(f, h, lay.F_JP),

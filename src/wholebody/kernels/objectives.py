@@ -7,8 +7,10 @@ The maths is documented with the objectives (:mod:`wholebody.tasks.arm_energy`,
 :mod:`wholebody.arm.angle`); the objective classes call these kernels, and the
 compiled plan calls them for every built-in objective of a stack in one pass.
 
-Parameters travel as flat float arrays with named entries (``AE_*`` for the arm energy, the
-network layout of :func:`mlp_stiffness`), so that many objectives fit in one table.
+Parameters travel as flat float arrays with named entries (``AE_*`` for the arm energy,
+followed by its links and its network in the layout of :func:`mlp_stiffness`; its frames are
+ints ``AF_*``, rows of a table of frame kinematics), so that many objectives fit in one
+table.
 """
 
 from __future__ import annotations
@@ -31,17 +33,22 @@ __all__ = [
     "mlp_stiffness",
 ]
 
-# the arm energy's parameters: one row of AE_WIDTH floats per arm
-AE_G, AE_M1, AE_M2, AE_COM1, AE_COM2 = 0, 1, 2, 3, 6  # m/s^2, kg, kg, m (3), m (3)
-AE_SIDE, AE_FADE, AE_SMOOTH, AE_SHOULDER = 9, 10, 11, 12  # +-1, m, rad, 1: shoulder reference
-AE_K, AE_NET, AE_DK = 13, 14, 15  # stiffness (N m/rad); its source (below); dk/dp (3)
-AE_WIDTH = 18
-# AE_NET: the offset of the stiffness network in ``nets``, or AE_CONSTANT (k = par[AE_K]) or
-# AE_GIVEN (k = par[AE_K] and dk/dp = par[AE_DK:AE_DK + 3], evaluated by the caller at the
-# canonical wrist position)
-AE_CONSTANT, AE_GIVEN = -1, -2
+# An arm energy's parameter block (floats; one per arm, of variable length):
+AE_G, AE_SIDE, AE_FADE, AE_SMOOTH = 0, 1, 2, 3  # m/s^2, +-1 (left/right), m, rad
+AE_SHOULDER, AE_LINKS = 4, 5  # 1: heights from the shoulder (0: world); number of links n
+AE_K, AE_NET, AE_DK = 6, 7, 8  # stiffness (N m/rad); its source (below); dk/dp (3, N m/rad/m)
+AE_WIDTH = 11  # then ARM_PARTS outputs, then n links from AE_LINK0, then the network if any
 ARM_PARTS = 6  # value, gravity, spring (J), arm angle (rad), stiffness (N m/rad), rho (m)
-ARM_FRAMES = 6  # shoulder, elbow, wrist, upper arm, forearm, base
+AE_LINK0 = AE_WIDTH + ARM_PARTS
+LINK_WIDTH = 4  # a link: mass (kg), centre of mass in the link frame (m, 3)
+# AE_NET: the offset in the block of the packed stiffness network (:func:`mlp_stiffness`), or
+# AE_CONSTANT (k = par[AE_K]) or AE_GIVEN (k = par[AE_K] and dk/dp = par[AE_DK:AE_DK + 3],
+# written by the caller at the canonical wrist position before each call)
+AE_CONSTANT, AE_GIVEN = -1, -2
+# An arm energy's ints: rows of the frame table (positions, rotations and Jacobians) of the
+# shoulder, elbow and wrist centres, the base (-1 with a constant stiffness: not read), then
+# of the n links' frames from AF_LINK0, upper arm's first, in the order of the block's links
+AF_SHOULDER, AF_ELBOW, AF_WRIST, AF_BASE, AF_LINK0 = 0, 1, 2, 3, 4
 
 _PIVOT_FLOOR = 1e-8  # Cholesky pivots^2 below this fraction of max diag(J J^T): LU decides
 
@@ -137,28 +144,36 @@ def mlp_stiffness(net: np.ndarray, p: np.ndarray, grad: np.ndarray) -> float:
 
 
 @kernel
-def _gravity(P: np.ndarray, R: np.ndarray, par: np.ndarray, C: np.ndarray) -> float:
-    """``g (m1 h1 + m2 h2)`` of the upper-arm and forearm centres of mass (heights from the
-    shoulder with ``AE_SHOULDER``), its gradient's coefficients added into ``C``."""
-    g, m1, m2 = par[AE_G], par[AE_M1], par[AE_M2]
+def _gravity(
+    P: np.ndarray, R: np.ndarray, frames: np.ndarray, par: np.ndarray, C: np.ndarray
+) -> float:
+    """``g sum_i m_i h_i`` over the arm's links (``AE_LINKS`` of them: a segment may be split
+    over several), heights (m) of their centres of mass from the shoulder centre with
+    ``AE_SHOULDER``, else from the world's origin; the coefficients of its gradient
+    ``g m_i (J_ci[z] - J_S[z])`` on the frames' Jacobian rows added into ``C`` (rows as
+    ``frames``: ``J_ci[z] = J_i[z] + (w_i x R_i c_i)[z]`` reads the link frame's linear z row
+    and angular x and y rows)."""
+    g = par[AE_G]
+    mass = 0.0
     gravity = 0.0
-    for body in range(2):
-        f = 3 + body
-        m = m1 if body == 0 else m2
-        o = AE_COM1 if body == 0 else AE_COM2
-        c0, c1, c2 = par[o], par[o + 1], par[o + 2]
+    for link in range(int(par[AE_LINKS])):
+        o = AE_LINK0 + LINK_WIDTH * link
+        m, c0, c1, c2 = par[o], par[o + 1], par[o + 2], par[o + 3]
+        row = AF_LINK0 + link
+        f = frames[row]
         Rb = R[f]
-        rx = Rb[0, 0] * c0 + Rb[0, 1] * c1 + Rb[0, 2] * c2
+        rx = Rb[0, 0] * c0 + Rb[0, 1] * c1 + Rb[0, 2] * c2  # R c: the centre from the origin
         ry = Rb[1, 0] * c0 + Rb[1, 1] * c1 + Rb[1, 2] * c2
         rz = Rb[2, 0] * c0 + Rb[2, 1] * c1 + Rb[2, 2] * c2
         gm = g * m
         gravity += gm * (P[f, 2] + rz)
-        C[f, 2] += gm
-        C[f, 3] += gm * ry
-        C[f, 4] -= gm * rx
+        C[row, 2] += gm
+        C[row, 3] += gm * ry
+        C[row, 4] -= gm * rx
+        mass += m
     if par[AE_SHOULDER] != 0.0:
-        gravity -= g * (m1 + m2) * P[0, 2]
-        C[0, 2] -= g * (m1 + m2)
+        gravity -= g * mass * P[frames[AF_SHOULDER], 2]
+        C[AF_SHOULDER, 2] -= g * mass
     return gravity
 
 
@@ -167,22 +182,26 @@ def arm_energy(
     P: np.ndarray,
     R: np.ndarray,
     J: np.ndarray,
+    frames: np.ndarray,
     par: np.ndarray,
-    nets: np.ndarray,
     grad: np.ndarray,
-    parts: np.ndarray,
 ) -> None:
     """Gravity plus spring energy of one arm and its gradient (into ``grad``, nu).
 
-    ``P`` (6, 3), ``R`` (6, 3, 3) and ``J`` (6, 6, nu): positions, rotations and Jacobians of
-    the shoulder, elbow, wrist, upper-arm, forearm and base frames (the base's only read when
-    the stiffness depends on the wrist); ``par`` one row of ``AE_*`` parameters; ``nets`` the packed
-    networks (:func:`mlp_stiffness`). ``parts`` receives ``ARM_PARTS`` numbers."""
-    C = np.zeros((ARM_FRAMES, 6))  # the gradient's coefficients of each frame's 6 rows
-    gravity = _gravity(P, R, par, C)
+    ``P`` (F, 3), ``R`` (F, 3, 3) and ``J`` (F, 6, nu): world positions (m), rotations and
+    Jacobians (world-aligned axes at the frame origin, linear rows first, actuated columns)
+    of a table of frames, of which ``frames`` (ints ``AF_*``) names the arm's rows: the
+    shoulder, elbow and wrist centres, the base (read only when the stiffness depends on the
+    wrist) and each link. ``par`` the arm's block (``AE_*``, the links, the network); its
+    ``ARM_PARTS`` numbers at ``AE_WIDTH`` receive the value and its parts. ``J`` is read only
+    for the gradient's columns (none: the value alone)."""
+    C = np.zeros((frames.shape[0], 6))  # the gradient's coefficients of each frame's 6 rows
+    gravity = _gravity(P, R, frames, par, C)
+    S, E, W = P[frames[AF_SHOULDER]], P[frames[AF_ELBOW]], P[frames[AF_WRIST]]
     dx = np.empty(9)
     dy = np.empty(9)
-    alpha, x, y = arm_angle_terms(P[0], P[1], P[2], par[AE_SIDE], dx, dy)
+    side = par[AE_SIDE]
+    alpha, x, y = arm_angle_terms(S, E, W, side, dx, dy)
     rho2 = x * x + y * y
     eps2 = par[AE_FADE] ** 2
     w = rho2 / (rho2 + eps2)
@@ -194,53 +213,53 @@ def arm_energy(
     rest = math.pi - s
     net = int(par[AE_NET])
     dk = np.zeros(3)
-    side = par[AE_SIDE]
     d = np.empty(3)
     for i in range(3):
-        d[i] = P[2, i] - P[0, i]
+        d[i] = W[i] - S[i]
     if net == AE_CONSTANT:
         k = par[AE_K]
     elif net == AE_GIVEN:
         k = par[AE_K]
         dk[:] = par[AE_DK : AE_DK + 3]
     else:
-        Rb = R[5]
+        Rb = R[frames[AF_BASE]]
         wrist = np.empty(3)
         for i in range(3):  # Mirror R_b^T (W - S), the mirror flipping y for a left arm
             wrist[i] = Rb[0, i] * d[0] + Rb[1, i] * d[1] + Rb[2, i] * d[2]
         wrist[1] *= -side
-        k = mlp_stiffness(nets[net:], wrist, dk)
+        k = mlp_stiffness(par[net:], wrist, dk)
     spring = 0.5 * k * rest * rest * w
     den = rho2 + eps2
     cw = k * rest * 0.5 * rest * 2 * eps2 / (den * den)
     ca = -k * rest * ds / den
     coef_x = cw * x - ca * y
     coef_y = cw * y + ca * x
-    for i in range(9):  # d f_e / d(S, E, W)
+    for i in range(9):  # d f_e / d(S, E, W): rows AF_SHOULDER, AF_ELBOW, AF_WRIST
         C[i // 3, i % 3] += coef_x * dx[i] + coef_y * dy[i]
     if net != AE_CONSTANT:
         # dp = Mirror R_b^T (J_W - J_S + [W - S]x J_b,ang): with q = (c dk Mirror) R_b^T,
         # q.dp = q.J_W - q.J_S + (q x (W - S)).J_b,ang
         c = 0.5 * rest * rest * w
         dk[1] *= -side
-        Rb = R[5]
+        Rb = R[frames[AF_BASE]]
         q = np.empty(3)
         for i in range(3):
             q[i] = (c * dk[0]) * Rb[i, 0] + (c * dk[1]) * Rb[i, 1] + (c * dk[2]) * Rb[i, 2]
         for i in range(3):
-            C[2, i] += q[i]
-            C[0, i] -= q[i]
-        C[5, 3] += q[1] * d[2] - q[2] * d[1]
-        C[5, 4] += q[2] * d[0] - q[0] * d[2]
-        C[5, 5] += q[0] * d[1] - q[1] * d[0]
-    frames = ARM_FRAMES if net != AE_CONSTANT else ARM_FRAMES - 1
+            C[AF_WRIST, i] += q[i]
+            C[AF_SHOULDER, i] -= q[i]
+        C[AF_BASE, 3] += q[1] * d[2] - q[2] * d[1]
+        C[AF_BASE, 4] += q[2] * d[0] - q[0] * d[2]
+        C[AF_BASE, 5] += q[0] * d[1] - q[1] * d[0]
     grad[:] = 0.0
-    for f in range(frames):
+    for row in range(frames.shape[0]):
+        f = frames[row]
         for r in range(6):
-            cf = C[f, r]
-            if cf != 0.0:
+            cf = C[row, r]
+            if cf != 0.0:  # (a frame not read, f < 0, has none)
                 for col in range(grad.shape[0]):
                     grad[col] += cf * J[f, r, col]
+    parts = par[AE_WIDTH : AE_WIDTH + ARM_PARTS]
     parts[0] = gravity + spring
     parts[1] = gravity
     parts[2] = spring

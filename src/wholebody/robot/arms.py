@@ -59,8 +59,8 @@ def arm_chain(robot: Robot, cfg: ArmConfig) -> ArmChain:
 
 
 def _segment(robot: Robot, key: str, links: tuple[str, ...]) -> tuple[Body, ...]:
-    """The bodies of an arm segment: links of the URDF with a mass; the first one the
-    arm energy's kernel reads, the others added to it (see ArmPotentialEnergy)."""
+    """The bodies of an arm segment: links of the URDF with a mass (the arm energy sums the
+    gravity of them all; see ArmPotentialEnergy)."""
     out = []
     config, known = robot.config, robot.urdf.links
     for name in links:

@@ -1,7 +1,9 @@
 """The paper's arm potential energy ``f_p = f_g + f_e`` as an objective.
 
-* Gravity: ``f_g = g (m1 h1 + m2 h2)``, the heights (m) of the upper-arm and forearm centres
-  of mass, masses and centres of mass from the robot model (hand excluded). **Decision:**
+* Gravity: ``f_g = g sum_i m_i h_i`` over the links of the upper arm and the forearm (hand
+  excluded), ``h_i`` the height (m) of link i's centre of mass, masses and centres of mass
+  (in the link frames) from the robot model; a segment may be split over several links
+  (``forearm = ["a", "b"]`` in robot.toml), the kernel takes any number. **Decision:**
   heights are measured from the arm's shoulder centre (``reference="shoulder"``, default), so
   the energy describes the arm's posture: bending the waist or lowering the body earns
   nothing. (With world heights, ``reference="world"``, leaning the trunk forward lowers both
@@ -26,14 +28,16 @@ Two regularisations make the energy smooth everywhere (documented decisions):
   everywhere. With eps = 1 cm, w > 0.96 once rho > 5 cm.
 
 Gradient in actuated coordinates, with ``J_S, J_E, J_W`` the linear Jacobians of the joint
-centres, ``J_c1, J_c2`` those of the centres of mass and ``s = |alpha|_s``::
+centres, ``J_ci = J_i,lin + J_i,ang x (R_i c_i)`` those of the links' centres of mass (``c_i``
+in the link frame, from the link frames' Jacobians) and ``s = |alpha|_s``::
 
-    d f_g = g (m1 (J_c1[z] - J_S[z]) + m2 (J_c2[z] - J_S[z]))     (shoulder reference)
+    d f_g = g sum_i m_i (J_ci[z] - J_S[z])       (shoulder reference; world: without J_S)
     d f_e = 1/2 (pi - s)^2 w dk  -  k (pi - s) s'(alpha) w dalpha  +  1/2 k (pi - s)^2 dw
 
-A segment whose mass is split over several links (``upper_arm = ["a", "b"]`` in robot.toml)
-adds ``g m_i h_i`` per link; the kernels hold one link per segment, so an arm with more is
-evaluated here: the kernel's two, plus the others with their centre-of-mass Jacobians.
+One kernel, :func:`wholebody.kernels.objectives.arm_energy`, computes both, in the compiled
+control step and for :meth:`ArmPotentialEnergy.evaluate`; only a stiffness model of your own
+(not a constant nor a :class:`~wholebody.arm.network.NetworkStiffness`) is evaluated in
+Python, before each call.
 
 The stiffness model's input is the wrist relative to the shoulder in the arm's canonical body
 axes (x forward, y medial, z up; see :mod:`wholebody.arm.stiffness`):
@@ -51,22 +55,24 @@ from wholebody.arm.stiffness import ConstantStiffness, StiffnessModel
 from wholebody.errors import DimensionError
 from wholebody.kernels.layout import KIND_ARM
 from wholebody.kernels.objectives import (
-    AE_COM1,
-    AE_COM2,
     AE_CONSTANT,
     AE_DK,
     AE_FADE,
     AE_G,
     AE_GIVEN,
     AE_K,
-    AE_M1,
-    AE_M2,
+    AE_LINK0,
+    AE_LINKS,
     AE_NET,
     AE_SHOULDER,
     AE_SIDE,
     AE_SMOOTH,
     AE_WIDTH,
+    AF_BASE,
+    AF_SHOULDER,
+    AF_WRIST,
     ARM_PARTS,
+    LINK_WIDTH,
     arm_energy,
 )
 from wholebody.robot import ArmChain, Body, Frame, Robot, RobotState
@@ -129,8 +135,8 @@ class ArmPotentialEnergy(Objective):
         self.side = 1.0 if self.arm.side == "left" else -1.0
         self._mirror = np.array([1.0, -self.side, 1.0])  # canonical y = medial
         arm = self.arm
-        self._frames = (arm.shoulder, arm.elbow, arm.wrist, arm.upper_arm.frame, arm.forearm.frame)
-        self._frames_base = (*self._frames, robot.base_frame)
+        upper, fore = arm.upper_arm_bodies[1:], arm.forearm_bodies[1:]
+        self._links = (arm.upper_arm, *upper, arm.forearm, *fore)
         self._settings = (float(smoothing), float(fade), reference)
         self.stiffness = stiffness  # (lays out the parameter block)
 
@@ -157,6 +163,16 @@ class ArmPotentialEnergy(Objective):
                 )
             self._stiffness = ConstantStiffness(k)
         self._params = self._block()  # a new block: a stack lays it out again
+        table = _FrameTable()  # the frames evaluate() reads, as the kernel's ints name them
+        self._rows = self._frame_rows(table)
+        self._frames = tuple(table.frames)
+
+    @property
+    def links(self) -> tuple[Body, ...]:
+        """The links whose gravity the energy sums, each with its mass and centre of mass in
+        its link frame: the upper arm's, then the forearm's (a segment may span several,
+        ``forearm = ["a", "b"]`` in robot.toml)."""
+        return self._links
 
     @property
     def smoothing(self) -> float:
@@ -179,29 +195,43 @@ class ArmPotentialEnergy(Objective):
         return float(np.linalg.norm(self.robot.model.gravity.linear))
 
     def _block(self) -> np.ndarray:
-        """The kernel's parameter block: ``AE_*`` parameters, ``ARM_PARTS`` outputs, then the
-        packed stiffness network if the kernels evaluate it."""
-        arm = self.arm
-        par = np.zeros(AE_WIDTH)
-        par[AE_G], par[AE_M1], par[AE_M2] = self.g, arm.upper_arm.mass, arm.forearm.mass
-        par[AE_COM1 : AE_COM1 + 3] = arm.upper_arm.com
-        par[AE_COM2 : AE_COM2 + 3] = arm.forearm.com
-        par[AE_SIDE], par[AE_FADE], par[AE_SMOOTH] = self.side, self.fade, self.smoothing
-        par[AE_SHOULDER] = self.reference == "shoulder"
+        """The kernel's parameter block (:mod:`wholebody.kernels.objectives`): ``AE_*``
+        parameters, ``ARM_PARTS`` outputs, each link's mass and centre of mass (kg, m in the
+        link frame) from ``AE_LINK0``, then the packed stiffness network if the kernels
+        evaluate it."""
+        links = self.links
+        par = np.zeros(AE_LINK0 + LINK_WIDTH * len(links))
+        par[AE_G], par[AE_SIDE], par[AE_FADE] = self.g, self.side, self.fade
+        par[AE_SMOOTH], par[AE_SHOULDER] = self.smoothing, self.reference == "shoulder"
+        par[AE_LINKS] = len(links)
+        for i, body in enumerate(links):
+            o = AE_LINK0 + LINK_WIDTH * i
+            par[o], par[o + 1 : o + 4] = body.mass, body.com
         net = self.network()
         stiffness = self._stiffness
         if type(stiffness) is ConstantStiffness:  # k does not depend on the wrist
             par[AE_K], par[AE_NET] = stiffness.k, AE_CONSTANT
         elif net is not None:
-            par[AE_NET] = 0
-        else:  # evaluated in Python at each call (_kernel_energy)
+            par[AE_NET] = par.size
+        else:  # evaluated in Python before each call (_energy)
             par[AE_NET] = AE_GIVEN
-        return np.concatenate([par, np.zeros(ARM_PARTS), np.zeros(0) if net is None else net])
+        return par if net is None else np.concatenate([par, net])
+
+    def _frame_rows(self, packer: Packer) -> np.ndarray:
+        """The kernel's ints (``AF_*``): the rows ``packer`` gives the shoulder, elbow and
+        wrist centres, the base (-1 with a constant stiffness: not read) and each link's
+        frame (the order of :attr:`links`)."""
+        arm = self.arm
+        rows = [packer.frame(f) for f in (arm.shoulder, arm.elbow, arm.wrist)]
+        constant = self._params[AE_NET] == AE_CONSTANT
+        rows.append(-1 if constant else packer.frame(self.robot.base_frame))
+        rows += [packer.frame(body.frame) for body in self.links]
+        return np.array(rows, dtype=np.int64)
 
     def jacobian_frames(self) -> tuple[Frame, ...]:
-        """Shoulder, elbow, wrist, upper-arm and forearm frames, and the base frame when the
-        stiffness depends on the wrist position."""
-        return self._frames if isinstance(self._stiffness, ConstantStiffness) else self._frames_base
+        """Shoulder, elbow and wrist frames, the base frame when the stiffness depends on the
+        wrist position, and the links' frames (each once)."""
+        return self._frames
 
     def network(self) -> np.ndarray | None:
         """The stiffness as a packed network the kernels evaluate themselves, or None (a
@@ -210,21 +240,17 @@ class ArmPotentialEnergy(Objective):
         return packed() if callable(packed) else None
 
     def pack(self, packer: Packer) -> Packed | None:
-        """Compiled where the kernels evaluate the stiffness (a constant or a packed network)
-        and each segment is one link (see the module docstring)."""
-        if (
-            self.extra_bodies
-            or self._params[AE_NET] == AE_GIVEN
-            or not self.compiled_as(ArmPotentialEnergy, "evaluate", "_energy")
+        """Compiled wherever the kernels evaluate the stiffness: a constant or a packed
+        network, whatever the number of links (a model of your own runs in Python)."""
+        if self._params[AE_NET] == AE_GIVEN or not self.compiled_as(
+            ArmPotentialEnergy, "evaluate", "_energy"
         ):
             return None
-        frames = self._frames_base if self.network() is not None else self._frames
-        ints = [packer.frame(f) for f in frames] + [-1] * (6 - len(frames))
-        return Packed(KIND_ARM, self._params, np.array(ints, dtype=np.int64))
+        return Packed(KIND_ARM, self._params, self._frame_rows(packer))
 
     def evaluate(self, state: RobotState) -> ArmEnergyValue:
         grad = np.empty(self.robot.nu)
-        parts = self._energy(state, state.jacobians(self._frames_base), grad)
+        parts = self._energy(state, state.jacobians(self._frames), grad)
         value, gravity, spring, alpha, k, rho = parts.tolist()
         return ArmEnergyValue(
             value=value,
@@ -241,47 +267,22 @@ class ArmPotentialEnergy(Objective):
         at ``state``, without the gradient (no Jacobians: what a monitor logs)."""
         return self._energy(state, _NO_JACOBIAN, _NO_GRADIENT)
 
-    @property
-    def extra_bodies(self) -> tuple[Body, ...]:
-        """The links of the arm's segments beyond the first of each (see the module
-        docstring): their gravity is added outside the kernel."""
-        arm = self.arm
-        return arm.upper_arm_bodies[1:] + arm.forearm_bodies[1:]
-
     def _energy(self, state: RobotState, J: np.ndarray, grad: np.ndarray) -> np.ndarray:
-        """``ARM_PARTS`` at ``state`` (the kernel's, with the extra links' gravity), the
-        gradient into ``grad`` (``J``: the frames' Jacobians, one column per entry of
-        ``grad``; none: no gradient)."""
-        parts = self._kernel_energy(state, J, grad)
-        extra = self.extra_bodies
-        if extra:
-            shoulder = self.reference == "shoulder"
-            base = state.position(self.arm.shoulder)[2] if shoulder else 0.0
-            gravity = sum(self.g * b.mass * (state.com_position(b)[2] - base) for b in extra)
-            parts[0] += gravity
-            parts[1] += gravity
-            if grad.size:
-                for b in extra:
-                    grad += self.g * b.mass * state.com_jacobian(b)[2]
-                    if shoulder:
-                        grad -= self.g * b.mass * state.jacobian(self.arm.shoulder)[2]
-        return parts
-
-    def _kernel_energy(self, state: RobotState, J: np.ndarray, grad: np.ndarray) -> np.ndarray:
-        """The kernel's ``ARM_PARTS`` at ``state`` (the first link of each segment), its
-        gradient into ``grad``."""
-        P = np.empty((6, 3))
-        R = np.empty((6, 3, 3))
-        for i, f in enumerate(self._frames_base):
+        """``ARM_PARTS`` at ``state`` (the kernel's), the gradient into ``grad`` (``J``: the
+        Jacobians of :meth:`jacobian_frames`, one column per entry of ``grad``; none: no
+        gradient)."""
+        frames, rows = self._frames, self._rows
+        P = np.empty((len(frames), 3))
+        R = np.empty((len(frames), 3, 3))
+        for i, f in enumerate(frames):
             R[i], P[i] = state.rotation_translation(f)
-        par = self._params[:AE_WIDTH]
+        par = self._params
         if par[AE_NET] == AE_GIVEN:  # a model evaluated here, at Mirror R_b^T (W - S)
-            par = par.copy()
-            wrist = self._mirror * R[5].T.dot(P[2] - P[0])
+            s, w, b = rows[AF_SHOULDER], rows[AF_WRIST], rows[AF_BASE]
+            wrist = self._mirror * R[b].T.dot(P[w] - P[s])
             par[AE_K], par[AE_DK : AE_DK + 3] = self._stiffness.evaluate(wrist)
-        parts = self._params[AE_WIDTH : AE_WIDTH + ARM_PARTS]
-        arm_energy(P, R, J, par, self._params[AE_WIDTH + ARM_PARTS :], grad, parts)
-        return parts.copy()
+        arm_energy(P, R, J, rows, par, grad)
+        return par[AE_WIDTH : AE_WIDTH + ARM_PARTS].copy()
 
     def same_energy(self, other: object) -> bool:
         """Whether ``other`` is an arm energy with the same value as this one at every state
@@ -298,5 +299,21 @@ class ArmPotentialEnergy(Objective):
         )
 
 
-_NO_JACOBIAN = np.zeros((6, 6, 0))  # parts(): the gradient has no columns
+class _FrameTable:
+    """A :class:`Packer` of the frames :meth:`ArmPotentialEnergy.evaluate` reads: each frame
+    asked for gets the next row, once."""
+
+    def __init__(self) -> None:
+        self.frames: list[Frame] = []
+        self._rows: dict[int, int] = {}  # a frame's index -> its row
+
+    def frame(self, frame: Frame) -> int:
+        row = self._rows.setdefault(frame.index, len(self.frames))
+        if row == len(self.frames):
+            self.frames.append(frame)
+        return row
+
+
+_NO_JACOBIAN = np.zeros((0, 6, 0))  # parts(): the gradient has no columns (J is not read)
+_NO_JACOBIAN.setflags(write=False)  # (as the states' Jacobians: one compiled signature)
 _NO_GRADIENT = np.zeros(0)

@@ -233,10 +233,7 @@ class Controller:
         if self._limits is None and self.threads is not None:
             self._limits = threadpool_limits(self.threads)
         q = self._checked(q)
-        if self._call is None or self.stack.plan() is not self._bound:
-            self._step(q, None)
-        else:
-            self._call_step(q)
+        self._step(q, None)
         return self._u.copy()
 
     @property
@@ -289,7 +286,7 @@ class Controller:
             raise DimensionError(f"configuration of robot {self.robot.name!r} is not finite: {q}")
         return q
 
-    def _call_step(self, q: np.ndarray) -> None:
+    def _call_step(self, q: np.ndarray, state: RobotState | None) -> None:
         """:meth:`_step` where the last step was one kernel call on the same plan: the same
         call again (:meth:`Solver.stepper <wholebody.solvers.base.Solver.stepper>`)."""
         plan = self._bound
@@ -301,19 +298,21 @@ class Controller:
         if self.references:
             batch.refs[0] = self._refs[j]  # type: ignore[index]
         start = time.perf_counter()
-        plan.sync(None, self.dt)  # type: ignore[union-attr]
+        plan.sync(state, self.dt)  # type: ignore[union-attr]
         if plan.stale:  # type: ignore[union-attr]
-            self._bound = None
-            return self._step(q, None)
+            self._bound = self._call = None
+            return self._step(q, state)
         self._call()  # type: ignore[misc]
         self.solve_time = time.perf_counter() - start
-        plan.evaluated = -1.0  # type: ignore[union-attr]
+        plan.evaluated = -1.0 if state is None else state.stamp  # type: ignore[union-attr]
         plan.last_result = None  # type: ignore[union-attr]
         self._k += 1
 
     def _step(self, q: np.ndarray, state: RobotState | None) -> None:
         """The step of :meth:`step` (module docstring), ``state`` the kinematics at ``q`` if
         the caller has them."""
+        if self._call is not None and self.stack.plan() is self._bound:
+            return self._call_step(q, state)
         rec = self.recovery
         stack = self.stack if rec is None else rec.stack
         plan = stack.plan()
@@ -336,9 +335,8 @@ class Controller:
             what = KINEMATICS | ADVANCE | INTEGRATE
             self.solver.run(plan, buffers.own, batch, 1, what)
             plan.evaluated = -1.0 if state is None else state.stamp
-            if state is None:  # the next step is the same call
-                self._call = self.solver.stepper(plan, buffers.own, batch, what)
-                self._batch = batch
+            self._call = self.solver.stepper(plan, buffers.own, batch, what)  # the next steps'
+            self._batch = batch
         else:
             state = self._general(plan, q, state, j)
             plan = self._plan_of_step

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.linalg
 from test_tasks import configurations
 
 from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
@@ -278,6 +279,79 @@ def test_round_off_of_a_computed_projector_does_not_damp_a_tall_level_below(rng)
         N = np.linalg.svd(A0)[2][7:].T  # what level 0 leaves free, exactly
         gradient = N.T @ A1.T @ (A1 @ u - b1)
         assert np.linalg.norm(gradient) <= 1e-5 * np.linalg.norm(N.T @ A1.T @ b1)
+
+
+def _level(name, A, b):
+    """A level of one task (rows ``A u = b``), no inequality rows."""
+    n = A.shape[1]
+    return LevelProblem(name, A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
+                        {name: slice(0, A.shape[0])})  # fmt: skip
+
+
+def _wide(rng, m, n, largest=5.0, smallest=0.05):
+    """A random m x n matrix of full row rank, singular values from ``largest`` down to
+    ``smallest``."""
+    U, _ = np.linalg.qr(rng.normal(size=(m, m)))
+    V, _ = np.linalg.qr(rng.normal(size=(n, m)))
+    return (U * np.logspace(np.log10(largest), np.log10(smallest), m)) @ V.T
+
+
+def _solve(levels, n):
+    """The projection's solution of ``levels`` (no box)."""
+    box = np.full(n, 1e12)
+    return ProjectionSolver().solve_problem(StackProblem(levels, -box, box, np.ones(n), {})).u
+
+
+@pytest.mark.parametrize("above", [1, 2])
+@pytest.mark.parametrize("s", [1.0, 0.05, 0.01])
+def test_a_task_level_of_rows_s_identity_is_its_closed_form_below_wide_levels(rng, above, s):
+    # A posture task in a uniform metric has rows s I: under ``above`` wide levels (certified,
+    # undamped, condition numbers up to 1700) it moves by P (b / s - u), P the projector on
+    # what they leave, far above the singular threshold eps (0.02); below it, every direction
+    # of s Zb has the singular value s and is damped alike: g = s / (s^2 + (1 - (s / eps)^2)
+    # lambda^2) instead of 1/s. Its move leaves the levels above as they were, to rounding.
+    n, m, solver = 23, 6, ProjectionSolver()
+    eps, lam = solver.singular_threshold, solver.damping
+    gain = 1.0 / s if s >= eps else s / (s * s + (1.0 - (s / eps) ** 2) * lam**2)
+    for _ in range(5):
+        rows = [_wide(rng, m, n, largest=50.0, smallest=0.03) for _ in range(above)]
+        levels = [_level(f"L{k}", A, rng.normal(size=m)) for k, A in enumerate(rows)]
+        b = rng.normal(size=n)
+        u_above = _solve(levels, n)
+        levels.append(_level("posture", s * np.eye(n), b))
+        u = _solve(levels, n)
+        expected, N = np.zeros(n), np.eye(n)  # N: orthonormal basis of what is left free
+        for level in levels[:-1]:
+            M = level.A @ N
+            expected += N @ np.linalg.pinv(M) @ (level.b - level.A @ expected)
+            N = N @ scipy.linalg.null_space(M)
+        expected += gain * N @ N.T @ (b - s * expected)
+        np.testing.assert_allclose(u, expected, rtol=0, atol=1e-9 * np.abs(expected).max())
+        move = u - u_above
+        for A in rows:
+            assert np.abs(A @ move).max() <= 1e-14 * np.linalg.norm(A, 2) * np.abs(move).max()
+
+
+@pytest.mark.parametrize("tight", [False, True])
+def test_rows_s_identity_take_the_general_routes_step(rng, tight):
+    # The shortcut for rows s I (tasks) is the step of the general route, with or without
+    # the box: the same level with one off-diagonal entry at 1e-300 (numerically nothing,
+    # structurally not s I) goes through level_step and, in SNS, the task's saturation.
+    n, solver = 23, ProjectionSolver()
+    for _ in range(5):
+        A0, b0, b1 = _wide(rng, 12, n, smallest=0.5), rng.normal(size=12), rng.normal(size=n)
+        u = {}
+        for off in (0.0, 1e-300):
+            A1 = np.eye(n)
+            A1[3, 7] = off
+            box = np.full(n, 1.5 if tight else 1e12)
+            problem = StackProblem([_level("hands", A0, b0), _level("posture", A1, b1)],
+                                   -box, box, np.ones(n), {})  # fmt: skip
+            result = solver.solve_problem(problem)
+            u[off] = result.u
+        if tight:
+            assert np.abs(u[0.0]).max() <= 1.5 + 1e-9 and result.status != SolverStatus.OK
+        np.testing.assert_allclose(u[0.0], u[1e-300], rtol=0, atol=1e-11 * np.abs(u[0.0]).max())
 
 
 class _Box(Constraint):

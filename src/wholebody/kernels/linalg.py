@@ -26,6 +26,8 @@ __all__ = [
     "fortran",
     "frobenius2",
     "gather_rows",
+    "gram_cols",
+    "gram_rows",
     "level_report",
     "mm",
     "mmt",
@@ -61,14 +63,14 @@ def combine(x: np.ndarray, a: float, y: np.ndarray) -> np.ndarray:
 
 @kernel
 def mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A x``."""
+    """``A x`` (each entry summed in index order, the rows at once: no chain of dependent
+    additions)."""
     m, n = A.shape
     out = np.zeros(m)
-    for i in range(m):
-        s = 0.0
-        for k in range(n):
-            s += A[i, k] * x[k]
-        out[i] = s
+    for k in range(n):
+        a = x[k]
+        for i in range(m):
+            out[i] += A[i, k] * a
     return out
 
 
@@ -124,6 +126,37 @@ def mmt(A: np.ndarray, B: np.ndarray) -> np.ndarray:
             for k in range(p):
                 s += A[i, k] * B[j, k]
             out[i, j] = s
+    return out
+
+
+@kernel
+def gram_rows(M: np.ndarray) -> np.ndarray:
+    """``M M^T`` (C-ordered), as :func:`mmt` gives it: its lower triangle, mirrored."""
+    m, p = M.shape
+    out = np.empty((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(p):
+                s += M[i, k] * M[j, k]
+            out[i, j] = s
+            out[j, i] = s
+    return out
+
+
+@kernel
+def gram_cols(M: np.ndarray) -> np.ndarray:
+    """``M^T M`` (C-ordered), as :func:`mtm` gives it: its lower triangle, mirrored."""
+    p, m = M.shape
+    out = np.zeros((m, m))
+    for k in range(p):
+        for i in range(m):
+            a = M[k, i]
+            for j in range(i + 1):
+                out[i, j] += a * M[k, j]
+    for i in range(m):
+        for j in range(i):
+            out[j, i] = out[i, j]
     return out
 
 

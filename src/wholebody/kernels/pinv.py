@@ -1,16 +1,21 @@
 """The damped pseudo-inverse of one level on its free directions, in kernels: the linear
 algebra of the projection backend (:mod:`wholebody.solvers.projection` documents the method).
 
-A level's rows ``A`` act on the free directions the levels above leave: the orthonormal basis
-``Zb`` of them is either the columns ``Z`` (``is_mask`` False) or the coordinate axes of the
-joints in ``mask`` (``is_mask``: while no direction but whole joints was removed).
-:func:`level_step` takes the least-squares step ``Zb M^+_damped R`` of ``M = A Zb`` by the
-cheapest route that is exact: a certified Cholesky of ``M M^T`` (no singular value below the
-damping threshold: no damping, every direction used), the normal equations of a tall
-well-conditioned ``M``, or else the eigen-decomposition of ``M M^T`` (the fast path) or the
-SVD (in saturation), where the directions below the threshold are damped one by one and
-those below the rank floor dropped. :func:`leftover` is the basis of what the level leaves
-free for the next.
+A level's rows ``A`` act on the free directions the levels above leave (:data:`Free`): the
+orthonormal basis ``Zb`` of them is either the columns ``Z`` (``is_mask`` False) or the
+coordinate axes of the joints in ``mask`` (``is_mask``: while no direction but whole joints
+was removed). :func:`level_step` takes the least-squares step ``Zb M^+_damped R`` of ``M = A
+Zb`` by the cheapest route that is exact: a certified Cholesky of ``M M^T`` (no singular value
+below the damping threshold: no damping, every direction used), the normal equations of a
+tall well-conditioned ``M``, or else the eigen-decomposition of ``M M^T`` (the fast path) or
+the SVD (in saturation), where the directions below the threshold are damped one by one and
+those below the rank floor dropped; it returns what the level leaves free for the next.
+
+After a certified Cholesky of ``M M^T = L L^T`` the free directions left are ``{Zb y : M y =
+0}``, the complement of the orthonormal rows ``B = L^-1 M``: they are kept in that form, and
+their basis (:func:`basis`, a QR factorisation) is built only for a level below that needs
+one. A level whose rows are ``s I`` (objectives, or a posture task in a uniform metric) needs
+only the projection ``F d = Zb (c - B^T B c)``, ``c = Zb^T d`` (:func:`project_free`).
 """
 
 from __future__ import annotations
@@ -25,10 +30,12 @@ from wholebody.kernels.lapack import gesdd, potrf, syevd
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
     cholesky_inverse,
+    combine,
     fortran,
     frobenius2,
+    gram_cols,
+    gram_rows,
     mm,
-    mmt,
     mtm,
     mtv,
     mv,
@@ -39,8 +46,10 @@ from wholebody.kernels.linalg import (
 
 __all__ = [
     "Free",
+    "basis",
+    "free_of",
     "free_rank",
-    "leftover",
+    "identity_rows",
     "level_step",
     "lift",
     "project_free",
@@ -53,11 +62,13 @@ FIXED = 1e-18  # F_jj at or below this: joint j does not move along the free dir
 # par: the solver's settings
 PAR_DAMPING, PAR_THRESHOLD, PAR_RANK, PAR_TOLERANCE, PAR_SATURATE = 0, 1, 2, 3, 4
 PAR_WIDTH = 5
-ROUTE_WIDE, ROUTE_ALL, ROUTE_BASIS = 0, 1, 2  # what a step leaves free: see leftover
 
-Free = namedtuple("Free", ["Z", "is_mask", "mask"])
-"""The free directions the levels above leave: the columns of ``Z`` (n x r), or where
-``is_mask`` the coordinate axes of the joints in ``mask``."""
+Free = namedtuple("Free", ["Z", "is_mask", "mask", "M", "H"])
+"""The free directions the levels above leave: those of ``Zb``, the columns of ``Z`` (n x r)
+or where ``is_mask`` the coordinate axes of the joints in ``mask`` (n entries either way),
+less, where ``M`` (m x r) has rows, those ``Zb y`` with ``M y = 0``; ``H = L^-1`` (m x m,
+Fortran-ordered) for the Cholesky factor ``M M^T = L L^T``, so that ``H M`` has orthonormal
+rows."""
 
 
 @kernel
@@ -138,7 +149,7 @@ def _gram_step(
             kept += keep[k]
         Y = _damped_solve(Vt, U, sv, False, keep, R, eps, lam)
         return Y, _rows_not_kept(Vt, keep, Vt.shape[0] - kept)
-    E = fortran(mmt(M, M))
+    E = fortran(gram_rows(M))
     _, w = syevd(E)
     top = max(w[-1], 0.0) if w.shape[0] else 0.0
     floor = max((rank_tol * max(1.0, math.sqrt(top))) ** 2, 10.0 * w.shape[0] * _EPS * top)
@@ -183,8 +194,14 @@ def _solve_ls(
 
 
 @kernel
-def free_rank(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> int:
-    """How many free directions there are: the mask's count, or Z's columns."""
+def free_of(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> Free:
+    """The free directions ``Zb`` (see :data:`Free`), nothing removed from them."""
+    return Free(Z, is_mask, mask, np.zeros((0, 0)), np.zeros((0, 0)).T)
+
+
+@kernel
+def _basis_rank(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> int:
+    """How many directions ``Zb`` has: the mask's count, or Z's columns."""
     if not is_mask:
         return Z.shape[1]
     r = 0
@@ -194,13 +211,19 @@ def free_rank(Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> int:
 
 
 @kernel
+def free_rank(free: Free) -> int:
+    """How many free directions there are: those of ``Zb`` less the rows of ``M``."""
+    return _basis_rank(free.Z, free.is_mask, free.mask) - free.M.shape[0]
+
+
+@kernel
 def restrict(A: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
     """``A Zb`` (m x r) for the orthonormal basis ``Zb`` of the free directions: the mask's
     columns of A in order, or ``A Z``."""
     if not is_mask:
         return mm(A, Z)
     m = A.shape[0]
-    out = np.empty((m, free_rank(Z, is_mask, mask)))
+    out = np.empty((m, _basis_rank(Z, is_mask, mask)))
     c = 0
     for j in range(mask.shape[0]):
         if mask[j]:
@@ -220,14 +243,61 @@ def lift(Y: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.nd
 
 
 @kernel
-def project_free(d: np.ndarray, Z: np.ndarray, is_mask: bool, mask: np.ndarray) -> np.ndarray:
-    """``Zb Zb^T d``: ``d`` projected on the free directions."""
-    if not is_mask:
-        return mv(Z, mtv(Z, d))
-    out = np.zeros(d.shape[0])
-    for j in range(d.shape[0]):
+def basis(free: Free) -> Free:
+    """The free directions as an orthonormal basis (or mask): ``Zb N``, ``N`` the null-space
+    basis of ``M`` (where ``M`` has rows; else ``free`` itself)."""
+    if free.M.shape[0] == 0:
+        return free
+    Z = lift(null_basis(free.M), free.Z, free.is_mask, free.mask)
+    return free_of(Z, False, free.mask)
+
+
+@kernel
+def project_free(d: np.ndarray, free: Free) -> np.ndarray:
+    """``F d``: ``d`` projected on the free directions, ``Zb Zb^T d`` less, where ``M`` has
+    rows, ``Zb B^T B Zb^T d`` with ``B = H M`` (its rows orthonormal)."""
+    Z, is_mask, mask, M, H = free.Z, free.is_mask, free.mask, free.M, free.H
+    if M.shape[0] and free_rank(free) == 0:  # (the rows take every direction: exactly 0)
+        return np.zeros(d.shape[0])
+    if M.shape[0] == 0:
+        if not is_mask:
+            return mv(Z, mtv(Z, d))
+        out = np.zeros(d.shape[0])
+        for j in range(d.shape[0]):
+            if mask[j]:
+                out[j] = d[j]
+        return out
+    c = mtv(Z, d) if not is_mask else _gather(d, mask)
+    for _ in range(2):  # twice: the computed B has orthonormal rows to kappa(M)^2 eps only
+        t = mtv(H, mv(H, mv(M, c)))  # B^T B c = M^T H^T H M c
+        c = combine(c, -1.0, mtv(M, t))
+    return mv(Z, c) if not is_mask else _scatter(c, mask)
+
+
+@kernel
+def _gather(d: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The entries of ``d`` where ``mask``, in order."""
+    count = 0
+    for j in range(mask.shape[0]):
+        count += mask[j]
+    out = np.empty(count)
+    c = 0
+    for j in range(mask.shape[0]):
         if mask[j]:
-            out[j] = d[j]
+            out[c] = d[j]
+            c += 1
+    return out
+
+
+@kernel
+def _scatter(c: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_gather`, zeros elsewhere."""
+    out = np.zeros(mask.shape[0])
+    k = 0
+    for j in range(mask.shape[0]):
+        if mask[j]:
+            out[j] = c[k]
+            k += 1
     return out
 
 
@@ -266,7 +336,7 @@ def _trace(G: np.ndarray) -> float:
 def _certify_wide(M: np.ndarray, eps: float, rank_tol: float):
     """The reference's certificate of ``G = M M^T`` (m x m): ``(ok, L^-1)``."""
     dummy = np.zeros((0, 0)).T
-    G = mmt(M, M)
+    G = gram_rows(M)
     if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, _trace(G)):
         return False, dummy
     ok, Linv = cholesky_inverse(G)
@@ -283,7 +353,7 @@ def _certify_tall(M: np.ndarray, eps: float, floor: float):
     dummy = np.zeros((0, 0)).T
     if M.shape[1] == 0 or not eps * eps > floor:
         return False, dummy, 0.0
-    G = mtm(M, M)
+    G = gram_cols(M)
     ok, Linv = cholesky_inverse(G)
     if not ok or not _exceeds(G, Linv, eps):
         return False, dummy, 0.0
@@ -306,19 +376,12 @@ def _exceeds(G: np.ndarray, Linv: np.ndarray, eps: float) -> bool:
 
 
 @kernel
-def level_step(
-    A: np.ndarray,
-    R: np.ndarray,
-    Z: np.ndarray,
-    is_mask: bool,
-    mask: np.ndarray,
-    par: np.ndarray,
-    sns: bool,
-):
-    """A level's least-squares step on its free directions (``Z``, ``is_mask``, ``mask``:
-    see :func:`restrict`), ``Zb`` (n x r): ``(Y, M, Nf, route, rank)`` with ``Y = Zb
-    M^+_damped R`` (``M = A Zb``, R: m x k), what :func:`leftover` needs for the basis of
-    the directions the level leaves free, and the rank the reference reports.
+def level_step(A: np.ndarray, R: np.ndarray, free: Free, par: np.ndarray, sns: bool):
+    """A level's least-squares step on its free directions (``free``: a basis or mask, see
+    :func:`basis`), ``Zb`` (n x r): ``(Y, left, rank)`` with ``Y = Zb M^+_damped R`` (``M =
+    A Zb``, R: m x k), the free directions the level leaves (a complement after the certified
+    Cholesky of ``M M^T``, none after the normal equations, else the basis of the directions
+    unused) and the rank the reference reports.
 
     The route is the reference's: its certified Cholesky where it certifies (``G = M M^T``,
     m <= r; ``M^T M`` when the level has more rows than nu and nothing is fixed), else its
@@ -328,16 +391,17 @@ def level_step(
     damped or dropped, well conditioned) takes the normal equations, which is what those
     routes then compute, at a fraction of the cost."""
     eps, lam, rank_tol = par[PAR_THRESHOLD], par[PAR_DAMPING], par[PAR_RANK]
+    Z, is_mask, mask = free.Z, free.is_mask, free.mask
     n, m = mask.shape[0], A.shape[0]
-    r = free_rank(Z, is_mask, mask)
+    r = free_rank(free)
     if r == 0:  # nothing left to move (the reference's routes all give 0)
-        return np.zeros((n, R.shape[1])), np.zeros((m, 0)), np.zeros((0, 0)), ROUTE_ALL, 0
+        return np.zeros((n, R.shape[1])), _none(mask), 0
     M = restrict(A, Z, is_mask, mask)
     if m <= n and m <= r:  # the reference certifies G = M M^T
         ok, Linv = _certify_wide(M, eps, rank_tol)
         if ok:
             Y = lift(mtm(M, mtm(Linv, mm(Linv, R))), Z, is_mask, mask)
-            return Y, M, np.zeros((0, 0)), ROUTE_WIDE, m
+            return Y, Free(Z, is_mask, mask, M, Linv), m
     top = frobenius2(M)
     tall_ref = m > n
     if sns:
@@ -352,24 +416,40 @@ def level_step(
     if m > r or (tall_ref and r == n):  # (m <= r: M^T M singular, or M M^T certified)
         ok, Linv, k2 = _certify_tall(M, eps, floor)
         if ok:
-            Y = lift(normal_solve(M, Linv, R, k2), Z, is_mask, mask)
-            return Y, M, np.zeros((0, 0)), ROUTE_ALL, r
+            return lift(normal_solve(M, Linv, R, k2), Z, is_mask, mask), _none(mask), r
     if sns:
         Y, Nf, rank = _solve_ls(M, R, eps, lam, rank_tol)
     else:
         Y, Nf = _gram_step(M, R, tall_ref, is_mask, eps, lam, rank_tol)
         rank = 0
-    return lift(Y, Z, is_mask, mask), M, lift(Nf, Z, is_mask, mask), ROUTE_BASIS, rank
+    left = free_of(lift(Nf, Z, is_mask, mask), False, mask)
+    return lift(Y, Z, is_mask, mask), left, rank
 
 
 @kernel
-def leftover(
-    Z: np.ndarray, is_mask: bool, mask: np.ndarray, M: np.ndarray, N: np.ndarray, route: int
-) -> np.ndarray:
-    """The basis (n x .) of the free directions a level's step leaves (see :func:`level_step`):
-    those that ``M = A Zb`` does not move, none, or the given ``N``."""
-    if route == ROUTE_WIDE:
-        return lift(null_basis(M), Z, is_mask, mask)
-    if route == ROUTE_ALL:
-        return np.zeros((mask.shape[0], 0))
-    return N
+def _none(mask: np.ndarray) -> Free:
+    """No free direction (an empty basis)."""
+    return free_of(np.zeros((mask.shape[0], 0)), False, mask)
+
+
+@kernel
+def identity_rows(A: np.ndarray, scale: float, par: np.ndarray) -> float:
+    """``s`` where the rows ``scale A`` are ``s I`` (n x n) and every certificate of
+    :func:`level_step` holds for them on any free directions by a margin of 2 (on ``r <= n``
+    orthonormal directions ``M = s Zb``, all singular values ``s``: ``s^2 >= 2 eps^2``, ``eps^2
+    > 2 floor``, ``kappa_F^2 = r^2 <= NORMAL_KAPPA^2``), else 0. Such a level is solved
+    without damping on all its free directions, ``Zb (s Zb)^+ R = F R / s``, and leaves none:
+    the step of an objectives' level (a posture task in a uniform metric)."""
+    n = A.shape[1]
+    if A.shape[0] != n or n == 0 or n > NORMAL_KAPPA:
+        return 0.0
+    s = scale * A[0, 0]
+    for i in range(n):
+        for j in range(n):
+            if scale * A[i, j] != (s if i == j else 0.0):
+                return 0.0
+    eps, rank_tol = par[PAR_THRESHOLD], par[PAR_RANK]
+    floor = max((rank_tol * max(1.0, s * math.sqrt(n))) ** 2, 10.0 * n * n * _EPS * s * s)
+    if not (0.0 < s < math.inf and s * s >= 2.0 * eps * eps and eps * eps > 2.0 * floor):
+        return 0.0
+    return s

@@ -27,7 +27,9 @@ from wholebody.kernels.pinv import (
     PAR_TOLERANCE,
     PAR_WIDTH,
     Free,
-    leftover,
+    basis,
+    free_of,
+    identity_rows,
     level_step,
     project_free,
 )
@@ -47,45 +49,40 @@ Rows = namedtuple("Rows", ["A", "b", "reference", "identity"])
 
 @kernel
 def _level(
-    rows: Rows,
-    u0: np.ndarray,
-    free: Free,
-    sat: np.ndarray,
-    box: Box,
-    need_next: bool,
-    sns: bool,
-    par: np.ndarray,
+    rows: Rows, u0: np.ndarray, free: Free, sat: np.ndarray, box: Box, sns: bool, par: np.ndarray
 ):
     """One level on top of the levels above (their solution ``u0``, the free directions and
-    the joints saturated so far): ``(u, free left, saturated, scale)``."""
+    the joints saturated so far): ``(u, free left, saturated, scale)``. A level of rows ``s I``
+    (objectives, or tasks certified so by :func:`identity_rows`) moves by ``F (b / s - u0)``
+    and leaves nothing free; any other level takes :func:`level_step` on a basis of ``F``."""
     A, b, ids = rows.A, rows.b, rows.identity
     n, m = u0.shape[0], A.shape[0]
     if m == 0:
         return u0, free, sat, 1.0
-    if rows.reference != 1.0:  # damping decided independently of a common scale
-        A = A * (1.0 / rows.reference)
-        b = b * (1.0 / rows.reference)
-    nothing = np.zeros(n, np.bool_)
-    empty = np.zeros((n, 0))
-    if ids > 0:
+    scale = 1.0 / rows.reference  # damping decided independently of a common scale
+    s = ids if ids > 0 else identity_rows(A, scale, par)
+    if scale != 1.0:
+        b = b * scale
+        A = A * scale if s == 0.0 else A  # (rows s I: scaled only if saturate needs them)
+    if s > 0:
         d = np.empty(n)
         for j in range(n):
-            d[j] = b[j] / ids - u0[j]
-        u = combine(u0, 1.0, project_free(d, free.Z, free.is_mask, free.mask))
-        left = Free(empty, True, nothing)
+            d[j] = b[j] / s - u0[j]
+        u = combine(u0, 1.0, project_free(d, free))
+        left = free_of(np.zeros((n, 0)), ids > 0, np.zeros(n, np.bool_))
     else:
         Au = mv(A, u0)
         R = np.empty((m, 1))
         for k in range(m):
             R[k, 0] = b[k] - Au[k]
-        Y, M, N, route, _ = level_step(A, R, free.Z, free.is_mask, free.mask, par, False)
+        Y, left, _ = level_step(A, R, basis(free), par, False)
         u = combine(u0, 1.0, Y[:, 0])
-        nZ = leftover(free.Z, free.is_mask, free.mask, M, N, route) if need_next else empty
-        left = Free(nZ, False, nothing)
     if not sns or inside(u, box.lo_tol, box.hi_tol):
         return u, left, sat, 1.0
     if ids > 0:
         return saturate_identity(b, ids, u0, free, sat, box)
+    if s > 0 and scale != 1.0:
+        A = A * scale
     return saturate(A, b, u0, free, sat, box, par)
 
 
@@ -125,7 +122,7 @@ def _pass(
         for j in range(n):
             sat[j] = box.lo[j] == box.hi[j]
             mask[j] = not sat[j]
-    free = Free(np.zeros((n, 0)), True, mask)
+    free = free_of(np.zeros((n, 0)), True, mask)
     first = -1 if held.A.shape[0] else 0
     for k in range(first, L):
         if k < 0:
@@ -134,7 +131,7 @@ def _pass(
             r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
             bk = combine(b[r0:r1], -1.0, mv(A[r0:r1], u_c)) if sns else b[r0:r1]
             rows = Rows(A[r0:r1], bk, lf[k, lay.LEVEL_REFERENCE], lf[k, lay.LEVEL_IDENTITY])
-        u, free, sat, s = _level(rows, u, free, sat, box, k + 1 < L, sns, par)
+        u, free, sat, s = _level(rows, u, free, sat, box, sns, par)
         if sns and k >= 0:
             lev_out[k, 1] = s
     return u
@@ -149,8 +146,8 @@ def _solve(f: np.ndarray, i: np.ndarray, h: np.ndarray, held: Rows, par: np.ndar
     anchor = fvec(f, h, lay.F_ANCHOR)
     n = lo.shape[0]
     fmat(f, h, lay.F_LEVEL_OUT)[:, 1] = 1.0
-    u_free = _pass(f, i, h, held, _widened(lo, hi), np.zeros(n), False, par)
     wide = _widened(lo, hi)
+    u_free = _pass(f, i, h, held, wide, np.zeros(n), False, par)
     if par[PAR_SATURATE] == 0.0 or inside(u_free, wide.lo_tol, wide.hi_tol):
         return u_free, u_free, False
     u_c = np.empty(n)  # SNS for d = u - u_c from d = 0, u_c the box's point closest to the anchor

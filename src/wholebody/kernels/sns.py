@@ -22,10 +22,10 @@ from wholebody.kernels import kernel
 from wholebody.kernels.linalg import combine, dot, mv
 from wholebody.kernels.pinv import (
     FIXED,
-    ROUTE_ALL,
     Free,
+    basis,
+    free_of,
     free_rank,
-    leftover,
     level_step,
     project_free,
     row_norm2,
@@ -121,9 +121,9 @@ def _deflate(Z: np.ndarray, j: int) -> np.ndarray:
 
 @kernel
 def _fixed(j: int, value: float, base: np.ndarray, free: Free) -> tuple[np.ndarray, Free]:
-    """The free directions once joint j is saturated at ``value`` (new arrays): ``base``
-    moved along them (minimum norm) to put the joint there, and the directions that move it
-    removed."""
+    """The free directions (a basis or mask) once joint j is saturated at ``value`` (new
+    arrays): ``base`` moved along them (minimum norm) to put the joint there, and the
+    directions that move it removed."""
     Z, mask = free.Z, free.mask
     if free.is_mask:
         if not mask[j]:
@@ -132,7 +132,7 @@ def _fixed(j: int, value: float, base: np.ndarray, free: Free) -> tuple[np.ndarr
         nb[j] = value
         nm = mask.copy()
         nm[j] = False
-        return nb, Free(Z, True, nm)
+        return nb, free_of(Z, True, nm)
     fjj = row_norm2(Z, j)
     if fjj <= FIXED:  # |row j of an orthonormal basis| <= 1e-9: the joint cannot move
         return base, free
@@ -141,7 +141,7 @@ def _fixed(j: int, value: float, base: np.ndarray, free: Free) -> tuple[np.ndarr
         z[k] = Z[j, k]
     nb = combine(base, (value - base[j]) / fjj, mv(Z, z))
     nb[j] = value
-    return nb, Free(_deflate(Z, j), False, mask)
+    return nb, free_of(_deflate(Z, j), False, mask)
 
 
 @kernel
@@ -171,38 +171,35 @@ def saturate(
     the levels above leave: ``(u, free left, saturated joints, scale)``. The rank the level
     needs is that of its first factorisation."""
     n, m = u0.shape[0], A.shape[0]
+    free = basis(free)
     base = u0
     needed = -1
     skip = sat.copy()
     best_s = -np.inf
-    best_rest, best_a = u0, u0
-    best_free, best_M, best_N, best_route = free, A, free.Z, ROUTE_ALL
+    best_rest, best_a, best_left = u0, u0, free
     R = np.empty((m, 2))
     for it in range(n + 1):
         Ab = mv(A, base)
         for k in range(m):
             R[k, 0] = b[k]
             R[k, 1] = -Ab[k]
-        Y, M, N, route, r = level_step(A, R, free.Z, free.is_mask, free.mask, par, True)
+        Y, left, r = level_step(A, R, free, par, True)
         a, rest = Y[:, 0].copy(), combine(base, 1.0, Y[:, 1])
         if needed < 0:
             needed = r
         s_max, critical = _scaling(a, rest, box, skip)
         if it == 0 or s_max > best_s:
-            best_s, best_rest, best_a = s_max, rest, a
-            best_free, best_M, best_N, best_route = free, M, N, route
+            best_s, best_rest, best_a, best_left = s_max, rest, a, left
         cand = combine(rest, 1.0, a)
         if inside(cand, box.lo_tol, box.hi_tol):
-            left = leftover(free.Z, free.is_mask, free.mask, M, N, route)
-            return cand, Free(left, False, free.mask), skip, 1.0
+            return cand, left, skip, 1.0
         if r < needed or critical < 0:
             break  # out of free directions: scale the level by the best factor found
         skip[critical] = True
         bound = box.hi[critical] if cand[critical] > box.hi[critical] else box.lo[critical]
         base, free = _fixed(critical, bound, base, free)
     u = _guard(u0, combine(best_rest, best_s, best_a), box)
-    left = leftover(best_free.Z, best_free.is_mask, best_free.mask, best_M, best_N, best_route)
-    return u, Free(left, False, free.mask), skip, best_s
+    return u, best_left, skip, best_s
 
 
 @kernel
@@ -213,17 +210,18 @@ def saturate_identity(
     free directions ``F`` (joints with ``F_jj <= 1e-18`` held exactly); it leaves nothing
     free: ``(u, free left, saturated joints, scale)``."""
     n = u0.shape[0]
+    free = basis(free)
     base = u0
-    needed = free_rank(free.Z, free.is_mask, free.mask)
+    needed = free_rank(free)
     skip = sat.copy()
     best_s = -np.inf
     best_rest, best_a, best_none = u0, u0, False
     for it in range(n + 1):
-        r = free_rank(free.Z, free.is_mask, free.mask)
-        a = project_free(b, free.Z, free.is_mask, free.mask)
+        r = free_rank(free)
+        a = project_free(b, free)
         for j in range(n):
             a[j] *= 1.0 / s
-        rest = combine(base, -1.0, project_free(base, free.Z, free.is_mask, free.mask))
+        rest = combine(base, -1.0, project_free(base, free))
         if not free.is_mask:  # a joint the directions do not move stays: 0, not rounding
             for j in range(n):
                 if row_norm2(free.Z, j) <= FIXED:
@@ -246,4 +244,4 @@ def saturate_identity(
 @kernel
 def _nothing(n: int, is_mask: bool) -> Free:
     """No free direction left: an empty mask (``is_mask``) or an empty basis."""
-    return Free(np.zeros((n, 0)), is_mask, np.zeros(n, np.bool_))
+    return free_of(np.zeros((n, 0)), is_mask, np.zeros(n, np.bool_))

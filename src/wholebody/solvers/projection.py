@@ -21,7 +21,11 @@ factor of ``G - eps^2 I``), no damping applies and every direction counts:
 ``M^+ r = M^T G^-1 r`` and ``M^+ M = M^T G^-1 M`` exactly, or, for a level with more rows
 than columns (a weighted sum of tasks), its well-conditioned normal equations. Otherwise (near
 a singularity) the eigen-decomposition (fast path) or the SVD (saturation) decides damping and
-rank as described below.
+rank as described below. What a certified level leaves free is kept as the complement of the
+orthonormal rows ``L^-1 M`` (``G = L L^T``): its basis (a QR factorisation) is built only for
+a level below that needs one. A level of tasks whose rows are ``s I`` (a posture task in a
+uniform metric), with ``s`` far enough above ``eps`` that every certificate holds, is solved
+as a level of objectives, ``P (b/s - u_{k-1})``: the same exact step without a factorisation.
 
 Singularity robustness: each singular direction of a level whose singular value ``s_i`` is
 below ``eps`` is damped with the variable damping ``lambda_i^2 = (1 - (s_i/eps)^2)

@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 import scipy.linalg.lapack as scipy_lapack
 
-from wholebody.kernels import lapack
+from wholebody.kernels import lapack, linalg
 from wholebody.kernels.kinematics import frame_kinematics, joint_positions
 from wholebody.kernels.so3 import jlog3, log3
 
@@ -47,6 +47,31 @@ def test_lapack_routines_give_scipys_answers_bit_for_bit(rng):
     np.testing.assert_array_equal(b[:8], x[:8])
     # a singular factorisation is reported, not hidden
     assert lapack.potrf(np.asfortranarray(np.zeros((3, 3))), True) != 0
+
+
+@pytest.mark.parametrize("n", [1, 5, 12, 23])
+def test_cholesky_inverse_is_the_inverse_of_numpys_factor(rng, n):
+    M = rng.normal(size=(n, n + 4)) * np.logspace(0, -3, n + 4)  # kappa(G) ~ 1e4 and more
+    G = M @ M.T
+    ok, Linv = linalg.cholesky_inverse(G)
+    L = np.linalg.cholesky(G)
+    assert ok and Linv.flags.f_contiguous and np.array_equal(Linv, np.tril(Linv))
+    assert np.abs(Linv @ L - np.eye(n)).max() <= 1e-12 * np.linalg.cond(L)
+    nan = G.copy()
+    nan[n - 1, n - 1] = np.nan
+    singular = np.ones((n, n)) if n > 1 else np.zeros((1, 1))  # a pivot exactly 0
+    for H in (singular, -G, nan):  # a pivot not above 0 is reported, not hidden
+        assert not linalg.cholesky_inverse(H)[0]
+
+
+def test_products_are_numpys_and_grams_the_products_sums(rng):
+    # the same sums in the same order: Gram matrices exactly the general products'
+    for m, p in ((12, 23), (23, 11), (3, 1), (5, 0)):
+        M, x = rng.normal(size=(m, p)), rng.normal(size=p)
+        np.testing.assert_allclose(linalg.mv(M, x), M @ x, rtol=0, atol=1e-13 * (1 + p))
+        np.testing.assert_array_equal(linalg.gram_rows(M), linalg.mmt(M, M))
+        np.testing.assert_array_equal(linalg.gram_cols(M), linalg.mtm(M, M))
+        np.testing.assert_allclose(linalg.gram_rows(M), M @ M.T, atol=1e-13 * (1 + p))
 
 
 @pytest.mark.parametrize("kind", ["generic", "small", "near_pi", "zero", "pi", "perturbed"])

@@ -1,9 +1,10 @@
 """Small dense linear algebra shared by the solver kernels: products, the certified Cholesky
 route of a level's Gram matrix, its normal-equations solve, and the residual report.
 
-The products are plain loops, summed in index order: on matrices of a few dozen entries they
-cost less than a BLAS call, compile to a tenth of the machine code numpy's implementations
-generate, and give the same answer compiled and uncompiled. The maths and the thresholds of
+The products and the Cholesky factor's inverse are plain loops, summed in index order: on
+matrices of a few dozen entries they cost less than a BLAS or LAPACK call, compile to a tenth
+of the machine code numpy's implementations generate, and give the same answer compiled and
+uncompiled. The maths and the thresholds of
 the rest are those of the reference solvers (:mod:`wholebody.solvers.projection`,
 :mod:`wholebody._numeric`, :class:`wholebody.solvers.stack.LevelProblem`), documented there.
 """
@@ -15,7 +16,7 @@ import math
 import numpy as np
 
 from wholebody.kernels import kernel
-from wholebody.kernels.lapack import geqrf, orgqr, potrf, trtri
+from wholebody.kernels.lapack import geqrf, orgqr
 
 __all__ = [
     "NORMAL_KAPPA",
@@ -63,14 +64,27 @@ def combine(x: np.ndarray, a: float, y: np.ndarray) -> np.ndarray:
 
 @kernel
 def mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A x`` (each entry summed in index order, the rows at once: no chain of dependent
+    """``A x``, each entry summed in index order, four rows at a time: four sums that do
+    not wait for each other's additions (a single row's sum is a chain of dependent
     additions)."""
     m, n = A.shape
-    out = np.zeros(m)
-    for k in range(n):
-        a = x[k]
-        for i in range(m):
-            out[i] += A[i, k] * a
+    out = np.empty(m)
+    i = 0
+    while i + 4 <= m:
+        s0 = s1 = s2 = s3 = 0.0
+        for k in range(n):
+            a = x[k]
+            s0 += A[i, k] * a
+            s1 += A[i + 1, k] * a
+            s2 += A[i + 2, k] * a
+            s3 += A[i + 3, k] * a
+        out[i], out[i + 1], out[i + 2], out[i + 3] = s0, s1, s2, s3
+        i += 4
+    for r in range(i, m):
+        s = 0.0
+        for k in range(n):
+            s += A[r, k] * x[k]
+        out[r] = s
     return out
 
 
@@ -211,15 +225,36 @@ def scatter_rows(Y: np.ndarray, keep: np.ndarray) -> np.ndarray:
 
 @kernel
 def cholesky_inverse(G: np.ndarray) -> tuple[bool, np.ndarray]:
-    """``(ok, L^-1)`` for the Cholesky factor ``G = L L^T`` of the symmetric ``G`` (n x n):
-    ``L^-1`` lower triangular, Fortran-ordered; ok False where ``G`` is not positive
-    definite to working precision."""
-    L = fortran(G)
-    if potrf(L, True) != 0:
-        return False, L
-    if trtri(L, True) != 0:
-        return False, L
-    return True, L
+    """``(ok, L^-1)`` for the Cholesky factor ``G = L L^T`` of the symmetric ``G`` (n x n,
+    its lower triangle read): ``L^-1`` lower triangular, Fortran-ordered; ok False where
+    ``G`` is not positive definite to working precision (a pivot not above 0, or NaN).
+
+    Plain loops, the matrices being a few dozen rows at most: LAPACK's unblocked routines
+    make a BLAS call per column, which costs more than the arithmetic. Row by row (the
+    Cholesky-Crout order), ``L_ij = (G_ij - sum_k<j L_ik L_jk) / L_jj``; then column by
+    column, ``L^-1`` from ``L X = I`` by forward substitution."""
+    n = G.shape[0]
+    L = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = G[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            if i > j:
+                L[i, j] = s / L[j, j]
+            elif s > 0.0:
+                L[i, i] = math.sqrt(s)
+            else:
+                return False, L.T
+    X = np.zeros((n, n)).T
+    for j in range(n):
+        X[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= L[i, k] * X[k, j]
+            X[i, j] = s / L[i, i]
+    return True, X
 
 
 @kernel

@@ -443,11 +443,13 @@ def identity_rows(A: np.ndarray, scale: float, par: np.ndarray) -> float:
     n = A.shape[1]
     if A.shape[0] != n or n == 0 or n > NORMAL_KAPPA:
         return 0.0
-    s = scale * A[0, 0]
-    for i in range(n):
+    for i in range(n):  # (A itself a I: then scale A is s I)
+        nonzero = 0
         for j in range(n):
-            if scale * A[i, j] != (s if i == j else 0.0):
-                return 0.0
+            nonzero += A[i, j] != 0.0
+        if nonzero != 1 or A[i, i] != A[0, 0]:
+            return 0.0
+    s = scale * A[0, 0]
     eps, rank_tol = par[PAR_THRESHOLD], par[PAR_RANK]
     floor = max((rank_tol * max(1.0, s * math.sqrt(n))) ** 2, 10.0 * n * n * _EPS * s * s)
     if not (0.0 < s < math.inf and s * s >= 2.0 * eps * eps and eps * eps > 2.0 * floor):

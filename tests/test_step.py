@@ -21,10 +21,12 @@ import pinocchio as pin
 import pytest
 
 from wholebody.control import Controller
+from wholebody.kernels.linalg import combine
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
 from wholebody.solvers import Level, ProjectionSolver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.solvers.plan import BoundCall
 from wholebody.tasks import (
     AccelerationLimits,
     FrameTask,
@@ -282,3 +284,15 @@ def test_controller_step_with_an_engine_solving_in_python(humanoid, engine):
         paths.append(np.array(path))
     np.testing.assert_allclose(paths[0], paths[1], atol=1e-6)
     np.testing.assert_allclose(paths[0], paths[2], atol=1e-3)
+
+
+def test_a_bound_call_gives_the_dispatchers_answers(rng):
+    """A bound call's first call goes through numba's dispatcher, the next ones through the
+    compiled entry point of the arguments' types, with the same answers."""
+    x, y = rng.normal(size=7), rng.normal(size=7)
+    call = BoundCall("linalg.combine", "a test kernel", combine, x, 0.5, y)
+    for _ in range(3):
+        np.testing.assert_array_equal(call(), x + 0.5 * y)
+        assert call.bound != UNCOMPILED
+    y[:] = rng.normal(size=7)  # the same objects, new numbers
+    np.testing.assert_array_equal(call(), x + 0.5 * y)

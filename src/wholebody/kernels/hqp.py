@@ -32,7 +32,14 @@ import numpy as np
 from wholebody.kernels import daqp as dk
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
-from wholebody.kernels.hqp_level import optimal, polish, qp_setup, strongly_active, tie_setup
+from wholebody.kernels.hqp_level import (
+    optimal,
+    polish,
+    qp_setup,
+    strongly_active,
+    tie_setup,
+    unknown_multipliers,
+)
 from wholebody.kernels.hqp_state import (
     C_CLIP,
     C_D,
@@ -91,8 +98,13 @@ from wholebody.kernels.hqp_state import (
     W_Y,
     Arena,
     Basis,
+    Bounds,
+    LevelRows,
+    Multipliers,
     apply_basis,
     bound_limited,
+    box_row,
+    compose_basis,
     coords,
     finish,
     finite1,
@@ -103,14 +115,15 @@ from wholebody.kernels.hqp_state import (
     level_rows,
     max_abs,
     qp_views,
+    report_row,
     restrict,
-    set_basis,
+    restrict_into,
     skip_nonfinite,
     state,
     violated,
 )
-from wholebody.kernels.layout import fmat, fvec, imat, ivec
-from wholebody.kernels.linalg import combine, dot, frobenius2, mm, mv
+from wholebody.kernels.layout import fmat, fvec, ivec
+from wholebody.kernels.linalg import combine, dot, frobenius2, mv
 from wholebody.kernels.lsq import cod, in_box, null_space, pivot_norm, residual
 
 __all__ = [
@@ -142,22 +155,24 @@ def begin(f, i, h, wf, wi, wh, par) -> int:
     DONE where the box is empty."""
     st = ivec(wi, wh, W_STATE)
     st[:] = 0
-    imat(wi, wh, W_REPORT)[:, :] = 0
+    ivec(wi, wh, W_REPORT)[:] = 0
     ivec(wi, wh, W_LIMITED)[:] = 0
-    box, x = fmat(wf, wh, W_BOX), fvec(wf, wh, W_X)
-    ab = fmat(f, h, lay.F_BOX)
+    box, x = fvec(wf, wh, W_BOX), fvec(wf, wh, W_X)
+    ab = fvec(f, h, lay.F_BOX)  # (2, n): lower, upper
     fvec(wf, wh, W_SCAL)[:] = 0.0
     bt = par[P_RELAX]
-    for j in range(x.shape[0]):
-        if not ab[0, j] <= ab[1, j]:  # NaN compares false; evaluate never crosses the box
+    n = x.shape[0]
+    for j in range(n):
+        if not ab[j] <= ab[n + j]:  # NaN compares false; evaluate never crosses the box
             st[S_BOXBAD] = 1
             x[:] = 0.0
             return DONE
-    for j in range(x.shape[0]):
-        box[2, j], box[3, j] = ab[0, j], ab[1, j]
-        x[j] = min(max(0.0, ab[0, j]), ab[1, j])  # the minimum-norm point of the box
-        box[0, j], box[1, j] = ab[0, j] - bt, ab[1, j] + bt
-    st[S_R], st[S_ZI], st[S_EXACT] = x.shape[0], 1, 1
+    for j in range(n):  # (W_BOX rows: relaxed lo, hi; exact lb, ub)
+        lo, hi = ab[j], ab[n + j]
+        box[2 * n + j], box[3 * n + j] = lo, hi
+        x[j] = min(max(0.0, lo), hi)  # the minimum-norm point of the box
+        box[j], box[n + j] = lo - bt, hi + bt
+    st[S_R], st[S_ZI], st[S_EXACT] = n, 1, 1
     return NEXT
 
 
@@ -168,8 +183,7 @@ def advance(f, i, h, wf, wi, wh, par) -> int:
     where it needs one: the bounds bind it), and the clip to the exact box (DONE)."""
     s, w = Arena(f, i, h), Arena(wf, wi, wh)
     st = ivec(wi, wh, W_STATE)
-    L = imat(i, h, lay.I_LEVEL).shape[0]
-    while st[S_K] < L:
+    while st[S_K] < h[lay.I_LEVEL, 2]:
         if _level(s, w, par, st[S_K]) == NEED_QP:
             return NEED_QP
         st[S_K] += 1
@@ -186,14 +200,15 @@ def advance(f, i, h, wf, wi, wh, par) -> int:
 
 
 @kernel
-def _level_step(s: Arena, w: Arena, par: np.ndarray, k: int):
+def _level_step(
+    s: Arena, w: Arena, par: np.ndarray, k: int, rows: LevelRows, x: np.ndarray, basis: Basis
+):
     """Level k's unconstrained step in the free coordinates, the exact candidate:
     ``(code, y, rank, smax, known, null_cols)`` (:func:`wholebody.kernels.lsq.cod`), code
     DONE where the level is skipped (non-finite rows, a failed decomposition), else NEED_QP;
-    its least squares ``M``, ``c`` go to the workspace, the null space of M to ``W_NULL``."""
+    its least squares ``M``, ``c`` go to the workspace, the null space of M to ``W_NULL``.
+    ``rows``, ``x``, ``basis``: the level's rows and the cascade's state."""
     rank_tol = par[P_RANK]
-    _, x, basis, _ = state(w)
-    rows = level_rows(s, k)
     A, b = rows.A, rows.b
     n, r, m = x.shape[0], basis.r, A.shape[0]
     t = coords(basis, x)
@@ -202,14 +217,12 @@ def _level_step(s: Arena, w: Arena, par: np.ndarray, k: int):
     moved = not basis.identity  # (x = 0: c = b, even where A is not finite)
     for j in range(n):
         moved = moved or x[j] != 0
-    c = combine(b, -1.0, mv(A, x)) if moved else b.copy()
-    M = restrict(A, basis)
-    Mw, cw = fvec(w.f, w.h, W_M)[: m * r].reshape((m, r)), fvec(w.f, w.h, W_CV)
-    for q in range(m):
-        cw[q] = c[q]
-        for j in range(r):
-            Mw[q, j] = M[q, j]
-    sw = fmat(s.f, s.h, lay.F_LEVEL)[k, lay.LEVEL_IDENTITY] if m == n else 0.0
+    M, c = fvec(w.f, w.h, W_M)[: m * r].reshape((m, r)), fvec(w.f, w.h, W_CV)[:m]
+    c[:] = residual(A, x, b) if moved else b
+    restrict_into(A, basis, M)
+    sw = 0.0
+    if m == n:  # (F_LEVEL: L x 4)
+        sw = fvec(s.f, s.h, lay.F_LEVEL)[4 * k + lay.LEVEL_IDENTITY]
     if sw > 0:  # rows sw * I: M = sw Z has r singular values sw
         y = coords(basis, c)
         for j in range(r):
@@ -221,8 +234,8 @@ def _level_step(s: Arena, w: Arena, par: np.ndarray, k: int):
         if not finite_rows(rows):
             skip_nonfinite(s, w, k)
         else:
-            rep = imat(w.i, w.h, W_REPORT)
-            rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_DECOMPOSITION
+            rep = report_row(w, k)
+            rep[R_FAILED], rep[R_FAIL] = 1, FAIL_DECOMPOSITION
         return DONE, y, 0, 0.0, True, -1
     null_cols = -1
     if rank < r:
@@ -240,10 +253,10 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     the level's inequality rows (DONE); else the QP is set up and NEED_QP returned."""
     tol = par[P_TOL]
     st, x, basis, bounds = state(w)
-    rep = imat(w.i, w.h, W_REPORT)
+    rep = report_row(w, k)
     rows = level_rows(s, k)
     m, p = rows.A.shape[0], rows.C.shape[0]
-    rep[k, R_FREE] = basis.r
+    rep[R_FREE] = basis.r
     if basis.r == 0:  # nothing left to move: report the inequality rows x leaves violated
         if not finite_rows(rows):
             skip_nonfinite(s, w, k)
@@ -253,19 +266,18 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     if p and not finite_rows(rows):
         skip_nonfinite(s, w, k)
         return DONE
-    code, y, rank, smax, known, null_cols = _level_step(s, w, par, k)
+    code, y, rank, smax, known, null_cols = _level_step(s, w, par, k, rows, x, basis)
     if code == DONE:
         return DONE
     if m and (rank == 0 or not finite1(y)) and not finite_rows(rows):
         skip_nonfinite(s, w, k)
         return DONE
     if not finite1(y):  # finite rows, yet the decomposition overflowed
-        rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_STEP
+        rep[R_FAILED], rep[R_FAIL] = 1, FAIL_STEP
         return DONE
-    rep[k, R_RANK] = rank
+    rep[R_RANK] = rank
     xc = combine(x, 1.0, apply_basis(basis, y))
-    box = fmat(w.f, w.h, W_BOX)
-    exact = in_box(xc, box[2], box[3])
+    exact = in_box(xc, box_row(w, 2), box_row(w, 3))
     st[S_RANK], st[S_NULL], st[S_M], st[S_P] = rank, null_cols, m, p
     met = inside(xc, bounds)  # (the relaxed box contains the exact one)
     Cx = mv(rows.C, xc) if met and p else np.zeros(0)
@@ -275,16 +287,16 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
         x[:] = xc
         st[S_EXACT] = exact
         _close_rows(w)
-        _close_rest(s, w, par, k)
+        _close_rest(s, w, par, k, rows, x, bounds)
         return DONE
     st[S_ANYQP] = 1
     if m and rank == 0 and p == 0:
         # rows with nothing left to move (round-off in the free directions, or a task the
         # levels above fix): only the minimum-norm step left the box; the tie-break decides
         _close_rows(w)
-        _close_rest(s, w, par, k)
+        _close_rest(s, w, par, k, rows, x, bounds)
         return DONE
-    rep[k, R_QP] = 1
+    rep[R_QP] = 1
     if not known:  # certified full rank: |R_00| only now needed
         smax = pivot_norm(level_lsq(w)[0])
     fvec(w.f, w.h, W_XC)[:] = xc
@@ -313,8 +325,8 @@ def after_qp(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     st, x, basis, bounds = state(w)
     k, m, p = st[S_K], st[S_M], st[S_P]
     if not ok:
-        rep = imat(wi, wh, W_REPORT)
-        rep[k, R_FAILED], rep[k, R_FAIL] = 1, FAIL_ENGINE
+        rep = report_row(w, k)
+        rep[R_FAILED], rep[R_FAIL] = 1, FAIL_ENGINE
         st[S_K] += 1
         return NEXT
     rows = level_rows(s, k)
@@ -323,11 +335,13 @@ def after_qp(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     if m == 0:
         if p:  # only inequality rows: their slack is the level's least squares
             y = polish(s, w, par, y, True)
-        return _finish_level(s, w, par, y)
+        return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
     y = polish(s, w, par, y, p > 0)
     xq = combine(x, 1.0, apply_basis(basis, y))
-    if p == 0 and optimal(rows, xq, basis, bounds, par[P_ACT], par[P_RANK]):
-        return _finish_level(s, w, par, y)
+    if p == 0:
+        ok, mult = optimal(rows, xq, basis, bounds, par[P_ACT], par[P_RANK])
+        if ok:  # (the same point as _finish_level's: the multipliers carry over)
+            return _finish_level(s, w, par, y, mult)
     scal, gg, yr = fvec(wf, wh, W_SCAL), fmat(wf, wh, W_G), fmat(wf, wh, W_Y)
     gg[1, : basis.r] = gg[0, : basis.r]
     scal[C_TOL] = par[P_TOL] * (1.0 + math.sqrt(dot(c, c)))
@@ -338,7 +352,7 @@ def after_qp(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     st[S_PROX] = 0
     if _next_proximal(w, par) == NEED_PROXIMAL:
         return NEED_PROXIMAL
-    return _finish_level(s, w, par, y)
+    return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
 
 
 @kernel
@@ -366,7 +380,7 @@ def proximal(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     st[S_PROX] += 1
     y = yr[0, : basis.r].copy()
     if not ok:
-        return _finish_level(s, w, par, y)
+        return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
     rows = level_rows(s, k)
     M, c = level_lsq(w)
     yn = polish(s, w, par, sol[: basis.r].copy(), p > 0)
@@ -375,43 +389,45 @@ def proximal(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     if p:
         fn = level_objective(rows, combine(x, 1.0, apply_basis(basis, yn)))
     if p and fn > scal[C_F]:
-        return _finish_level(s, w, par, y)
+        return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
     rnorm = math.sqrt(dot(rn, rn))
     better = scal[C_RES] - rnorm
     if better <= 0.0:
-        return _finish_level(s, w, par, y)
+        return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
     yr[0, : basis.r] = yn
     scal[C_RES], scal[C_F] = rnorm, fn
     if better <= 1e-3 * scal[C_TOL] or _next_proximal(w, par) != NEED_PROXIMAL:
-        return _finish_level(s, w, par, yn)
+        return _finish_level(s, w, par, yn, unknown_multipliers(x.shape[0]))
     return NEED_PROXIMAL
 
 
 # ---------------------------------------------------------------------- a level's close
 @kernel
-def _finish_level(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray) -> int:
+def _finish_level(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray, mult: Multipliers) -> int:
     """The level's QP answer ``x + Z y`` taken: which tasks the box limited; the level's rows
     fixed, and the constraints its optimum presses on (found in the level's free directions:
-    their rows removed from the free directions too); its inequality rows inherited; NEXT."""
-    st, x, basis, _ = state(w)
+    their rows removed from the free directions too); its inequality rows inherited; NEXT.
+    ``mult``: the level's multipliers at ``x + Z y`` where they are known."""
+    st, x, basis, bounds = state(w)
     k = st[S_K]
     xq = combine(x, 1.0, apply_basis(basis, y))
     if st[S_M]:
         bound_limited(s, w, par, k, xq)
     x[:] = xq
-    Z = basis.Z.copy() if not basis.identity else np.zeros((x.shape[0], 0))
-    level = Basis(Z, basis.r, basis.identity)  # (the workspace's Z changes below)
-    _close_rows(w)
-    _, _, basis, bounds = state(w)
-    if imat(w.i, w.h, W_REPORT)[k, R_QP] and st[S_M] and (basis.identity or basis.r > 0):
+    rows = level_rows(s, k)
+    # (found in the level's free directions, before _close_rows fixes its rows)
+    left = st[S_NULL] > 0 if st[S_RANK] else basis.identity or basis.r > 0
+    pins = np.zeros((0, x.shape[0]))
+    if report_row(w, k)[R_QP] and st[S_M] and left:
         smax = fvec(w.f, w.h, W_SCAL)[C_SMAX]
         delta = par[P_REG] * (smax * smax if smax > 0 else 1.0)
-        pins = strongly_active(level_rows(s, k), x, level, bounds, delta, par)
-        if pins.shape[0]:
-            floor = par[P_RANK] * max_abs(pins)
-            V2 = null_space(restrict(pins, basis), par[P_RANK], floor)
-            set_basis(w, V2 if basis.identity else mm(basis.Z, V2))
-    _close_rest(s, w, par, k)
+        pins = strongly_active(rows, x, basis, bounds, delta, par, mult)
+    _close_rows(w)
+    if pins.shape[0]:
+        _, _, basis, _ = state(w)
+        floor = par[P_RANK] * max_abs(pins)
+        compose_basis(w, null_space(restrict(pins, basis), par[P_RANK], floor))
+    _close_rest(s, w, par, k, rows, x, bounds)
     st[S_K] += 1
     return NEXT
 
@@ -419,24 +435,25 @@ def _finish_level(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray) -> int:
 @kernel
 def _close_rows(w: Arena) -> None:
     """The level's rows fixed: the basis Z times the level's own null space (``W_NULL``)."""
-    st, _, basis, _ = state(w)
+    st = ivec(w.i, w.h, W_STATE)
     if st[S_RANK]:
-        cols = max(st[S_NULL], 0)
-        null = fvec(w.f, w.h, W_NULL)[: basis.r * cols].reshape((basis.r, cols))
-        set_basis(w, null.copy() if basis.identity else mm(basis.Z, null))
+        r, cols = st[S_R], max(st[S_NULL], 0)
+        compose_basis(w, fvec(w.f, w.h, W_NULL)[: r * cols].reshape((r, cols)))
 
 
 @kernel
-def _close_rest(s: Arena, w: Arena, par: np.ndarray, k: int) -> None:
+def _close_rest(
+    s: Arena, w: Arena, par: np.ndarray, k: int, rows: LevelRows, x: np.ndarray, bounds: Bounds
+) -> None:
     """Level k's inequality rows inherited by the levels below, their bounds widened to
     contain ``C x`` (a violated row held where it is) and relaxed by ``P_RELAX``; the relaxed
-    box widened to contain x."""
-    st, x, _, bounds = state(w)
-    rows = level_rows(s, k)
+    box widened to contain x. ``rows``, ``x``, ``bounds``: the level's rows and the cascade's
+    state (the inherited rows' count is read anew)."""
+    st = ivec(w.i, w.h, W_STATE)
     C, ni, p = rows.C, st[S_NINH], rows.C.shape[0]
     if p:
         Cx = mv(C, x)
-        qp = imat(w.i, w.h, W_REPORT)[k, R_QP] == 1
+        qp = report_row(w, k)[R_QP] == 1
         viol = violated(s, w, k, Cx, rows, par[P_TOL], qp)
         bt = par[P_RELAX]
         Gw, gbw = fmat(w.f, w.h, W_INH), fmat(w.f, w.h, W_INHB)
@@ -448,7 +465,7 @@ def _close_rest(s: Arena, w: Arena, par: np.ndarray, k: int) -> None:
             gbw[0, ni + j] = min(lo_j, Cx[j]) - bt
             gbw[1, ni + j] = max(hi_j, Cx[j]) + bt
         st[S_NINH] = ni + p
-    if k != imat(s.i, s.h, lay.I_LEVEL).shape[0] - 1 or st[S_ANYQP]:
+    if k != s.h[lay.I_LEVEL, 2] - 1 or st[S_ANYQP]:
         for j in range(x.shape[0]):
             bounds.lo[j] = min(bounds.lo[j], x[j])
             bounds.hi[j] = max(bounds.hi[j], x[j])
@@ -473,14 +490,15 @@ def tie_done(wf, wi, wh, sol, ok) -> int:
 def _clip(w: Arena) -> int:
     """``x`` clipped to the exact box (by the relaxation and engine tolerances at most),
     where anything may have moved it outside; DONE."""
-    st, x, box = ivec(w.i, w.h, W_STATE), fvec(w.f, w.h, W_X), fmat(w.f, w.h, W_BOX)
+    st, x = ivec(w.i, w.h, W_STATE), fvec(w.f, w.h, W_X)
     scal = fvec(w.f, w.h, W_SCAL)
     scal[C_CLIP] = 0.0
     if st[S_EXACT] and not st[S_ANYQP]:
         return DONE
+    lb, ub = box_row(w, 2), box_row(w, 3)
     worst = 0.0
     for j in range(x.shape[0]):
-        v = min(max(x[j], box[2, j]), box[3, j])
+        v = min(max(x[j], lb[j]), ub[j])
         worst = max(worst, abs(v - x[j]))
         x[j] = v
     scal[C_CLIP] = worst
@@ -504,7 +522,7 @@ def _daqp(w: Arena, settings: np.ndarray) -> tuple[np.ndarray, bool, int, int]:
     if has_box:
         upper[:nv], lower[:nv] = qb[3, :nv], qb[2, :nv]
     upper[ms:], lower[ms:] = qb[1, :rows], qb[0, :rows]
-    sol = np.zeros(fmat(w.f, w.h, W_G).shape[1])
+    sol = np.zeros(w.h[W_G, 3])  # (W_G: 2 x nv_max)
     for j in range(m):
         if not lower[j] <= upper[j]:
             return sol, False, QP_INFEASIBLE, 0
@@ -533,7 +551,6 @@ def cascade(f, i, h, wf, wi, wh, par, settings) -> None:
     Tikhonov term 100 and 10000 times larger after a failure), the proximal steps and the
     tie-break; the outcome in the arena (:func:`finish`)."""
     w = Arena(wf, wi, wh)
-    report = imat(wi, wh, W_REPORT)
     st = ivec(wi, wh, W_STATE)
     code = begin(f, i, h, wf, wi, wh, par)
     while code != DONE:
@@ -545,20 +562,20 @@ def cascade(f, i, h, wf, wi, wh, par, settings) -> None:
             st[S_TIESTATUS] = status
             code = tie_done(wf, wi, wh, sol, ok)
             continue
-        k = st[S_K]
+        report = report_row(w, st[S_K])
         if code == NEED_QP:
             for attempt in range(3):
                 if attempt:  # ill-conditioned and degenerate: 100x more Tikhonov
                     bump(wf, wi, wh, attempt)
-                    report[k, R_RETRIES] += 1
+                    report[R_RETRIES] += 1
                 sol, ok, status, iterations = _daqp(w, settings)
-                report[k, R_STATUS] = status
-                report[k, R_ITER] += iterations
+                report[R_STATUS] = status
+                report[R_ITER] += iterations
                 if ok:
                     break
             code = after_qp(f, i, h, wf, wi, wh, par, sol, ok)
         else:  # NEED_PROXIMAL
             sol, ok, status, iterations = _daqp(w, settings)
-            report[k, R_ITER] += iterations
+            report[R_ITER] += iterations
             code = proximal(f, i, h, wf, wi, wh, par, sol, ok)
     finish(f, i, h, wf, wi, wh, par)

@@ -46,6 +46,7 @@ from wholebody.kernels.hqp_state import (
     Basis,
     Bounds,
     LevelRows,
+    Multipliers,
     apply_basis,
     coords,
     finite1,
@@ -63,7 +64,14 @@ from wholebody.kernels.layout import fvec
 from wholebody.kernels.linalg import combine, dot, gather_rows, mm, mtm, mtv, mv
 from wholebody.kernels.lsq import bvls, cod, columns_of, gradient, null_space, residual
 
-__all__ = ["optimal", "polish", "qp_setup", "strongly_active", "tie_setup"]
+__all__ = [
+    "optimal",
+    "polish",
+    "qp_setup",
+    "strongly_active",
+    "tie_setup",
+    "unknown_multipliers",
+]
 
 _ACT = 1e-8  # the polish's activity threshold
 _FLAT = 1e-12  # a QP row whose coefficients are at most this (relative) is left unbounded
@@ -102,14 +110,21 @@ def _active_rows(x: np.ndarray, bounds: Bounds, act: float):
 
 
 @kernel
+def unknown_multipliers(n: int) -> Multipliers:
+    """Multipliers not computed (for a point of ``n`` coordinates)."""
+    return Multipliers(-1.0, np.zeros((0, n)), np.zeros((0, 0)), False, np.zeros(0), 0.0)
+
+
+@kernel
 def _active_multipliers(
     rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Bounds, act: float, rank_tol: float
-):
-    """At ``x``: the norm of the level's gradient in the free coordinates, the rows ``N``
-    (x-space) of the bounds active at ``x`` (within ``act``), the multipliers that best
-    combine their inward normals into the gradient (``has_mu`` False where none is active or
-    the decomposition failed) and the norm of what that combination leaves of the gradient:
-    ``(gnorm, N, has_mu, mu, res)``."""
+) -> Multipliers:
+    """At ``x``: the level's gradient against the bounds active at ``x`` (within ``act``),
+    the multipliers by the least squares of the active rows (``has_mu`` False where none is
+    active or the decomposition failed). Where only the box bounds the level and Z is the
+    identity, the active rows are unit rows: then ``mu`` is the gradient's entry on each,
+    signed, and the residual its free entries, as the least squares gives them exactly."""
+    n = x.shape[0]
     g = gradient(rows.A, x, rows.b)
     if rows.C.shape[0]:
         g = combine(g, 1.0, mtv(rows.C, slack(mv(rows.C, x), rows.lo, rows.hi)))
@@ -117,19 +132,32 @@ def _active_multipliers(
     gnorm = math.sqrt(dot(gy, gy))
     N, signs = _active_rows(x, bounds, act)
     count = N.shape[0]
-    if count == 0:
-        return gnorm, N, False, np.zeros(0), gnorm
     Ny = restrict(N, basis)
-    NyT = np.empty((Ny.shape[1], count))
+    if count == 0:
+        return Multipliers(gnorm, N, Ny, False, np.zeros(0), gnorm)
     for q in range(count):
         for j in range(Ny.shape[1]):
             Ny[q, j] *= signs[q]
+    if basis.identity and bounds.G.shape[0] == 0:
+        mu = np.empty(count)
+        free2 = 0.0
+        q = 0
+        for j in range(n):
+            if q < count and N[q, j] == 1.0:
+                mu[q] = signs[q] * gy[j]
+                q += 1
+            else:
+                free2 += gy[j] * gy[j]
+        return Multipliers(gnorm, N, Ny, True, mu, math.sqrt(free2))
+    NyT = np.empty((Ny.shape[1], count))
+    for q in range(count):
+        for j in range(Ny.shape[1]):
             NyT[j, q] = Ny[q, j]
     info, _, mu, _, _, _ = cod(NyT, gy, np.zeros(count), rank_tol, 0.0)
     if info != 0:
-        return gnorm, N, False, np.zeros(0), gnorm
+        return Multipliers(gnorm, N, Ny, False, np.zeros(0), gnorm)
     res = combine(mtv(Ny, mu), -1.0, gy)
-    return gnorm, N, True, mu, math.sqrt(dot(res, res))
+    return Multipliers(gnorm, N, Ny, True, mu, math.sqrt(dot(res, res)))
 
 
 @kernel
@@ -153,40 +181,52 @@ def _box_conditions(g: np.ndarray, y: np.ndarray, lb: np.ndarray, ub: np.ndarray
 @kernel
 def optimal(
     rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Bounds, act: float, rank_tol: float
-) -> bool:
+) -> tuple[bool, Multipliers]:
     """Whether ``x`` meets the optimality conditions of the least squares of a level without
     inequality rows over the bounds (relative tolerance 1e-4): the gradient a combination of
-    the active bounds' inward normals with nonnegative multipliers."""
+    the active bounds' inward normals with nonnegative multipliers; and those multipliers
+    where they were computed (for :func:`strongly_active` at the same point)."""
     if basis.identity and bounds.G.shape[0] == 0:  # unit normals: mu = +-g on the bounds
-        return _box_conditions(gradient(rows.A, x, rows.b), x, bounds.lo, bounds.hi, act)
-    gn, _, has_mu, mu, res = _active_multipliers(rows, x, basis, bounds, act, rank_tol)
+        ok = _box_conditions(gradient(rows.A, x, rows.b), x, bounds.lo, bounds.hi, act)
+        return ok, unknown_multipliers(x.shape[0])
+    mult = _active_multipliers(rows, x, basis, bounds, act, rank_tol)
+    gn, mu = mult.gnorm, mult.mu
     if gn == 0.0:
-        return True
-    if not (has_mu and res <= 1e-4 * gn):
-        return False
+        return True, mult
+    if not (mult.has_mu and mult.res <= 1e-4 * gn):
+        return False, mult
     for q in range(mu.shape[0]):
         if not mu[q] >= -1e-4 * gn:
-            return False
-    return True
+            return False, mult
+    return True, mult
 
 
 @kernel
 def strongly_active(
-    rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Bounds, delta: float, par: np.ndarray
+    rows: LevelRows,
+    x: np.ndarray,
+    basis: Basis,
+    bounds: Bounds,
+    delta: float,
+    par: np.ndarray,
+    mult: Multipliers,
 ) -> np.ndarray:
     """Rows (x-space) of the bounds the level's own objective presses on at its optimum
     ``x``, ``basis`` the level's free directions: those whose multiplier is clearly positive.
     None where the gradient is at the level of the tolerance or of the Tikhonov term
-    ``delta`` (then the bounds cost the level nothing)."""
-    gnorm, N, has_mu, mu, _ = _active_multipliers(rows, x, basis, bounds, par[P_ACT], par[P_RANK])
+    ``delta`` (then the bounds cost the level nothing). ``mult``: the multipliers at ``x``
+    if :func:`optimal` computed them (else computed here)."""
+    if mult.gnorm < 0:
+        mult = _active_multipliers(rows, x, basis, bounds, par[P_ACT], par[P_RANK])
+    gnorm, N, mu = mult.gnorm, mult.N, mult.mu
     floor = max(
         1e-3 * par[P_TOL] * max(1.0, math.sqrt(dot(rows.b, rows.b))),
         100.0 * delta * max(1.0, math.sqrt(dot(x, x))),
     )
     n = x.shape[0]
-    if gnorm <= floor or not has_mu:
+    if gnorm <= floor or not mult.has_mu:
         return np.zeros((0, n))
-    scale = max(1.0, max_abs(N if basis.identity else mm(N, basis.Z)))
+    scale = max(1.0, max_abs(mult.Ny))  # (signs do not change |N Z|)
     pin = np.empty(mu.shape[0], np.bool_)
     for q in range(mu.shape[0]):
         pin[q] = mu[q] > max(1e-6 * gnorm, floor) / scale

@@ -12,6 +12,7 @@ the evaluated stack (:mod:`wholebody.solvers.stack`). The kernels read it as a f
 * :data:`LevelRows`: a level's equality and inequality rows;
 * :data:`Basis`: the free directions the levels above leave;
 * :data:`Bounds`: the relaxed box and the inherited rows, which every level's answer meets;
+* :data:`Multipliers`: a level's gradient against the active bounds;
 * :data:`QP`: the QP a stage set up for the engine.
 
 Also here: the small predicates the stages share (finite rows, inside the bounds, a level's
@@ -29,8 +30,8 @@ import numpy as np
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
-from wholebody.kernels.linalg import combine, dot, level_report, mm, mtv, mv
-from wholebody.kernels.lsq import in_box
+from wholebody.kernels.linalg import combine, dot, level_report, mtv, mv
+from wholebody.kernels.lsq import in_box, product
 
 __all__ = [
     "QP",
@@ -38,20 +39,26 @@ __all__ = [
     "Basis",
     "Bounds",
     "LevelRows",
+    "Multipliers",
     "apply_basis",
     "bound_limited",
+    "box_row",
+    "compose_basis",
     "coords",
     "finish",
     "finite1",
     "finite2",
     "finite_rows",
     "inside",
+    "level_int",
     "level_lsq",
     "level_objective",
     "level_rows",
     "max_abs",
     "qp_views",
+    "report_row",
     "restrict",
+    "restrict_into",
     "set_basis",
     "skip_nonfinite",
     "slack",
@@ -109,6 +116,12 @@ orthonormal), or where ``identity`` every direction (``Z`` is then not read, r =
 Bounds = namedtuple("Bounds", ["lo", "hi", "G", "glo", "ghi"])
 """What every level's answer meets: the relaxed box ``lo <= x <= hi`` and the inequality rows
 inherited from the levels above, ``glo <= G x <= ghi``."""
+
+Multipliers = namedtuple("Multipliers", ["gnorm", "N", "Ny", "has_mu", "mu", "res"])
+"""A level's gradient against the bounds active at a point (:mod:`wholebody.kernels.hqp_level`):
+the gradient's norm in the free coordinates (negative: not computed), the active bounds' rows
+``N`` (x-space) and ``Ny`` (free coordinates, signed inwards), whether the multipliers ``mu``
+that best combine them into the gradient were found, and the norm of what they leave of it."""
 
 QP = namedtuple("QP", ["H", "g", "Q", "qb"])
 """The QP in the workspace, as the engine takes it: ``min 1/2 v^T H v + g^T v`` subject to
@@ -210,21 +223,53 @@ def coords(basis: Basis, x: np.ndarray) -> np.ndarray:
 @kernel
 def restrict(N: np.ndarray, basis: Basis) -> np.ndarray:
     """``N Z``: the rows ``N`` in the free coordinates (a new array)."""
+    out = np.empty((N.shape[0], basis.r))
+    restrict_into(N, basis, out)
+    return out
+
+
+@kernel
+def restrict_into(N: np.ndarray, basis: Basis, out: np.ndarray) -> None:
+    """``N Z`` into ``out`` (q x r; not a view of ``N`` or of the basis)."""
     if basis.identity:
-        return N.copy()
-    return mm(N, basis.Z)
+        for q in range(N.shape[0]):
+            for j in range(basis.r):
+                out[q, j] = N[q, j]
+    else:
+        product(N, basis.Z, out)
 
 
 # ---------------------------------------------------------------------- reading the arenas
+# (A 2-D view costs a reshape, some 40 ns: the hot paths below read 2-D regions by offset.)
+@kernel
+def level_int(s: Arena, k: int, column: int) -> int:
+    """Entry ``column`` (``LEVEL_*``) of level k's row of ``I_LEVEL``."""
+    return s.i[s.h[lay.I_LEVEL, 0] + k * lay.LEVEL_INTS + column]
+
+
 @kernel
 def level_rows(s: Arena, k: int) -> LevelRows:
     """Level k's rows in the evaluated stack."""
-    levels = imat(s.i, s.h, lay.I_LEVEL)
-    r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
-    p0, p1 = levels[k, lay.LEVEL_INEQ0], levels[k, lay.LEVEL_INEQ_END]
-    A, b = fmat(s.f, s.h, lay.F_A), fvec(s.f, s.h, lay.F_B)
-    C, cb = fmat(s.f, s.h, lay.F_C), fmat(s.f, s.h, lay.F_CB)
-    return LevelRows(A[r0:r1], b[r0:r1], C[p0:p1], cb[0, p0:p1], cb[1, p0:p1])
+    r0, r1 = level_int(s, k, lay.LEVEL_ROW0), level_int(s, k, lay.LEVEL_ROW_END)
+    p0, p1 = level_int(s, k, lay.LEVEL_INEQ0), level_int(s, k, lay.LEVEL_INEQ_END)
+    nu, P = s.h[lay.F_A, 3], s.h[lay.F_CB, 3]
+    A = fvec(s.f, s.h, lay.F_A)[r0 * nu : r1 * nu].reshape((r1 - r0, nu))
+    C = fvec(s.f, s.h, lay.F_C)[p0 * nu : p1 * nu].reshape((p1 - p0, nu))
+    cb = fvec(s.f, s.h, lay.F_CB)
+    return LevelRows(A, fvec(s.f, s.h, lay.F_B)[r0:r1], C, cb[p0:p1], cb[P + p0 : P + p1])
+
+
+@kernel
+def report_row(w: Arena, k: int) -> np.ndarray:
+    """Level k's report (``R_*``; a view of ``W_REPORT``)."""
+    return ivec(w.i, w.h, W_REPORT)[k * R_WIDTH : (k + 1) * R_WIDTH]
+
+
+@kernel
+def box_row(w: Arena, j: int) -> np.ndarray:
+    """Row j of ``W_BOX`` (0, 1: the relaxed box; 2, 3: the exact one; a view)."""
+    n = w.h[W_X, 1]
+    return fvec(w.f, w.h, W_BOX)[j * n : (j + 1) * n]
 
 
 @kernel
@@ -245,10 +290,38 @@ def state(w: Arena):
     integers ``S_*``."""
     st = ivec(w.i, w.h, W_STATE)
     x = fvec(w.f, w.h, W_X)
-    n, r, ni = x.shape[0], st[S_R], st[S_NINH]
-    box, G, gb = fmat(w.f, w.h, W_BOX), fmat(w.f, w.h, W_INH), fmat(w.f, w.h, W_INHB)
+    n, r, ni, P = x.shape[0], st[S_R], st[S_NINH], w.h[W_INHB, 3]
+    G = fvec(w.f, w.h, W_INH)[: ni * n].reshape((ni, n))
+    gb = fvec(w.f, w.h, W_INHB)
     basis = Basis(fvec(w.f, w.h, W_Z)[: n * r].reshape((n, r)), r, st[S_ZI] == 1)
-    return st, x, basis, Bounds(box[0], box[1], G[:ni], gb[0, :ni], gb[1, :ni])
+    return st, x, basis, Bounds(box_row(w, 0), box_row(w, 1), G, gb[:ni], gb[P : P + ni])
+
+
+@kernel
+def compose_basis(w: Arena, V: np.ndarray) -> None:
+    """The free directions become ``Z V`` (V: r x cols, cols <= r, not a view of ``W_Z``):
+    the columns of ``V`` where Z is the identity, else computed in place, row by row (a row
+    of ``Z V`` only needs the same row of ``Z``, and is no longer than it)."""
+    st = ivec(w.i, w.h, W_STATE)
+    n, r, cols = fvec(w.f, w.h, W_X).shape[0], st[S_R], V.shape[1]
+    Z = fvec(w.f, w.h, W_Z)
+    if st[S_ZI] == 1:
+        for i in range(n):
+            for a in range(cols):
+                Z[i * cols + a] = V[i, a]
+    else:
+        row, acc = np.empty(r), np.empty(cols)
+        for i in range(n):
+            for j in range(r):
+                row[j] = Z[i * r + j]
+            acc[:] = 0.0
+            for j in range(r):
+                z = row[j]
+                for a in range(cols):
+                    acc[a] += z * V[j, a]
+            for a in range(cols):
+                Z[i * cols + a] = acc[a]
+    st[S_R], st[S_ZI] = cols, 0
 
 
 @kernel
@@ -334,19 +407,19 @@ def bound_limited(s: Arena, w: Arena, par: np.ndarray, k: int, xq: np.ndarray) -
     """Flag level k's tasks whose residual at ``xq`` the box raised above the box-free
     optimum (the unconstrained candidate ``W_XC``); none when no entry of ``xq`` is on the
     box: then the levels above set the residual."""
-    box = fmat(w.f, w.h, W_BOX)
+    lb, ub = box_row(w, 2), box_row(w, 3)
     tasks, limited = imat(s.i, s.h, lay.I_TASK), ivec(w.i, w.h, W_LIMITED)
     t0, t1 = task_range(tasks, k)
     for t in range(t0, t1):
         limited[t] = 0
     on = False
     for j in range(xq.shape[0]):
-        if xq[j] <= box[2, j] + 1e-7 or xq[j] >= box[3, j] - 1e-7:
+        if xq[j] <= lb[j] + 1e-7 or xq[j] >= ub[j] - 1e-7:
             on = True
     if not on or t1 == t0:
         return
     rows = level_rows(s, k)
-    r0 = imat(s.i, s.h, lay.I_LEVEL)[k, lay.LEVEL_ROW0]
+    r0 = level_int(s, k, lay.LEVEL_ROW0)
     unweight = fmat(s.f, s.h, lay.F_ROW)[1, r0 : r0 + rows.A.shape[0]]
     at = np.zeros((t1 - t0, 3))
     free = np.zeros((t1 - t0, 3))
@@ -361,39 +434,43 @@ def bound_limited(s: Arena, w: Arena, par: np.ndarray, k: int, xq: np.ndarray) -
 def finish(f, i, h, wf, wi, wh, par) -> None:
     """The outcome in the stack's arena: ``F_U``, the level and task residuals, the tasks met,
     the active bounds and the status (``I_OUT``)."""
-    st, x, box = ivec(wi, wh, W_STATE), fvec(wf, wh, W_X), fmat(wf, wh, W_BOX)
-    rep, limited = imat(wi, wh, W_REPORT), ivec(wi, wh, W_LIMITED)
-    levels, tasks = imat(i, h, lay.I_LEVEL), imat(i, h, lay.I_TASK)
+    w = Arena(wf, wi, wh)
+    st, x, lb, ub = ivec(wi, wh, W_STATE), fvec(wf, wh, W_X), box_row(w, 2), box_row(w, 3)
+    rep, limited = ivec(wi, wh, W_REPORT), ivec(wi, wh, W_LIMITED)
+    tasks = imat(i, h, lay.I_TASK)
     A, b, rows = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B), fmat(f, h, lay.F_ROW)
-    out, lev_out = ivec(i, h, lay.I_OUT), fmat(f, h, lay.F_LEVEL_OUT)
+    out, lev_out = ivec(i, h, lay.I_OUT), fvec(f, h, lay.F_LEVEL_OUT)
     res, infeasible = fmat(f, h, lay.F_TASK_RES), ivec(i, h, lay.I_INFEASIBLE)
     active = ivec(i, h, lay.I_ACTIVE)
-    U, D = fmat(f, h, lay.F_U), fmat(f, h, lay.F_METRIC)[0]
-    for j in range(x.shape[0]):
-        U[0, j] = x[j]
-        U[1, j] = D[j] * x[j]
+    n = x.shape[0]
+    U, D = fvec(f, h, lay.F_U), fvec(f, h, lay.F_METRIC)
+    for j in range(n):
+        U[j] = x[j]
+        U[n + j] = D[j] * x[j]
     tol, act = par[P_TOL], par[P_ACT]
     failures = st[S_BOXBAD] or st[S_TIEFAIL]
     top_unmet = any_limited = False
-    for k in range(levels.shape[0]):
-        r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
+    s = Arena(f, i, h)
+    for k in range(h[lay.I_LEVEL, 2]):
+        r0, r1 = level_int(s, k, lay.LEVEL_ROW0), level_int(s, k, lay.LEVEL_ROW_END)
         t0, t1 = task_range(tasks, k)
-        lev_out[k, 0], lev_out[k, 1] = 0.0, 1.0
+        lev_out[2 * k], lev_out[2 * k + 1] = 0.0, 1.0
         if r1 > r0:
-            lev_out[k, 0] = level_report(
+            lev_out[2 * k] = level_report(
                 A[r0:r1], b[r0:r1], rows[1, r0:r1], x, tasks[t0:t1], r0, res[t0:t1]
             )
-        failures = failures or rep[k, R_FAILED] == 1
+        failed = rep[k * R_WIDTH + R_FAILED] == 1
+        failures = failures or failed
         for t in range(t0, t1):
             met = res[t, 0] <= tol * (1.0 + res[t, 2])  # (a NaN residual is not met)
             empty = tasks[t, 2] == tasks[t, 1]
-            infeasible[t] = 0 if empty or (met and not rep[k, R_FAILED]) else 1
+            infeasible[t] = 0 if empty or (met and not failed) else 1
             top_unmet = top_unmet or (k == 0 and infeasible[t] == 1)
     for t in range(limited.shape[0]):
         any_limited = any_limited or limited[t] == 1
     any_active = False
-    for j in range(x.shape[0]):
-        active[j] = x[j] <= box[2, j] + act or x[j] >= box[3, j] - act
+    for j in range(n):
+        active[j] = x[j] <= lb[j] + act or x[j] >= ub[j] - act
         any_active = any_active or active[j] == 1
     if failures:
         status = 4

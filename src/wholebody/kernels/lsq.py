@@ -18,23 +18,21 @@ Plain functions of arrays: they know nothing of the cascade's workspace.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from wholebody.kernels import kernel
-from wholebody.kernels.lapack import gels, geqp3, gesdd, orgqr, potrf, trtri, trtrs
+from wholebody.kernels.lapack import gels, geqp3, geqrf, gesdd, orgqr, trtri, trtrs
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
-    cholesky_inverse,
+    REFINE_KAPPA,
     combine,
     dot,
     fortran,
     frobenius2,
-    mmt,
-    mtm,
     mtv,
     mv,
-    normal_solve,
-    null_basis,
 )
 
 __all__ = [
@@ -46,6 +44,7 @@ __all__ = [
     "lstsq",
     "null_space",
     "pivot_norm",
+    "product",
     "residual",
 ]
 
@@ -55,9 +54,34 @@ _EPS = 2.220446049250313e-16
 
 # ---------------------------------------------------------------------- small helpers
 @kernel
+def product(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """``out = A B`` (``out`` C-ordered, distinct from A and B), the zero entries of ``A``
+    skipped: the rows multiplied here are sparse (a posture task's rows, a hand's Jacobian
+    off its arm, unit rows of bounds), so this costs a fraction of a dense product."""
+    m, p = A.shape
+    n = B.shape[1]
+    for i in range(m):
+        for j in range(n):
+            out[i, j] = 0.0
+        for k in range(p):
+            a = A[i, k]
+            if a != 0.0:
+                for j in range(n):
+                    out[i, j] += a * B[k, j]
+
+
+@kernel
 def residual(M: np.ndarray, y: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``c - M y``."""
-    return combine(c, -1.0, mv(M, y))
+    """``c - M y`` (a new vector; the zero entries of ``M`` skipped)."""
+    out = np.empty(c.shape[0])
+    for i in range(c.shape[0]):
+        s = 0.0
+        for k in range(y.shape[0]):
+            a = M[i, k]
+            if a != 0.0:
+                s += a * y[k]
+        out[i] = c[i] - s
+    return out
 
 
 @kernel
@@ -111,24 +135,92 @@ def _rank_certificate(M: np.ndarray, Rinv: np.ndarray, rtol: float, floor: float
 
 
 @kernel
+def _gram_inverse(M: np.ndarray) -> tuple[bool, np.ndarray]:
+    """``(ok, L^-1)`` for the Cholesky factor ``M^T M = L L^T`` of a tall ``M`` (m x r):
+    ``L^-1`` lower triangular, C-ordered, its upper triangle zero; ok False where ``M^T M``
+    is not positive definite to working precision (LAPACK's ``potrf`` criterion). Plain
+    loops: for a few dozen columns LAPACK's per-call overhead costs more than the
+    arithmetic."""
+    m, r = M.shape
+    X = np.zeros((r, r))
+    for q in range(m):  # the lower triangle of M^T M, zero entries of M skipped
+        for i in range(r):
+            a = M[q, i]
+            if a != 0.0:
+                for j in range(i + 1):
+                    X[i, j] += a * M[q, j]
+    for j in range(r):  # the Cholesky factor L, in place
+        d = X[j, j]
+        for k in range(j):
+            d -= X[j, k] * X[j, k]
+        if not d > 0.0:  # (NaN too)
+            return False, X
+        d = math.sqrt(d)
+        X[j, j] = d
+        for i in range(j + 1, r):
+            t = X[i, j]
+            for k in range(j):
+                t -= X[i, k] * X[j, k]
+            X[i, j] = t / d
+    for j in range(r):  # L^-1, in place, column by column (L's columns right of j unread yet)
+        X[j, j] = 1.0 / X[j, j]
+        for i in range(j + 1, r):
+            t = 0.0
+            for k in range(j, i):
+                t -= X[i, k] * X[k, j]
+            X[i, j] = t / X[i, i]
+    return True, X
+
+
+@kernel
+def _normal_step(M: np.ndarray, X: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``X^T X M^T c`` (``X`` lower triangular): the least squares of ``M`` where
+    ``(M^T M)^-1 = X^T X``."""
+    m, r = M.shape
+    g = np.zeros(r)
+    for q in range(m):  # M^T c
+        a = c[q]
+        if a != 0.0:
+            for j in range(r):
+                g[j] += M[q, j] * a
+    y = np.zeros(r)
+    for i in range(r):  # y = X^T (X g)
+        t = 0.0
+        for k in range(i + 1):
+            t += X[i, k] * g[k]
+        for j in range(i + 1):
+            y[j] += X[i, j] * t
+    return y
+
+
+@kernel
 def _tall_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float):
     """The least squares of a tall ``M`` (m > r) where full column rank is certain:
     ``(done, y, have_qr)``. By the normal equations where the certificate shows them accurate
-    (condition at most ``NORMAL_KAPPA``), else by LAPACK's QR (``gels``); ``have_qr``: the
-    QR's solution ``y`` exists (the unique solution if the rank rule finds full rank)."""
-    m, r = M.shape
-    U = fortran(mtm(M, M))
-    if potrf(U, False) == 0 and trtri(U, False) == 0:
-        k2 = _rank_certificate(M, U, rtol, floor)
-        if k2 >= 0 and k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
-            return True, normal_solve(M, U.T, c.reshape((m, 1)), k2)[:, 0].copy(), False
+    (condition at most ``NORMAL_KAPPA``; refined once above ``REFINE_KAPPA``, as
+    :func:`wholebody._numeric.normal_solve`), by LAPACK's QR (``gels``) where it is certain
+    but larger; not done where it is not certain (the pivoted QR of :func:`cod` decides
+    the rank: a QR here could not certify what the Cholesky factor did not). ``have_qr``:
+    the QR's solution ``y`` exists."""
+    r = M.shape[1]
+    ok, X = _gram_inverse(M)
+    k2 = _rank_certificate(M, X, rtol, floor) if ok else -1.0
+    if k2 < 0:
+        return False, c[:r].copy(), False
+    if k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+        y = _normal_step(M, X, c)
+        if k2 > REFINE_KAPPA * REFINE_KAPPA:
+            dy = _normal_step(M, X, residual(M, y, c))
+            for j in range(r):
+                y[j] += dy[j]
+        return True, y, False
     lqr = fortran(M)
     z = c.copy()
     if gels(lqr, z) != 0:
         return False, c[:r].copy(), False
     R = np.zeros((r, r)).T  # the QR's triangular factor, Fortran-ordered
     for j in range(r):
-        for i in range(r):
+        for i in range(j + 1):
             R[i, j] = lqr[i, j]
     done = trtri(R, False) == 0 and _rank_certificate(M, R, rtol, floor) >= 0
     return done, z[:r].copy(), True
@@ -226,35 +318,61 @@ def _cod_solution(qr, tau, jpvt, c, t, k: int, rank: int):
 
 @kernel
 def pivot_norm(M: np.ndarray) -> float:
-    """``|R_00|`` of the pivoted QR of ``M^T``: the scale of ``M``'s largest singular value."""
-    m, r = M.shape
-    if min(m, r) == 0:
-        return 0.0
-    qr = _transposed(M)
-    jpvt = np.zeros(m, np.int32)
-    tau = np.zeros(min(m, r))
-    if geqp3(qr, jpvt, tau) != 0:
-        return 0.0
-    return abs(qr[0, 0])
+    """``|R_00|`` of the pivoted QR of ``M^T``, the scale of ``M``'s largest singular value:
+    the norm of its first pivot, the largest column of ``M^T`` (row of ``M``); no
+    factorisation needed."""
+    top = 0.0
+    for i in range(M.shape[0]):
+        t = 0.0
+        for j in range(M.shape[1]):
+            t += M[i, j] * M[i, j]
+        top = max(top, t)
+    return math.sqrt(top)
+
+
+@kernel
+def _inverse_norm2(R: np.ndarray) -> float:
+    """``||R^-1||_F^2`` of the upper triangular ``R`` (inf where a diagonal entry is 0)."""
+    q = R.shape[0]
+    X = np.zeros((q, q))
+    for j in range(q):  # column j of R^-1: R x = e_j, by back substitution
+        if R[j, j] == 0.0:
+            return np.inf
+        X[j, j] = 1.0 / R[j, j]
+        for i in range(j - 1, -1, -1):
+            t = 0.0
+            for k in range(i + 1, j + 1):
+                t += R[i, k] * X[k, j]
+            X[i, j] = -t / R[i, i]
+    return frobenius2(X)
 
 
 @kernel
 def null_space(Nz: np.ndarray, rtol: float, floor: float) -> np.ndarray:
     """An orthonormal basis (r x (r - rank)) of the null space of ``Nz`` (q x r), singular
-    values at most ``max(rtol s_max, floor)`` counted as zero: by the QR of ``Nz^T`` where
-    ``Nz`` certainly has q such singular values (the Cholesky factor of ``Nz Nz^T``
-    certifies it), else by the SVD."""
+    values at most ``max(rtol s_max, floor)`` counted as zero: the last columns of the
+    complete Q of ``Nz^T = Q R`` where ``Nz`` certainly has q such singular values (``R``
+    certifies it, as the Cholesky factor of ``Nz Nz^T = R^T R`` would), else by the SVD."""
     q, r = Nz.shape
     if 0 < q <= r:
-        ok, Linv = cholesky_inverse(mmt(Nz, Nz))
-        if ok:
-            inv2 = frobenius2(Linv)
+        a = np.zeros((r, r)).T  # Fortran-ordered: Nz^T in the first q columns, then Q
+        for k in range(q):
+            for j in range(r):
+                a[j, k] = Nz[k, j]
+        tau = np.zeros(q)
+        if geqrf(a[:, :q], tau) == 0:
+            inv2 = _inverse_norm2(a[:q, :q])
             margin = _MARGIN * rtol
             if (
                 inv2 * frobenius2(Nz) * margin * margin < 1.0
                 and inv2 * (_MARGIN * floor) ** 2 < 1.0
+                and orgqr(a, tau, q, 8 * r) == 0
             ):
-                return null_basis(Nz)
+                out = np.empty((r, r - q))
+                for j in range(r):
+                    for k in range(r - q):
+                        out[j, k] = a[j, q + k]
+                return out
     _, _, S, Vt = gesdd(fortran(Nz), True)
     rank = 0
     if S.shape[0] and S[0] > floor:

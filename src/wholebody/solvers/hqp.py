@@ -99,7 +99,6 @@ levels (:mod:`wholebody.solvers.qpsolvers_engine`; no workspace is kept between 
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable
 from typing import Any
@@ -113,7 +112,7 @@ from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Setting, Solver
 from wholebody.solvers.level_report import LevelReport
-from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, BoundCall, Plan, ProblemArena, first_call
 from wholebody.solvers.qp import QPEngine, make_engine
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
@@ -312,8 +311,18 @@ class HierarchicalQPSolver(Solver):
             return super().stepper(plan, kinematics, batch, what)
         arena = plan.step_buffers(batch.refs.shape[1]).arena
         ws = self.workspace(plan).record
-        return functools.partial(
-            control.hqp_run, arena, ws, kinematics, batch, self._par, self._daqp_settings, 1, what
+        return BoundCall(
+            "hqp",
+            "the hierarchical QP kernels",
+            control.hqp_run,
+            arena,
+            ws,
+            kinematics,
+            batch,
+            self._par,
+            self._daqp_settings,
+            1,
+            what,
         )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:

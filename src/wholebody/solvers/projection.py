@@ -101,7 +101,6 @@ Everything runs in one kernel call after the stack's evaluation
 
 from __future__ import annotations
 
-import functools
 import time
 from collections.abc import Callable
 
@@ -120,7 +119,7 @@ from wholebody.kernels.pinv import (
 )
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Setting, Solver
-from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, BoundCall, Plan, ProblemArena, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
 
@@ -233,8 +232,16 @@ class ProjectionSolver(Solver):
         """The kernel call of one step with its arguments bound (the settings are read from
         their vector at each call)."""
         arena = plan.step_buffers(batch.refs.shape[1]).arena
-        return functools.partial(
-            control.projection_run, arena, kinematics, batch, self._par, 1, what
+        return BoundCall(
+            "projection",
+            "the projection kernels",
+            control.projection_run,
+            arena,
+            kinematics,
+            batch,
+            self._par,
+            1,
+            what,
         )
 
     def solve_problem(self, problem: StackProblem) -> SolverResult:

@@ -96,22 +96,29 @@ def solve_many(
         np.zeros((n, nF)),
     )
     threads = min(n, threads or os.cpu_count() or 1)
-    chunks = np.array_split(np.arange(n), threads)
-    work = [(_copy(plan, tasks), _workspace(solver, plan), _kinematics(buffers)) for _ in chunks]
+    # a call's states start from the memory its arena holds when called: one arena per call
+    work = [
+        (_copy(plan, tasks), _workspace(solver, plan), _kinematics(buffers))
+        for _ in range(threads + (threads > 1))
+    ]
     what = control.KINEMATICS | control.ADVANCE | control.INTEGRATE | control.RESET
 
-    def one(k: int) -> None:
-        rows = slice(int(chunks[k][0]), int(chunks[k][-1]) + 1) if chunks[k].size else slice(0)
-        part = control.Batch(*(a[rows] for a in batch))
-        arena, ws, kin = work[k]
-        solver.kernel_run(arena, kin, part, steps, what, ws)
+    def one(k: int, rows: np.ndarray) -> None:
+        if rows.size:
+            part = control.Batch(*(a[int(rows[0]) : int(rows[-1]) + 1] for a in batch))
+            arena, ws, kin = work[k]
+            solver.kernel_run(arena, kin, part, steps, what, ws)
 
     if threads == 1:
-        one(0)
-    else:
-        one(0)  # compiles (or loads) the kernel once, before the threads share it
-        with ThreadPoolExecutor(threads - 1) as pool:
-            list(pool.map(one, range(1, threads)))
+        one(0, np.arange(n))
+        return BatchResult(batch.U, batch.Q_next, batch.status, _errors(plan, batch.params))
+    one(threads, np.arange(1))  # compiles (or loads) the kernel once, before the threads share it
+    chunks = np.array_split(np.arange(1, n), threads)
+    with ThreadPoolExecutor(threads - 1) as pool:  # the calling thread takes the first chunk
+        others = [pool.submit(one, k, chunks[k]) for k in range(1, threads)]
+        one(0, chunks[0])
+        for done in others:
+            done.result()
     return BatchResult(batch.U, batch.Q_next, batch.status, _errors(plan, batch.params))
 
 

@@ -258,6 +258,7 @@ def test_ctrl_c_while_writing_a_run_says_what_was_not_written(tmp_path, monkeypa
     assert (out / "hands.png").stat().st_size > 0 and not (out / "arm_energy.png").exists()
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_compare_keeps_the_finished_backends(tmp_path, monkeypatch, capsys):
     from wholebody import cli
     from wholebody.scenarios import runner

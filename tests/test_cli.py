@@ -168,6 +168,7 @@ def test_run_writes_the_log_metrics_and_figures(tmp_path, capsys):
     assert median == pytest.approx(metrics["step_time_us"]["median"], abs=1)
 
 
+@pytest.mark.slow
 def test_compare_writes_table_2(tmp_path):
     out = tmp_path / "cmp"
     assert (
@@ -220,6 +221,7 @@ def test_demo_opens_a_viewer_only_with_viz(monkeypatch, capsys, tmp_path):
     assert calls == [False, True]
 
 
+@pytest.mark.slow
 def test_run_viz_without_a_terminal_leaves_a_standalone_replay(tmp_path, monkeypatch, capsys):
     """--viz with no terminal to wait on: the replay is saved as one HTML page that needs no
     server, the output says where, and the MeshCat URL is printed once (meshcat's own print

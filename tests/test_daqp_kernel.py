@@ -337,6 +337,7 @@ def test_version_guard(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.mark.skipif(DISABLED, reason="caching concerns compiled kernels")
+@pytest.mark.slow
 def test_cached_without_warnings() -> None:
     """A fresh process compiles solve into the cache with no numba warning (a kernel holding
     a ctypes pointer would say "Cannot cache"), and the next process loads it from there."""

@@ -45,6 +45,14 @@ GOAL = np.array([1.73, -0.30, 1.09])
 CENTERS = ([1.725, -0.4, 1.09], [1.725, -0.2, 1.09])
 
 
+def _first_fast(names: object) -> list:
+    """The cases as parameters, all but the first marked slow (``-m "not slow"`` keeps one)."""
+    return [
+        pytest.param(n, id=n, marks=() if k == 0 else pytest.mark.slow)
+        for k, n in enumerate(names)  # type: ignore[call-overload]
+    ]
+
+
 def reach(start: np.ndarray, goal: np.ndarray, n: int = 160, T: float = 2.0) -> DMP:
     """A DMP of a minimum-jerk straight reach in ``T`` s."""
     t = np.linspace(0.0, T, n)
@@ -159,7 +167,7 @@ def demonstrations() -> dict[str, tuple[np.ndarray, np.ndarray, DMPConfig]]:
     }
 
 
-@pytest.mark.parametrize("name", list(demonstrations()))
+@pytest.mark.parametrize("name", _first_fast(demonstrations()))
 def test_rollout_solves_the_dmp_ode_to_fourth_order(name: str) -> None:
     """Without obstacles the rollout is RK4 of the DMP's equations: against DOP853 at 1e-12
     its error falls 16-fold when the step halves, and is below 2e-5 of the reach at 160
@@ -218,7 +226,7 @@ SCENES = {
 }
 
 
-@pytest.mark.parametrize("name", list(SCENES))
+@pytest.mark.parametrize("name", _first_fast(SCENES))
 def test_obstacle_rollout_solves_the_ode_with_the_forces(scene: DMP, name: str) -> None:
     """With obstacles, at a tolerance of 1e-7 m, the rollout is the solution of the DMP's
     equations with the potentials' forces (DOP853 at 1e-10: the path within 5 um, where the
@@ -241,6 +249,7 @@ def test_obstacle_rollout_solves_the_ode_with_the_forces(scene: DMP, name: str) 
     np.testing.assert_array_equal(public.positions, r.positions)
 
 
+@pytest.mark.slow
 def test_default_tolerance_in_the_papers_scene(scene: DMP) -> None:
     """At the default tolerance (1e-3 m on the local estimate) the paper's scene is within
     1e-5 m of the ODE's solution; the steps shrink near the cylinders only, where one RK4
@@ -257,6 +266,7 @@ def test_default_tolerance_in_the_papers_scene(scene: DMP) -> None:
     assert gap(fixed.positions, x) > 0.01
 
 
+@pytest.mark.slow
 def test_an_infinite_tolerance_is_fixed_step_rk4(scene: DMP) -> None:
     """``tolerance=inf``: every interval ``max_substeps`` RK4 substeps, none redone; the
     error against the ODE falls with the substep: one per interval misses the paper's path
@@ -277,7 +287,7 @@ def test_an_infinite_tolerance_is_fixed_step_rk4(scene: DMP) -> None:
 # Fit
 
 
-@pytest.mark.parametrize("name", list(demonstrations()))
+@pytest.mark.parametrize("name", _first_fast(demonstrations()))
 def test_fit_is_the_ridge_least_squares_solution(name: str) -> None:
     """The weights solve ``min |Phi W - F|^2 + r |W|^2`` (``r = ridge tr(Phi^T Phi) / nb``)
     for the forcing targets ``F = (tau^2 x'' + D tau x') / K - (g - x) + (g - x0) s`` of the
@@ -365,6 +375,7 @@ def test_stepper_reproduces_the_rollout(scene: DMP, dt: float) -> None:
         np.testing.assert_allclose(stepper.acceleration(state), r.accelerations[-1], atol=1e-8)
 
 
+@pytest.mark.slow
 def test_stepper_follows_a_moved_goal_as_the_ode_does(scene: DMP) -> None:
     """A goal moved mid-way and a sampling the rollout does not use: the stepper's states
     against DOP853 of the equations, restarted at the move with the new goal."""

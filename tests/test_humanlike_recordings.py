@@ -117,6 +117,7 @@ def test_npz_recordings_take_the_csv_options_and_csv_blank_lines_are_skipped(tmp
     )
 
 
+@pytest.mark.slow
 def test_directory_and_participants():
     recs = load_recordings(real_recordings_dir())
     assert len(recs) == 480

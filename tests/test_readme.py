@@ -32,6 +32,7 @@ def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
     assert printed.strip(), f"block {index + 1} prints nothing"
 
 
+@pytest.mark.slow
 def test_the_examples_do_what_they_say(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
     found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False,

@@ -55,6 +55,7 @@ def test_mujoco_loads_the_urdf_without_self_contact(name):
         assert pairs == []
 
 
+@pytest.mark.slow
 def test_wheel_ships_robots_and_tasks_for_a_non_editable_install(tmp_path):
     pytest.importorskip("hatchling", reason="building the wheel needs hatchling (dev extra)")
     out = tmp_path / "dist"

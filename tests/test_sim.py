@@ -350,6 +350,7 @@ def test_sim_settings_and_bad_inputs(tmp_path):
         wb.load_robot(robot_dir)
 
 
+@pytest.mark.slow
 def test_cli_runs_under_physics_and_reports_a_stop(tmp_path, capsys):
     """``wholebody run SCENARIO --sim mujoco`` writes the physics records and figure, and
     prints the torques; a robot too weak for its scenario ends the run with exit code 1 and
@@ -393,6 +394,7 @@ def test_cli_runs_under_physics_and_reports_a_stop(tmp_path, capsys):
     assert "stopped early: actuator limit too low" in err, err
 
 
+@pytest.mark.slow
 def test_live_view_moves_the_simulated_objects():
     """A physics run's objects reach the live view and are drawn with its next frame."""
     from wholebody.scenarios.visual import LiveView

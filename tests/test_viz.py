@@ -56,6 +56,7 @@ def test_server_listens_on_localhost_only(scene):
     reason="Debian's chromium is not installed (.ci/run "
     "installs it); the browser rendering test needs it",
 )
+@pytest.mark.slow
 def test_robot_is_drawn_in_a_headless_browser(scene, tmp_path):
     robot = scene.robot
     scene.show(robot.home())
@@ -293,6 +294,7 @@ def test_the_replay_page_opens_without_a_server_and_frames_the_run(tmp_path):
     assert red(_screenshot(unframed.as_uri(), tmp_path)) == 0
 
 
+@pytest.mark.slow
 def test_the_closest_pairs_are_drawn_live_and_in_the_replay(scene, monkeypatch, tmp_path):
     """A run with [collision]: the live view draws lines between the closest witness points
     (red at the safety distance) and the replay page holds the closest approach's line."""

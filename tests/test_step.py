@@ -296,3 +296,26 @@ def test_a_bound_call_gives_the_dispatchers_answers(rng):
         assert call.bound != UNCOMPILED
     y[:] = rng.normal(size=7)  # the same objects, new numbers
     np.testing.assert_array_equal(call(), x + 0.5 * y)
+
+
+@pytest.mark.parametrize("solver_name", sorted(SOLVERS))
+def test_a_levels_gain_changed_between_steps_is_the_next_steps(humanoid, rng, solver_name):
+    """A level's gain and objective weight set between one-call steps are those the next
+    step uses: its u is that of a controller built with them."""
+    from wholebody.tasks import JointLimitAvoidance
+
+    robot = humanoid
+    q = robot.random_configuration(rng, margin=0.2, base_range=0.3)
+
+    def controller(gain, weight):
+        level = Level([*hands(robot, ki=0.0), JointLimitAvoidance(robot)], gain, weight)
+        stack = Stack(robot, [level, [PostureTask(robot, weight=1e-3)]], limits(robot))
+        return Controller(robot, stack, SOLVERS[solver_name](), dt=DT)
+
+    changed = controller(1.0, 1.0)
+    changed.step(q)
+    changed.reset()
+    changed.stack.levels[0].gain, changed.stack.levels[0].objective_weight = 3.0, 0.5
+    u = changed.step(q)
+    np.testing.assert_allclose(u, controller(3.0, 0.5).step(q), atol=1e-12)
+    assert np.abs(u - controller(1.0, 1.0).step(q)).max() > 1e-6  # (the gain matters here)

@@ -44,6 +44,7 @@ Entry = Task | InequalityTask | Objective | Constraint
 _WARM: dict[str, bool] = {}  # whether a kernel entry point ran in this process
 NO_REFERENCES = np.zeros((0, REF_WIDTH))
 _PARAMS = operator.attrgetter("_params")
+LEVEL_SETTINGS = [0]  # how many times a level's gain or objective weight was set (any level)
 
 
 def sqrt_weights(task: Task, w: object) -> np.ndarray:
@@ -287,7 +288,7 @@ class Plan(Arena):
         self._compiled_entries = [r.entry for r in self.compiled]
         self._blocks = [r.block for r in self.compiled]  # (an entry's block while it is ours)
         self._dt: float | None = None  # the step the entries were checked for
-        self._gains: list[tuple[float, float]] | None = None  # the levels' as written
+        self._gains = -1  # LEVEL_SETTINGS when the levels' numbers were written
         self.reported = [
             (t, r.entry.name, self.levels[r.level].name) for t, r in enumerate(self.tasks) if r.rows
         ]
@@ -482,10 +483,10 @@ class Plan(Arena):
             metric = self.view(lay.F_METRIC)
             metric[0], metric[1] = stack.scale, stack._scale_sq
             self.metric_version = stack._scale_version
-        gains = [(level.gain, level.objective_weight) for level in self.levels]
-        if gains != self._gains:
+        if LEVEL_SETTINGS[0] != self._gains:
+            gains = [(level.gain, level.objective_weight) for level in self.levels]
             self._level_f[:, lay.LEVEL_GAIN : lay.LEVEL_OBJECTIVE_WEIGHT + 1] = gains
-            self._gains = gains
+            self._gains = LEVEL_SETTINGS[0]
         if not all(map(operator.is_, map(_PARAMS, self._compiled_entries), self._blocks)):
             for rec in self.compiled:
                 if rec.entry._params is not rec.block:

@@ -39,7 +39,7 @@ from wholebody.kernels import layout as lay
 from wholebody.kernels.advance import ADVANCE_FLAGS, ADVANCE_MEMORY, ADVANCE_TASKS, advance
 from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import Robot, RobotState
-from wholebody.solvers.plan import NO_REFERENCES, Plan, first_call
+from wholebody.solvers.plan import LEVEL_SETTINGS, NO_REFERENCES, Plan, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
 
@@ -80,6 +80,8 @@ class Level:
         # notices (it lays its buffers out again), and cannot change behind its back
         if name == "entries":
             value = tuple(value)  # type: ignore[arg-type]
+        elif name in ("gain", "objective_weight"):
+            LEVEL_SETTINGS[0] += 1  # (a plan rewrites its levels' numbers when this moves)
         object.__setattr__(self, name, value)
 
     @property

@@ -75,6 +75,7 @@ __all__ = [
 _NO_TWIST = np.zeros(6)
 _NO_TWIST.setflags(write=False)
 _ZERO_TWIST = np.zeros(6)  # (writable: the kernels' array type; never written)
+_F64 = np.dtype(np.float64)
 
 
 def _plain(a: np.ndarray) -> bool:
@@ -210,6 +211,15 @@ class PoseTask(Task):
     def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
         """Target pose (4x4 or SE3) and twist ``[v (m/s), w (rad/s)]`` (zero when omitted), in
         the task's axes (see the subclass)."""
+        if (  # a control loop's call: a plain 4x4 pose, no twist (checked, written in one call)
+            twist is None
+            and pose.__class__ is np.ndarray
+            and pose.dtype is _F64  # type: ignore[union-attr]
+            and pose.shape == (4, 4)  # type: ignore[union-attr]
+            and _plain(pose)  # type: ignore[arg-type]
+            and set_target(self._params, pose, _ZERO_TWIST) == POSE_FINE
+        ):
+            return
         try:
             T = float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, "pose")
             t = _ZERO_TWIST if twist is None else float_array(twist, "twist")

@@ -9,8 +9,8 @@ control steps, the evaluation, the stack's advance, the collision distances and 
 kernels.
 
 The work is split in two halves that compile in two processes at once (the machine's cores):
-the evaluation, the projection's step and the DMP kernels in one, the hierarchical QP's
-cascade, then its step (which finds the evaluation in the cache by then) in the other. The
+the evaluation and the projection's step in one, the hierarchical QP's cascade, then its
+step (which finds the evaluation in the cache by then) and the DMP kernels in the other. The
 evaluation and the cascade are compiled as parts of the steps (:func:`wholebody.kernels.
 as_callees`), optimised once, in the steps. This process then loads everything from the
 cache.
@@ -103,11 +103,11 @@ def _half(name: str) -> None:
             stack.evaluate(robot.update(robot.home()), DT)
         _steps(robot, ProjectionSolver())
         stack.levels[0].entries[-1].model.distances(robot.update(robot.home()), 0.05)
-        dmp.warmup()
     else:
         with as_callees():  # the cascade first, for the HQP's step
             _cascade()
         _steps(robot, HierarchicalQPSolver("daqp"))
+        dmp.warmup()
 
 
 def _cascade() -> None:

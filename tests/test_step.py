@@ -21,6 +21,7 @@ import pinocchio as pin
 import pytest
 
 from wholebody.control import Controller
+from wholebody.errors import DimensionError
 from wholebody.kernels.linalg import combine
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
@@ -319,3 +320,29 @@ def test_a_levels_gain_changed_between_steps_is_the_next_steps(humanoid, rng, so
     u = changed.step(q)
     np.testing.assert_allclose(u, controller(3.0, 0.5).step(q), atol=1e-12)
     assert np.abs(u - controller(1.0, 1.0).step(q)).max() > 1e-6  # (the gain matters here)
+
+
+@pytest.mark.parametrize("engine", ["projection", "daqp", "osqp"])
+def test_a_configuration_not_finite_is_refused_and_changes_nothing(humanoid, rng, engine):
+    """A NaN in ``q`` raises DimensionError, on the first step and on a bound one-call step
+    (checked by the kernel there), and the next steps are those of a controller that never
+    saw it."""
+    robot = humanoid
+
+    def controller():
+        solver = ProjectionSolver() if engine == "projection" else HierarchicalQPSolver(engine)
+        tasks = hands(robot)
+        stack = Stack(robot, [tasks, [PostureTask(robot, weight=1e-3)]], limits(robot))
+        return Controller(robot, stack, solver, dt=DT)
+
+    q = robot.random_configuration(rng, margin=0.2, base_range=0.3)
+    bad = q.copy()
+    bad[5] = np.nan
+    seen, clean = controller(), controller()
+    with pytest.raises(DimensionError, match="not finite"):
+        seen.step(bad)
+    for _ in range(3):
+        np.testing.assert_array_equal(seen.step(q), clean.step(q))
+        with pytest.raises(DimensionError, match="not finite"):
+            seen.step(bad)
+        q = clean.q_next.copy()

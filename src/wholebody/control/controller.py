@@ -44,7 +44,7 @@ from wholebody.control.log import ArmTrace, RunLog
 from wholebody.control.recovery import StallRecovery
 from wholebody.errors import DimensionError, WholebodyError
 from wholebody.kernels import layout as lay
-from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS, Batch
+from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS, NOT_FINITE, Batch
 from wholebody.kernels.evaluate import REF_WIDTH
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot, RobotState
@@ -279,12 +279,15 @@ class Controller:
             self._limits = None
 
     def _checked(self, q: np.ndarray) -> np.ndarray:
-        """``q`` as the kernel takes it: nq finite numbers."""
+        """``q`` as the kernel takes it: nq numbers (whether they are finite is checked by
+        the step: by the kernel where the step is one call, see :meth:`_not_finite`)."""
         if q.__class__ is not np.ndarray or q.dtype is not _F64 or q.shape != self._q_next.shape:
             q = self.robot.check_configuration(q)
-        if not math.isfinite(q.dot(q)):
-            raise DimensionError(f"configuration of robot {self.robot.name!r} is not finite: {q}")
         return q
+
+    def _not_finite(self, q: np.ndarray) -> DimensionError:
+        """The error for a configuration that is not finite (the step then wrote nothing)."""
+        return DimensionError(f"configuration of robot {self.robot.name!r} is not finite: {q}")
 
     def _call_step(self, q: np.ndarray, state: RobotState | None) -> None:
         """:meth:`_step` where the last step was one kernel call on the same plan: the same
@@ -303,6 +306,8 @@ class Controller:
             self._bound = self._call = None
             return self._step(q, state)
         self._call()  # type: ignore[misc]
+        if batch.status[0] == NOT_FINITE:
+            raise self._not_finite(q)
         self.solve_time = time.perf_counter() - start
         plan.evaluated = -1.0 if state is None else state.stamp  # type: ignore[union-attr]
         plan.last_result = None  # type: ignore[union-attr]
@@ -313,6 +318,8 @@ class Controller:
         the caller has them."""
         if self._call is not None and self.stack.plan() is self._bound:
             return self._call_step(q, state)
+        if not math.isfinite(q.dot(q)):
+            raise self._not_finite(q)
         rec = self.recovery
         stack = self.stack if rec is None else rec.stack
         plan = stack.plan()

@@ -20,7 +20,9 @@ reached ``Q_next`` (N, nq). What a call does is the bits of ``what``:
     (independent states: a batch);
 
 and ``steps`` control steps are run for each state, each from the configuration the last one
-reached (``KINEMATICS`` and ``INTEGRATE``: a closed-loop run inside the kernel). The arena holds
+reached (``KINEMATICS`` and ``INTEGRATE``: a closed-loop run inside the kernel). A state whose
+configuration is not finite is skipped: nothing is written for it but its status,
+``NOT_FINITE``. The arena holds
 the last state's outcome. The kernels release the GIL: threads may run them at once on
 copies of the arena (:meth:`wholebody.control.Controller.step_many`).
 """
@@ -44,6 +46,7 @@ __all__ = [
     "ADVANCE",
     "INTEGRATE",
     "KINEMATICS",
+    "NOT_FINITE",
     "RESET",
     "Arena",
     "Batch",
@@ -55,6 +58,7 @@ __all__ = [
 ]
 
 KINEMATICS, ADVANCE, INTEGRATE, RESET = 1, 2, 4, 8
+NOT_FINITE = -1  # a state's status when its configuration is not finite (nothing else written)
 
 Arena = namedtuple("Arena", ["f", "i", "h"])
 """A compiled stack's arenas and header (:mod:`wholebody.kernels.layout`), or a workspace's."""
@@ -81,6 +85,15 @@ def after(a: Arena, kin: Kinematics, q: np.ndarray, q_next: np.ndarray, what: in
         u = fmat(a.f, a.h, lay.F_U)[1]
         model_velocity(act[0], act[1], fvec(a.f, a.h, lay.F_ACT_A), u, kin.v)
         integrate(kin.model_i, q, kin.v, dt, q_next)
+
+
+@kernel
+def _finite(q: np.ndarray) -> bool:
+    """Whether every entry of ``q`` is finite."""
+    for j in range(q.shape[0]):
+        if not np.isfinite(q[j]):
+            return False
+    return True
 
 
 @kernel
@@ -115,6 +128,9 @@ def projection_run(
     q = np.empty(batch.Q.shape[1])
     q_next = np.empty(batch.Q.shape[1])
     for s in range(batch.Q.shape[0]):
+        if not _finite(batch.Q[s]):
+            batch.status[s] = NOT_FINITE
+            continue
         _begin(a, saved, what)
         q[:] = batch.Q[s]
         for k in range(steps):
@@ -144,6 +160,9 @@ def hqp_run(
     q = np.empty(batch.Q.shape[1])
     q_next = np.empty(batch.Q.shape[1])
     for s in range(batch.Q.shape[0]):
+        if not _finite(batch.Q[s]):
+            batch.status[s] = NOT_FINITE
+            continue
         _begin(a, saved, what)
         q[:] = batch.Q[s]
         for k in range(steps):

@@ -10,6 +10,7 @@ kernels, and so on until the tie-break and the result
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numba
@@ -152,6 +153,9 @@ def run_steps(
         solver.kernel_run(arena, kinematics, batch, steps, what, ws.record)  # (daqp only)
         return
     q = batch.Q[0]
+    if not math.isfinite(q.dot(q)):  # (as the kernels do)
+        batch.status[0] = control.NOT_FINITE
+        return
     if what & control.KINEMATICS:
         first_call("kinematics", "the control kernels", control.kinematics, kinematics, q, what)
     first_call(

@@ -22,9 +22,9 @@ reached ``Q_next`` (N, nq). What a call does is the bits of ``what``:
 and ``steps`` control steps are run for each state, each from the configuration the last one
 reached (``KINEMATICS`` and ``INTEGRATE``: a closed-loop run inside the kernel). A state whose
 configuration is not finite is skipped: nothing is written for it but its status,
-``NOT_FINITE``. The arena holds
-the last state's outcome. The kernels release the GIL: threads may run them at once on
-copies of the arena (:meth:`wholebody.control.Controller.step_many`).
+``NOT_FINITE``. The arena holds the last state's outcome. The kernels release the GIL:
+threads may run them at once on copies of the arena
+(:meth:`wholebody.control.Controller.step_many`).
 """
 
 from __future__ import annotations

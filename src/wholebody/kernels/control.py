@@ -40,6 +40,7 @@ from wholebody.kernels.evaluate import evaluate
 from wholebody.kernels.forward import forward_kinematics, integrate, model_velocity
 from wholebody.kernels.hqp import cascade
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
+from wholebody.kernels.linalg import finite1
 from wholebody.kernels.projection import project
 
 __all__ = [
@@ -88,15 +89,6 @@ def after(a: Arena, kin: Kinematics, q: np.ndarray, q_next: np.ndarray, what: in
 
 
 @kernel
-def _finite(q: np.ndarray) -> bool:
-    """Whether every entry of ``q`` is finite."""
-    for j in range(q.shape[0]):
-        if not np.isfinite(q[j]):
-            return False
-    return True
-
-
-@kernel
 def _begin(a: Arena, saved: np.ndarray, what: int) -> None:
     """A state's start: the entries' parameters as they were at the call (``RESET``)."""
     if what & RESET:
@@ -128,7 +120,7 @@ def projection_run(
     q = np.empty(batch.Q.shape[1])
     q_next = np.empty(batch.Q.shape[1])
     for s in range(batch.Q.shape[0]):
-        if not _finite(batch.Q[s]):
+        if not finite1(batch.Q[s]):
             batch.status[s] = NOT_FINITE
             continue
         _begin(a, saved, what)
@@ -160,7 +152,7 @@ def hqp_run(
     q = np.empty(batch.Q.shape[1])
     q_next = np.empty(batch.Q.shape[1])
     for s in range(batch.Q.shape[0]):
-        if not _finite(batch.Q[s]):
+        if not finite1(batch.Q[s]):
             batch.status[s] = NOT_FINITE
             continue
         _begin(a, saved, what)

@@ -107,7 +107,6 @@ from wholebody.kernels.hqp_state import (
     compose_basis,
     coords,
     finish,
-    finite1,
     finite_rows,
     inside,
     level_lsq,
@@ -123,7 +122,7 @@ from wholebody.kernels.hqp_state import (
     violated,
 )
 from wholebody.kernels.layout import fmat, fvec, ivec
-from wholebody.kernels.linalg import combine, dot, frobenius2, mv
+from wholebody.kernels.linalg import combine, dot, finite1, frobenius2, mv
 from wholebody.kernels.lsq import cod, in_box, null_space, pivot_norm, residual
 
 __all__ = [

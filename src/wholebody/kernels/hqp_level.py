@@ -49,7 +49,6 @@ from wholebody.kernels.hqp_state import (
     Multipliers,
     apply_basis,
     coords,
-    finite1,
     inside,
     level_lsq,
     level_objective,
@@ -61,7 +60,7 @@ from wholebody.kernels.hqp_state import (
     state,
 )
 from wholebody.kernels.layout import fvec
-from wholebody.kernels.linalg import combine, dot, gather_rows, mm, mtm, mtv, mv
+from wholebody.kernels.linalg import combine, dot, finite1, gather_rows, mm, mtm, mtv, mv
 from wholebody.kernels.lsq import bvls, cod, columns_of, gradient, null_space, residual
 
 __all__ = [

@@ -30,7 +30,7 @@ import numpy as np
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
-from wholebody.kernels.linalg import combine, dot, level_report, mtv, mv
+from wholebody.kernels.linalg import combine, dot, finite1, level_report, mtv, mv
 from wholebody.kernels.lsq import in_box, product
 
 __all__ = [
@@ -46,7 +46,6 @@ __all__ = [
     "compose_basis",
     "coords",
     "finish",
-    "finite1",
     "finite2",
     "finite_rows",
     "inside",
@@ -129,15 +128,6 @@ QP = namedtuple("QP", ["H", "g", "Q", "qb"])
 
 
 # ---------------------------------------------------------------------- small helpers
-@kernel
-def finite1(a: np.ndarray) -> bool:
-    """Whether every entry of the vector ``a`` is finite."""
-    for j in range(a.shape[0]):
-        if not math.isfinite(a[j]):
-            return False
-    return True
-
-
 @kernel
 def finite2(A: np.ndarray) -> bool:
     """Whether every entry of the matrix ``A`` is finite."""

@@ -24,6 +24,7 @@ __all__ = [
     "cholesky_inverse",
     "combine",
     "dot",
+    "finite1",
     "fortran",
     "frobenius2",
     "gather_rows",
@@ -51,6 +52,15 @@ def dot(x: np.ndarray, y: np.ndarray) -> float:
     for k in range(x.shape[0]):
         s += x[k] * y[k]
     return s
+
+
+@kernel
+def finite1(a: np.ndarray) -> bool:
+    """Whether every entry of the vector ``a`` is finite."""
+    for j in range(a.shape[0]):
+        if not math.isfinite(a[j]):
+            return False
+    return True
 
 
 @kernel

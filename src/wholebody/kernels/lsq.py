@@ -27,6 +27,7 @@ from wholebody.kernels.lapack import gels, geqp3, geqrf, gesdd, orgqr, trtri, tr
 from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
     REFINE_KAPPA,
+    cholesky_inverse,
     combine,
     dot,
     fortran,
@@ -136,40 +137,18 @@ def _rank_certificate(M: np.ndarray, Rinv: np.ndarray, rtol: float, floor: float
 
 @kernel
 def _gram_inverse(M: np.ndarray) -> tuple[bool, np.ndarray]:
-    """``(ok, L^-1)`` for the Cholesky factor ``M^T M = L L^T`` of a tall ``M`` (m x r):
-    ``L^-1`` lower triangular, C-ordered, its upper triangle zero; ok False where ``M^T M``
-    is not positive definite to working precision (LAPACK's ``potrf`` criterion). Plain
-    loops: for a few dozen columns LAPACK's per-call overhead costs more than the
-    arithmetic."""
+    """``(ok, L^-1)`` for the Cholesky factor ``M^T M = L L^T`` of a tall ``M`` (m x r)
+    (:func:`~wholebody.kernels.linalg.cholesky_inverse` of its lower triangle, built with the
+    zero entries of ``M`` skipped: bound rows are unit rows)."""
     m, r = M.shape
-    X = np.zeros((r, r))
-    for q in range(m):  # the lower triangle of M^T M, zero entries of M skipped
+    G = np.zeros((r, r))
+    for q in range(m):
         for i in range(r):
             a = M[q, i]
             if a != 0.0:
                 for j in range(i + 1):
-                    X[i, j] += a * M[q, j]
-    for j in range(r):  # the Cholesky factor L, in place
-        d = X[j, j]
-        for k in range(j):
-            d -= X[j, k] * X[j, k]
-        if not d > 0.0:  # (NaN too)
-            return False, X
-        d = math.sqrt(d)
-        X[j, j] = d
-        for i in range(j + 1, r):
-            t = X[i, j]
-            for k in range(j):
-                t -= X[i, k] * X[j, k]
-            X[i, j] = t / d
-    for j in range(r):  # L^-1, in place, column by column (L's columns right of j unread yet)
-        X[j, j] = 1.0 / X[j, j]
-        for i in range(j + 1, r):
-            t = 0.0
-            for k in range(j, i):
-                t -= X[i, k] * X[k, j]
-            X[i, j] = t / X[i, i]
-    return True, X
+                    G[i, j] += a * M[q, j]
+    return cholesky_inverse(G)
 
 
 @kernel

@@ -288,19 +288,7 @@ class HierarchicalQPSolver(Solver):
                 f"HierarchicalQPSolver({self.engine_name!r}): a batch or several steps in "
                 "one call need the engine 'daqp' (the QPs are then solved inside the kernel)"
             )
-        first_call(
-            "hqp",
-            "the hierarchical QP kernels",
-            control.hqp_run,
-            arena,
-            workspace,
-            kinematics,
-            batch,
-            self.parameters(),
-            self._daqp_settings,
-            steps,
-            what,
-        )
+        first_call(*self._kernel_call(arena, workspace, kinematics, batch, steps, what))
 
     def stepper(
         self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
@@ -311,17 +299,30 @@ class HierarchicalQPSolver(Solver):
             return super().stepper(plan, kinematics, batch, what)
         arena = plan.step_buffers(batch.refs.shape[1]).arena
         ws = self.workspace(plan).record
-        return BoundCall(
+        return BoundCall(*self._kernel_call(arena, ws, kinematics, batch, 1, what))
+
+    def _kernel_call(
+        self,
+        arena: control.Arena,
+        workspace: control.Arena | None,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+    ) -> tuple[Any, ...]:
+        """The step kernel's name, notice, dispatcher and arguments (for :func:`first_call`
+        and :class:`BoundCall`)."""
+        return (
             "hqp",
             "the hierarchical QP kernels",
             control.hqp_run,
             arena,
-            ws,
+            workspace,
             kinematics,
             batch,
             self._par,
             self._daqp_settings,
-            1,
+            steps,
             what,
         )
 

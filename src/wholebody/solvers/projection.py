@@ -103,6 +103,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -214,17 +215,7 @@ class ProjectionSolver(Solver):
     ) -> None:
         """:func:`wholebody.kernels.control.projection_run` on an arena (a plan's, or a copy
         of it: a thread's share of a batch); ``workspace``: unused (the HQP's)."""
-        first_call(
-            "projection",
-            "the projection kernels",
-            control.projection_run,
-            arena,
-            kinematics,
-            batch,
-            self.parameters(),
-            steps,
-            what,
-        )
+        first_call(*self._kernel_call(arena, kinematics, batch, steps, what))
 
     def stepper(
         self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
@@ -232,7 +223,19 @@ class ProjectionSolver(Solver):
         """The kernel call of one step with its arguments bound (the settings are read from
         their vector at each call)."""
         arena = plan.step_buffers(batch.refs.shape[1]).arena
-        return BoundCall(
+        return BoundCall(*self._kernel_call(arena, kinematics, batch, 1, what))
+
+    def _kernel_call(
+        self,
+        arena: control.Arena,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+    ) -> tuple[Any, ...]:
+        """The step kernel's name, notice, dispatcher and arguments (for :func:`first_call`
+        and :class:`BoundCall`)."""
+        return (
             "projection",
             "the projection kernels",
             control.projection_run,
@@ -240,7 +243,7 @@ class ProjectionSolver(Solver):
             kinematics,
             batch,
             self._par,
-            1,
+            steps,
             what,
         )
 

@@ -170,6 +170,17 @@ def test_rows_and_box_are_pinocchios_and_the_limits_definitions(humanoid, rng, s
 
 
 # ---------------------------------------------------------------------- the one-call step
+def four_calls(robot, stack, solver, refs, q, k):
+    """Step k of the loop of four calls (the references set as ``Controller`` samples them,
+    the pose at the step's start and the twist at its midpoint): ``(u, q_next, result)``."""
+    for task, traj in refs.items():
+        task.set_target(traj.sample(k * DT).pose, traj.sample((k + 0.5) * DT).twist)
+    state = robot.update(q)
+    result = solver.solve(stack, state, DT)
+    stack.advance(state, DT, result=result)
+    return result.u, robot.integrate(q, result.u, DT), result
+
+
 @pytest.mark.parametrize("solver_name", sorted(SOLVERS))
 @pytest.mark.parametrize("stack_name", ["paper", "chained"])
 def test_one_call_step_is_the_loop_of_four_calls(humanoid, rng, solver_name, stack_name):
@@ -194,14 +205,7 @@ def test_one_call_step_is_the_loop_of_four_calls(humanoid, rng, solver_name, sta
                 u = controller.step(q)
                 q = controller.q_next.copy()
             else:
-                for task, traj in refs.items():
-                    pose, twist = traj.sample(k * DT).pose, traj.sample((k + 0.5) * DT).twist
-                    task.set_target(pose, twist)
-                state = robot.update(q)
-                result = solver.solve(stack, state, DT)
-                stack.advance(state, DT, result=result)
-                u = result.u
-                q = robot.integrate(q, u, DT)
+                u, q, result = four_calls(robot, stack, solver, refs, q, k)
             path.append(np.r_[u, q])
             statuses.append(int(controller.result.status) if fast else int(result.status))
         controller.close()
@@ -273,13 +277,7 @@ def test_controller_step_with_an_engine_solving_in_python(humanoid, engine):
                 u = controller.step(q)
                 q = controller.q_next.copy()
             else:
-                for task, traj in refs.items():
-                    task.set_target(traj.sample(k * DT).pose, traj.sample((k + 0.5) * DT).twist)
-                state = robot.update(q)
-                result = solver.solve(stack, state, DT)
-                stack.advance(state, DT, result=result)
-                u = result.u
-                q = robot.integrate(q, u, DT)
+                u, q, _ = four_calls(robot, stack, solver, refs, q, k)
             path.append(np.r_[u, q])
         controller.close()
         paths.append(np.array(path))

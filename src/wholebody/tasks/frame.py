@@ -211,25 +211,20 @@ class PoseTask(Task):
     def set_target(self, pose: np.ndarray | pin.SE3, twist: np.ndarray | None = None) -> None:
         """Target pose (4x4 or SE3) and twist ``[v (m/s), w (rad/s)]`` (zero when omitted), in
         the task's axes (see the subclass)."""
-        if (  # a control loop's call: a plain 4x4 pose, no twist (checked, written in one call)
-            twist is None
-            and pose.__class__ is np.ndarray
-            and pose.dtype is _F64  # type: ignore[union-attr]
-            and pose.shape == (4, 4)  # type: ignore[union-attr]
-            and _plain(pose)  # type: ignore[arg-type]
-            and set_target(self._params, pose, _ZERO_TWIST) == POSE_FINE
-        ):
-            return
-        try:
-            T = float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, "pose")
+        try:  # (a plain float array, as a control loop passes, is taken as it is)
+            T = (
+                pose
+                if pose.__class__ is np.ndarray and pose.dtype is _F64  # type: ignore[union-attr]
+                else float_array(pose.homogeneous if isinstance(pose, pin.SE3) else pose, "pose")
+            )
             t = _ZERO_TWIST if twist is None else float_array(twist, "twist")
         except DimensionError:
             T = t = _NO_TWIST  # (the checks below raise with the task's name)
         if (
-            T.shape == (4, 4)
+            T.shape == (4, 4)  # type: ignore[union-attr]
             and t.shape == (6,)
-            and _plain(T)
-            and _plain(t)
+            and _plain(T)  # type: ignore[arg-type]
+            and (t is _ZERO_TWIST or _plain(t))
             and set_target(self._params, T, t) == POSE_FINE
         ):  # checked and written by one kernel call
             return

@@ -244,6 +244,46 @@ def test_a_tall_level_is_solved_accurately_at_every_condition_number(rng, kappa)
     assert worst <= 10.0
 
 
+@pytest.mark.parametrize("kappa", [1.0, 3e2, 3e3, 3e4])
+def test_a_wide_level_then_a_diagonal_one_are_exact_at_every_condition_number(rng, kappa):
+    # A wide first level of full row rank (solved by the Cholesky factor of M M^T where that
+    # is accurate, its null space then made only if a stage needs it) above a diagonal level
+    # (a posture in its metric: solved on that null space without a basis), and a third
+    # level below them, with and without the box binding: the recursive pseudo-inverse where
+    # no bound is active, the levels' optimality conditions everywhere.
+    solver = HierarchicalQPSolver()
+    n, qp = 9, 0
+    for trial in range(24):
+        U, _ = np.linalg.qr(rng.normal(size=(4, 4)))
+        V, _ = np.linalg.qr(rng.normal(size=(n, 4)))
+        A1 = (U * np.logspace(0, -np.log10(kappa), 4)) @ V.T
+        A2 = np.diag(rng.uniform(0.02, 1.0, n)) if trial % 3 else rng.normal(size=(2, n))
+        A3 = 0.1 * np.eye(n)
+        rows = [(A1, rng.normal(size=4)), (A2, rng.normal(size=len(A2))), (A3, rng.normal(size=n))]
+        empty = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
+        levels = [LevelProblem(f"l{k}", A, b, *empty, {"t": slice(0, len(b))})
+                  for k, (A, b) in enumerate(rows)]  # fmt: skip
+        box = 1e6 if trial % 2 else 0.3
+        lower, upper = -np.full(n, box), np.full(n, box)
+        if trial % 4 == 1:  # 0 outside the box, the first level's solution p inside it
+            p = np.linalg.pinv(A1) @ rows[0][1]
+            lower[0], upper[0] = (0.5 * p[0], box) if p[0] > 0 else (-box, 0.5 * p[0])
+        problem = StackProblem(levels, lower, upper, np.ones(n), {})
+        u = solver.solve_problem(problem).u
+        qp += any(r.qp for r in solver.levels)
+        kkt = kkt_residuals(equalities(problem), problem.lower, problem.upper, u)
+        assert kkt.max() < 1e-6, (trial, kkt)
+        if trial % 4 == 3:  # the recursive pseudo-inverse on orthonormal null-space bases (SVD)
+            x, Z = np.zeros(n), np.eye(n)
+            for A, b in rows:
+                _, sv, Vt = np.linalg.svd(A @ Z)
+                rank = int(np.sum(sv > 1e-9 * max(1.0, np.linalg.norm(A, 2))))
+                x = x + Z @ np.linalg.pinv(A @ Z, rcond=1e-9 / kappa) @ (b - A @ x)
+                Z = Z @ Vt[rank:].T
+            assert np.abs(u - x).max() <= 1e-12 * kappa * max(1.0, np.abs(x).max())
+    assert qp >= 6
+
+
 # ---------------------------------------------------------------------- the robot
 def hands(robot, kp=10.0):
     return FrameTask(robot, "left_tool", kp=kp), FrameTask(robot, "right_tool", kp=kp)

@@ -332,17 +332,22 @@ def test_a_task_level_of_rows_s_identity_is_its_closed_form_below_wide_levels(rn
             assert np.abs(A @ move).max() <= 1e-14 * np.linalg.norm(A, 2) * np.abs(move).max()
 
 
+@pytest.mark.parametrize("diagonal", ["s I", "non-uniform"])
 @pytest.mark.parametrize("tight", [False, True])
-def test_rows_s_identity_take_the_general_routes_step(rng, tight):
-    # The shortcut for rows s I (tasks) is the step of the general route, with or without
-    # the box: the same level with one off-diagonal entry at 1e-300 (numerically nothing,
-    # structurally not s I) goes through level_step and, in SNS, the task's saturation.
+def test_a_posture_level_takes_the_general_routes_step(rng, tight, diagonal):
+    # The shortcuts for a posture level below a certified one, rows s I (tasks) or a
+    # non-uniform diagonal (solved on the complement of the rows above, without the basis
+    # level_step builds), are the step of the general route, with or without the box: the
+    # same level with one off-diagonal entry at 1e-300 (numerically nothing, structurally
+    # not diagonal) goes through level_step and, in SNS, the task's saturation. With no
+    # bound active, the non-uniform one is also the least squares on what the hands leave.
     n, solver = 23, ProjectionSolver()
     for _ in range(5):
         A0, b0, b1 = _wide(rng, 12, n, smallest=0.5), rng.normal(size=12), rng.normal(size=n)
+        weights = np.ones(n) if diagonal == "s I" else rng.uniform(0.2, 2.0, n)
         u = {}
         for off in (0.0, 1e-300):
-            A1 = np.eye(n)
+            A1 = np.diag(weights)
             A1[3, 7] = off
             box = np.full(n, 1.5 if tight else 1e12)
             problem = StackProblem([_level("hands", A0, b0), _level("posture", A1, b1)],
@@ -352,6 +357,12 @@ def test_rows_s_identity_take_the_general_routes_step(rng, tight):
         if tight:
             assert np.abs(u[0.0]).max() <= 1.5 + 1e-9 and result.status != SolverStatus.OK
         np.testing.assert_allclose(u[0.0], u[1e-300], rtol=0, atol=1e-11 * np.abs(u[0.0]).max())
+        if not tight:
+            N, W = scipy.linalg.null_space(A0), np.diag(weights)
+            expected = np.linalg.pinv(A0) @ b0
+            expected += N @ np.linalg.lstsq(W @ N, b1 - W @ expected, rcond=None)[0]
+            np.testing.assert_allclose(u[0.0], expected, rtol=0,
+                                       atol=1e-10 * np.abs(expected).max())  # fmt: skip
 
 
 class _Box(Constraint):

@@ -3,7 +3,10 @@ in one call with daqp solving its QPs from the kernel.
 
 The method is :class:`wholebody.solvers.hqp.HierarchicalQPSolver`'s (its module docstring has
 the maths): level by level, in the free directions the levels above leave, the exact
-unconstrained candidate by a complete orthogonal decomposition (:mod:`wholebody.kernels.lsq`);
+unconstrained candidate by a complete orthogonal decomposition (:mod:`wholebody.kernels.lsq`;
+for a level of certain full row rank, the Cholesky factor of ``M M^T``, its null space made
+only where a stage needs it, and a diagonal level below it, a posture, solved on that null
+space without a basis: :func:`_diagonal_deferred`);
 where it leaves the bounds, the level's QP, its answer polished and checked against the
 level's optimality conditions, with proximal steps where they fail
 (:mod:`wholebody.kernels.hqp_level`); then the level's rows, and the constraints its optimum
@@ -66,6 +69,7 @@ from wholebody.kernels.hqp_state import (
     R_STATUS,
     S_ANYQP,
     S_BOXBAD,
+    S_DEFER_R,
     S_EXACT,
     S_HASBOX,
     S_K,
@@ -106,6 +110,8 @@ from wholebody.kernels.hqp_state import (
     box_row,
     compose_basis,
     coords,
+    defer_basis,
+    diagonal_step,
     finish,
     finite_rows,
     inside,
@@ -119,11 +125,12 @@ from wholebody.kernels.hqp_state import (
     restrict_into,
     skip_nonfinite,
     state,
+    views,
     violated,
 )
 from wholebody.kernels.layout import fmat, fvec, ivec
-from wholebody.kernels.linalg import combine, dot, finite1, frobenius2, mv
-from wholebody.kernels.lsq import cod, in_box, null_space, pivot_norm, residual
+from wholebody.kernels.linalg import combine, dot, finite1, frobenius2, mv, null_basis
+from wholebody.kernels.lsq import cod, in_box, null_space, pivot_norm, residual, wide_solve
 
 __all__ = [
     "DONE",
@@ -142,6 +149,7 @@ __all__ = [
 ]
 
 DONE, NEED_QP, NEED_PROXIMAL, NEED_TIE, NEXT = 0, 1, 2, 3, 4
+DEFERRED = -2  # _level_step's null_cols where the level's null space is not computed yet
 
 # QP statuses as the engines report them (wholebody.solvers.qp.QPStatus)
 QP_SOLVED, QP_INACCURATE, QP_INFEASIBLE, QP_FAILED = 0, 1, 2, 3
@@ -186,8 +194,10 @@ def advance(f, i, h, wf, wi, wh, par) -> int:
         if _level(s, w, par, st[S_K]) == NEED_QP:
             return NEED_QP
         st[S_K] += 1
+    if not st[S_ANYQP]:  # (the candidates were taken: x is the minimum-norm point)
+        return _clip(w)
     _, x, basis, bounds = state(w)
-    if basis.r and st[S_ANYQP]:
+    if basis.r:
         t = coords(basis, x)
         xc = combine(x, -1.0, apply_basis(basis, t))
         if inside(xc, bounds):
@@ -205,7 +215,9 @@ def _level_step(
     """Level k's unconstrained step in the free coordinates, the exact candidate:
     ``(code, y, rank, smax, known, null_cols)`` (:func:`wholebody.kernels.lsq.cod`), code
     DONE where the level is skipped (non-finite rows, a failed decomposition), else NEED_QP;
-    its least squares ``M``, ``c`` go to the workspace, the null space of M to ``W_NULL``.
+    its least squares ``M``, ``c`` go to the workspace, the null space of M to ``W_NULL``
+    (``null_cols`` DEFERRED where M has full row rank for certain: not yet computed, see
+    :func:`_close_deferred`).
     ``rows``, ``x``, ``basis``: the level's rows and the cascade's state."""
     rank_tol = par[P_RANK]
     A, b = rows.A, rows.b
@@ -228,6 +240,10 @@ def _level_step(
             y[j] /= sw
         return NEED_QP, y, r, sw, True, -1
     floor = 0.0 if basis.identity else rank_tol * math.sqrt(frobenius2(A))
+    if m < r:
+        done, y, _ = wide_solve(M, c, t, rank_tol, floor)
+        if done:  # full row rank for certain: the null space made only where needed
+            return NEED_QP, y, m, 0.0, False, DEFERRED
     info, rank, y, Q2, smax, known = cod(M, c, t, rank_tol, floor)
     if info != 0:
         if not finite_rows(rows):
@@ -250,6 +266,8 @@ def _level_step(
 def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     """Level k up to its QP: the unconstrained candidate, taken where it meets the bounds and
     the level's inequality rows (DONE); else the QP is set up and NEED_QP returned."""
+    if _diagonal_deferred(s, w, par, k):
+        return DONE
     tol = par[P_TOL]
     st, x, basis, bounds = state(w)
     rep = report_row(w, k)
@@ -282,10 +300,13 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     Cx = mv(rows.C, xc) if met and p else np.zeros(0)
     for j in range(Cx.shape[0]):  # and the level's inequality rows, within the tolerance
         met = met and Cx[j] >= rows.lo[j] - tol and Cx[j] <= rows.hi[j] + tol
+    if null_cols == DEFERRED:
+        _close_deferred(w, met)
     if met:
         x[:] = xc
         st[S_EXACT] = exact
-        _close_rows(w)
+        if null_cols != DEFERRED:
+            _close_rows(w)
         _close_rest(s, w, par, k, rows, x, bounds)
         return DONE
     st[S_ANYQP] = 1
@@ -302,6 +323,48 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     fvec(w.f, w.h, W_SCAL)[C_SMAX] = smax
     qp_setup(s, w, par, k)
     return NEED_QP
+
+
+@kernel
+def _close_deferred(w: Arena, met: bool) -> None:
+    """After a level of certain full row rank: where its candidate is taken, its null space
+    deferred (:func:`defer_basis`); else made into ``W_NULL`` for the QP and the close."""
+    st = ivec(w.i, w.h, W_STATE)
+    m, r = st[S_M], st[S_R]
+    if met:
+        defer_basis(w, m)
+        return
+    V = null_basis(fvec(w.f, w.h, W_M)[: m * r].reshape((m, r)))
+    fvec(w.f, w.h, W_NULL)[: r * (r - m)].reshape((r, r - m))[:, :] = V
+    st[S_NULL] = r - m
+
+
+@kernel
+def _diagonal_deferred(s: Arena, w: Arena, par: np.ndarray, k: int) -> bool:
+    """Level k where its rows are diagonal (a posture task, objectives; no inequality rows)
+    and the free directions are the identity's, deferred (:func:`defer_basis`): its candidate
+    ``x + dx`` (:func:`diagonal_step`), taken where it meets the bounds, which leaves nothing
+    free (True); False where the level is not such or its candidate is not taken
+    (:func:`_level` then solves it)."""
+    st = ivec(w.i, w.h, W_STATE)
+    if not st[S_DEFER_R] or st[S_ZI] != 1:
+        return False
+    _, x, _, bounds = views(w)
+    rows = level_rows(s, k)
+    if rows.A.shape[0] != x.shape[0] or rows.C.shape[0]:
+        return False
+    ok, dx = diagonal_step(w, rows.A, residual(rows.A, x, rows.b), par[P_RANK])
+    xc = combine(x, 1.0, dx)
+    if not (ok and finite1(xc) and inside(xc, bounds)):
+        return False
+    rep = report_row(w, k)
+    rep[R_FREE], rep[R_RANK] = st[S_R], st[S_R]
+    x[:] = xc
+    st[S_EXACT] = in_box(xc, box_row(w, 2), box_row(w, 3))
+    st[S_RANK], st[S_NULL], st[S_M], st[S_P] = st[S_R], -1, rows.A.shape[0], 0
+    st[S_DEFER_R], st[S_R], st[S_ZI] = 0, 0, 0
+    _close_rest(s, w, par, k, rows, x, bounds)
+    return True
 
 
 # ---------------------------------------------------------------------- after a QP

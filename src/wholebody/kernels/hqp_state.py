@@ -4,7 +4,9 @@ report of its outcome.
 Between the stage kernels of :mod:`wholebody.kernels.hqp` the cascade's state lives in a
 workspace arena (regions ``W_*`` below, laid out like :mod:`wholebody.kernels.layout`'s and
 sized by :class:`wholebody.solvers.compiled_hqp.Workspace`): the point ``x``, the relaxed box,
-the basis ``Z`` of the free directions, the inherited inequality rows, the current level's
+the basis ``Z`` of the free directions (or, after a level certified full rank, ``Z`` and
+that level's rows, their null space computed only where a later stage needs one: see
+:func:`defer_basis`), the inherited inequality rows, the current level's
 least squares and QP, and per level its report. Everything is in the scaled coordinates of
 the evaluated stack (:mod:`wholebody.solvers.stack`). The kernels read it as a few records:
 
@@ -30,7 +32,16 @@ import numpy as np
 from wholebody.kernels import kernel
 from wholebody.kernels import layout as lay
 from wholebody.kernels.layout import fmat, fvec, imat, ivec
-from wholebody.kernels.linalg import combine, dot, finite1, level_report, mtv, mv
+from wholebody.kernels.linalg import (
+    combine,
+    complement_solve,
+    dot,
+    finite1,
+    level_report,
+    mtv,
+    mv,
+    null_basis,
+)
 from wholebody.kernels.lsq import in_box, product
 
 __all__ = [
@@ -45,6 +56,8 @@ __all__ = [
     "box_row",
     "compose_basis",
     "coords",
+    "defer_basis",
+    "diagonal_step",
     "finish",
     "finite2",
     "finite_rows",
@@ -94,7 +107,8 @@ N_WREGIONS = 18
 
 S_K, S_R, S_ZI, S_ANYQP, S_EXACT, S_NINH, S_NV, S_NROWS, S_HASBOX, S_RANK = range(10)
 S_NULL, S_M, S_P, S_PROX, S_BOXBAD, S_TIEFAIL, S_TIE, S_TIESTATUS = range(10, 18)
-S_WIDTH = 18
+S_DEFER_R, S_DEFER_M = 18, 19  # a deferred basis (defer_basis): Z's columns, the level's rows
+S_WIDTH = 20
 C_SMAX, C_D, C_TOL, C_F, C_CLIP, C_RES = range(6)
 R_FREE, R_RANK, R_QP, R_FAILED, R_ITER, R_RETRIES, R_STATUS, R_FAIL, R_OBJBAD = range(9)
 R_WIDTH = 9
@@ -277,14 +291,63 @@ def task_range(tasks: np.ndarray, k: int) -> tuple[int, int]:
 @kernel
 def state(w: Arena):
     """The cascade's state (views of the workspace): ``(st, x, basis, bounds)``, ``st`` the
-    integers ``S_*``."""
+    integers ``S_*``; a deferred basis is made first (:func:`defer_basis`)."""
+    st = ivec(w.i, w.h, W_STATE)
+    if st[S_DEFER_R]:
+        r, m = st[S_DEFER_R], st[S_DEFER_M]
+        st[S_R], st[S_DEFER_R] = r, 0
+        compose_basis(w, null_basis(fvec(w.f, w.h, W_M)[: m * r].reshape((m, r))))
+    return views(w)
+
+
+@kernel
+def views(w: Arena):
+    """:func:`state` as the workspace holds it, a deferred basis left deferred (``basis``
+    is then the one before the deferring level)."""
     st = ivec(w.i, w.h, W_STATE)
     x = fvec(w.f, w.h, W_X)
     n, r, ni, P = x.shape[0], st[S_R], st[S_NINH], w.h[W_INHB, 3]
+    if st[S_DEFER_R]:
+        r = st[S_DEFER_R]
     G = fvec(w.f, w.h, W_INH)[: ni * n].reshape((ni, n))
     gb = fvec(w.f, w.h, W_INHB)
     basis = Basis(fvec(w.f, w.h, W_Z)[: n * r].reshape((n, r)), r, st[S_ZI] == 1)
     return st, x, basis, Bounds(box_row(w, 0), box_row(w, 1), G, gb[:ni], gb[P : P + ni])
+
+
+@kernel
+def defer_basis(w: Arena, m: int) -> None:
+    """The free directions become ``Z`` less the row space of the level's ``M = A Z`` (m x r
+    in ``W_M``, of full row rank m < r for certain), without computing its null space:
+    :func:`state` makes the basis where a stage needs one; a diagonal level below, where Z is
+    the identity, needs none (:func:`diagonal_step`)."""
+    st = ivec(w.i, w.h, W_STATE)
+    st[S_DEFER_R], st[S_DEFER_M] = st[S_R], m
+    st[S_R] -= m
+
+
+@kernel
+def diagonal_step(w: Arena, A: np.ndarray, c: np.ndarray, rtol: float):
+    """``(ok, dx)``: ``dx = argmin ||A dx - c||`` over the free directions of a basis deferred
+    from the identity (``M dx = 0``, ``M`` in ``W_M``) for a nonsingular diagonal ``A`` (n x
+    n), by :func:`~wholebody.kernels.linalg.complement_solve`. Not ok where A is not such, or
+    where the certificate does not show the cascade's rank rule keeping every free direction
+    (``min |a_j| > 1e3 rtol ||a||``: ``A Z`` has singular values in ``[min |a_j|, max
+    |a_j|]``), or the solve's."""
+    st = ivec(w.i, w.h, W_STATE)
+    n, m = A.shape[0], st[S_DEFER_M]
+    a = np.empty(n)
+    for i in range(n):
+        for j in range(n):
+            if i != j and A[i, j] != 0.0:
+                return False, a
+        a[i] = A[i, i]
+    amin, norm2 = math.inf, 0.0
+    for i in range(n):
+        amin, norm2 = min(amin, abs(a[i])), norm2 + a[i] * a[i]
+    if not (amin > 1e3 * rtol * math.sqrt(norm2) and norm2 < math.inf):
+        return False, a
+    return complement_solve(fvec(w.f, w.h, W_M)[: m * n].reshape((m, n)), a, c)
 
 
 @kernel

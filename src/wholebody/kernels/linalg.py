@@ -23,6 +23,7 @@ __all__ = [
     "REFINE_KAPPA",
     "cholesky_inverse",
     "combine",
+    "complement_solve",
     "dot",
     "finite1",
     "fortran",
@@ -39,6 +40,7 @@ __all__ = [
     "normal_solve",
     "null_basis",
     "scatter_rows",
+    "trace",
 ]
 
 NORMAL_KAPPA = 1e4  # as wholebody._numeric
@@ -196,6 +198,15 @@ def fortran(A: np.ndarray) -> np.ndarray:
 
 
 @kernel
+def trace(G: np.ndarray) -> float:
+    """``tr G``, the sum of the square ``G``'s diagonal."""
+    t = 0.0
+    for k in range(G.shape[0]):
+        t += G[k, k]
+    return t
+
+
+@kernel
 def frobenius2(A: np.ndarray) -> float:
     """``||A||_F^2`` of a matrix."""
     total = 0.0
@@ -276,6 +287,38 @@ def normal_solve(M: np.ndarray, H: np.ndarray, c: np.ndarray, kappa2: float) -> 
     if kappa2 > REFINE_KAPPA * REFINE_KAPPA:
         y += mtm(H, mm(H, mtm(M, c - mm(M, y))))
     return y
+
+
+@kernel
+def complement_solve(M: np.ndarray, a: np.ndarray, c: np.ndarray) -> tuple[bool, np.ndarray]:
+    """``(ok, dx)``: ``dx = argmin ||diag(a) dx - c||`` subject to ``M dx = 0`` (M: m x r of
+    full row rank, ``a``: r nonzero entries), without a basis of M's null space: with ``D =
+    diag(a)^2``, ``dx = D^-1 (a c - M^T l)`` where ``M D^-1 M^T l = M (c / a)``, by the
+    Cholesky factor of ``S = M D^-1 M^T``, the constraint's round-off projected out once more
+    above ``REFINE_KAPPA``. Not ok where ``S`` has no factor or its Frobenius condition
+    exceeds ``NORMAL_KAPPA``. A diagonal level (a posture in its metric) below a level of full
+    row rank, in both backends."""
+    m, r = M.shape
+    dinv, dx = np.empty(r), np.empty(r)
+    for k in range(r):
+        dinv[k] = 1.0 / (a[k] * a[k])
+        dx[k] = c[k] / a[k]
+    S = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            t = 0.0
+            for k in range(r):
+                t += M[i, k] * M[j, k] * dinv[k]
+            S[i, j] = t
+    ok, X = cholesky_inverse(S)
+    k2 = frobenius2(X) * trace(S) if ok else math.inf
+    if not k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+        return False, dx
+    for _ in range(2 if k2 > REFINE_KAPPA * REFINE_KAPPA else 1):
+        g = mtv(M, mtv(X, mv(X, mv(M, dx))))  # M^T S^-1 M dx: dx's part off M's null space
+        for k in range(r):
+            dx[k] -= g[k] * dinv[k]
+    return True, dx
 
 
 @kernel

@@ -5,7 +5,9 @@ One rank rule everywhere: singular values (or the diagonal of a pivoted QR) abov
 ``max(rtol s_max, floor)`` count. :func:`cod` solves ``min ||M y - c||`` at minimum norm by a
 complete orthogonal decomposition (the pivoted QR of ``M^T``); where full column rank is
 certain it takes a cheaper route to the same answer: the normal equations where they are
-accurate, else LAPACK's QR. "Certain" is a certificate, not a guess: the Frobenius condition
+accurate, else LAPACK's QR. :func:`wide_solve` is the route of a wide ``M`` of certain full
+row rank (the Cholesky factor of ``M M^T``), which leaves the null space to be made only where
+it is needed. "Certain" is a certificate, not a guess: the Frobenius condition
 number from the triangular factor's inverse, times a safety margin (``_MARGIN``) for
 round-off, proves that the rank rule would keep every column. :func:`null_space` does the same
 for a basis of a null space (a QR where full row rank is certain, else the SVD). :func:`bvls`
@@ -32,6 +34,7 @@ from wholebody.kernels.linalg import (
     dot,
     fortran,
     frobenius2,
+    gram_rows,
     mtv,
     mv,
 )
@@ -47,6 +50,7 @@ __all__ = [
     "pivot_norm",
     "product",
     "residual",
+    "wide_solve",
 ]
 
 _MARGIN = 1e3  # safety factor of the full-rank certificates (round-off)
@@ -203,6 +207,23 @@ def _tall_solve(M: np.ndarray, c: np.ndarray, rtol: float, floor: float):
             R[i, j] = lqr[i, j]
     done = trtri(R, False) == 0 and _rank_certificate(M, R, rtol, floor) >= 0
     return done, z[:r].copy(), True
+
+
+@kernel
+def wide_solve(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: float):
+    """``min ||M y - c||`` for a wide ``M`` (m < r) at minimum distance to ``-t``, where full
+    row rank is certain: ``(done, y, L^-1)``, ``y = M^T (M M^T)^-1 (c + M t) - t`` by the
+    Cholesky factor ``M M^T = L L^T`` where the certificate shows it accurate (as
+    :func:`_tall_solve`: condition at most ``NORMAL_KAPPA``, refined once above
+    ``REFINE_KAPPA``); not done where it is not (:func:`cod` then decides the rank)."""
+    ok, X = cholesky_inverse(gram_rows(M))
+    k2 = _rank_certificate(M.T, X, rtol, floor) if ok else -1.0
+    if not 0.0 <= k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+        return False, t.copy(), X
+    y = combine(mtv(M, mtv(X, mv(X, combine(c, 1.0, mv(M, t))))), -1.0, t)
+    if k2 > REFINE_KAPPA * REFINE_KAPPA:
+        y = combine(y, 1.0, mtv(M, mtv(X, mv(X, residual(M, y, c)))))
+    return True, y, X
 
 
 @kernel

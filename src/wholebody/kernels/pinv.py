@@ -31,6 +31,7 @@ from wholebody.kernels.linalg import (
     NORMAL_KAPPA,
     cholesky_inverse,
     combine,
+    complement_solve,
     fortran,
     frobenius2,
     gram_cols,
@@ -42,11 +43,13 @@ from wholebody.kernels.linalg import (
     normal_solve,
     null_basis,
     scatter_rows,
+    trace,
 )
 
 __all__ = [
     "Free",
     "basis",
+    "diagonal_step",
     "free_of",
     "free_rank",
     "identity_rows",
@@ -324,20 +327,11 @@ def _zero_fixed_rows(Z: np.ndarray) -> np.ndarray:
 
 
 @kernel
-def _trace(G: np.ndarray) -> float:
-    """``_trace(G)``."""
-    t = 0.0
-    for k in range(G.shape[0]):
-        t += G[k, k]
-    return t
-
-
-@kernel
 def _certify_wide(M: np.ndarray, eps: float, rank_tol: float):
     """The reference's certificate of ``G = M M^T`` (m x m): ``(ok, L^-1)``."""
     dummy = np.zeros((0, 0)).T
     G = gram_rows(M)
-    if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, _trace(G)):
+    if G.shape[0] == 0 or eps * eps <= (rank_tol**2) * max(1.0, trace(G)):
         return False, dummy
     ok, Linv = cholesky_inverse(G)
     if not ok or not _exceeds(G, Linv, eps):
@@ -357,7 +351,7 @@ def _certify_tall(M: np.ndarray, eps: float, floor: float):
     ok, Linv = cholesky_inverse(G)
     if not ok or not _exceeds(G, Linv, eps):
         return False, dummy, 0.0
-    k2 = frobenius2(Linv) * _trace(G)
+    k2 = frobenius2(Linv) * trace(G)
     if k2 > NORMAL_KAPPA * NORMAL_KAPPA:
         return False, dummy, 0.0
     return True, Linv, k2
@@ -365,7 +359,7 @@ def _certify_tall(M: np.ndarray, eps: float, floor: float):
 
 @kernel
 def _exceeds(G: np.ndarray, Linv: np.ndarray, eps: float) -> bool:
-    """``lambda_min(G) >= eps^2``: ``_trace(G^-1) <= 1 / eps^2``, or else ``G - eps^2 I`` has a
+    """``lambda_min(G) >= eps^2``: ``tr(G^-1) <= 1 / eps^2``, or else ``G - eps^2 I`` has a
     Cholesky factor (the reference's two tests)."""
     if frobenius2(Linv) * eps * eps <= 1.0:
         return True
@@ -424,6 +418,39 @@ def level_step(A: np.ndarray, R: np.ndarray, free: Free, par: np.ndarray, sns: b
         rank = 0
     left = free_of(lift(Nf, Z, is_mask, mask), False, mask)
     return lift(Y, Z, is_mask, mask), left, rank
+
+
+@kernel
+def diagonal_step(A: np.ndarray, c: np.ndarray, free: Free, par: np.ndarray):
+    """A diagonal level (n x n: a posture in its metric) on the free directions a certified
+    level left (``M`` with rows, ``Zb`` the mask's axes): ``(ok, dx)``, the least-squares step
+    ``dx`` (n) for the right-hand side ``c`` by
+    :func:`~wholebody.kernels.linalg.complement_solve`, without the basis :func:`level_step`
+    would build. Ok only where :func:`level_step`'s certificate of the normal equations holds
+    for it (on the free directions ``A Zb N`` has singular values in ``[min |a|, max |a|]``
+    over the mask: no direction damped or dropped, ``kappa_F <= NORMAL_KAPPA``), so that the
+    step is the one it computes."""
+    is_mask, mask, M = free.is_mask, free.mask, free.M
+    n = mask.shape[0]
+    r = free_rank(free)
+    dx = np.zeros(n)
+    if not is_mask or M.shape[0] == 0 or r == 0 or A.shape[0] != n:
+        return False, dx
+    for i in range(n):
+        for j in range(n):
+            if i != j and A[i, j] != 0.0:
+                return False, dx
+    a, cm = _gather(np.diag(A).copy(), mask), _gather(c, mask)
+    top, amin2 = 0.0, math.inf
+    for k in range(a.shape[0]):
+        top, amin2 = top + a[k] * a[k], min(amin2, a[k] * a[k])
+    eps, rank_tol = par[PAR_THRESHOLD], par[PAR_RANK]
+    floor = max((rank_tol * max(1.0, math.sqrt(top))) ** 2, 10.0 * n * _EPS * top)
+    kappa2 = r * r * top / amin2 if amin2 > 0 else math.inf
+    if not (amin2 >= eps * eps > floor and kappa2 <= NORMAL_KAPPA * NORMAL_KAPPA):
+        return False, dx
+    ok, step = complement_solve(M, a, cm)
+    return ok, _scatter(step, mask)
 
 
 @kernel

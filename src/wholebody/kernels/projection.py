@@ -28,6 +28,7 @@ from wholebody.kernels.pinv import (
     PAR_WIDTH,
     Free,
     basis,
+    diagonal_step,
     free_of,
     identity_rows,
     level_step,
@@ -75,8 +76,12 @@ def _level(
         R = np.empty((m, 1))
         for k in range(m):
             R[k, 0] = b[k] - Au[k]
-        Y, left, _ = level_step(A, R, basis(free), par, False)
-        u = combine(u0, 1.0, Y[:, 0])
+        ok, dx = diagonal_step(A, R[:, 0], free, par)
+        if ok:  # (a posture below a certified level: no basis needed)
+            u, left = combine(u0, 1.0, dx), free_of(np.zeros((n, 0)), False, free.mask)
+        else:
+            Y, left, _ = level_step(A, R, basis(free), par, False)
+            u = combine(u0, 1.0, Y[:, 0])
     if not sns or inside(u, box.lo_tol, box.hi_tol):
         return u, left, sat, 1.0
     if ids > 0:

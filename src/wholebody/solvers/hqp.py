@@ -33,7 +33,9 @@ Level by level, in the null space of the levels above (the stages in
 :mod:`wholebody.kernels.hqp`, the least squares in :mod:`wholebody.kernels.lsq`, a level's QP
 and polish in :mod:`wholebody.kernels.hqp_level`): each level's unconstrained least-squares
 candidate, exact, by a complete orthogonal decomposition (rank-deficient levels, such as two
-hands plus the closed chain between them, solve without error); where the candidate leaves the
+hands plus the closed chain between them, solve without error; a level of certain full row
+rank by the Cholesky factor of its Gram matrix, and a posture level below it without forming
+the basis of the free directions); where the candidate leaves the
 box or an inequality row, one QP for that level
 (``min 1/2 ||M y - c||^2 + d/2 ||y||^2 + 1/2 ||s||^2`` in the free coordinates ``y``, with a
 Tikhonov term ``d = regularization * sigma_max^2`` and slacks ``s`` of the level's inequality

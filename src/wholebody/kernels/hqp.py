@@ -342,12 +342,12 @@ def _close_deferred(w: Arena, met: bool) -> None:
 @kernel
 def _diagonal_deferred(s: Arena, w: Arena, par: np.ndarray, k: int) -> bool:
     """Level k where its rows are diagonal (a posture task, objectives; no inequality rows)
-    and the free directions are the identity's, deferred (:func:`defer_basis`): its candidate
-    ``x + dx`` (:func:`diagonal_step`), taken where it meets the bounds, which leaves nothing
-    free (True); False where the level is not such or its candidate is not taken
-    (:func:`_level` then solves it)."""
+    and the free directions deferred (:func:`defer_basis`; rows ``s I`` where they were not
+    the identity's): its candidate ``x + dx`` (:func:`diagonal_step`), taken where it meets
+    the bounds, which leaves nothing free (True); False where the level is not such or its
+    candidate is not taken (:func:`_level` then solves it)."""
     st = ivec(w.i, w.h, W_STATE)
-    if not st[S_DEFER_R] or st[S_ZI] != 1:
+    if not st[S_DEFER_R]:
         return False
     _, x, _, bounds = views(w)
     rows = level_rows(s, k)

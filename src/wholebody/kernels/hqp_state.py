@@ -328,26 +328,31 @@ def defer_basis(w: Arena, m: int) -> None:
 
 @kernel
 def diagonal_step(w: Arena, A: np.ndarray, c: np.ndarray, rtol: float):
-    """``(ok, dx)``: ``dx = argmin ||A dx - c||`` over the free directions of a basis deferred
-    from the identity (``M dx = 0``, ``M`` in ``W_M``) for a nonsingular diagonal ``A`` (n x
-    n), by :func:`~wholebody.kernels.linalg.complement_solve`. Not ok where A is not such, or
-    where the certificate does not show the cascade's rank rule keeping every free direction
-    (``min |a_j| > 1e3 rtol ||a||``: ``A Z`` has singular values in ``[min |a_j|, max
-    |a_j|]``), or the solve's."""
-    st = ivec(w.i, w.h, W_STATE)
-    n, m = A.shape[0], st[S_DEFER_M]
+    """``(ok, dx)``: ``dx = argmin ||A dx - c||`` over the free directions of a deferred basis
+    (``Z y`` with ``M y = 0``, ``M`` in ``W_M``) for a nonsingular diagonal ``A`` (n x n),
+    by :func:`~wholebody.kernels.linalg.complement_solve`: in x where Z is the identity, else
+    for ``A = s I`` in the coordinates ``y`` (``||s Z y - c|| = ||s y - Z^T c||`` up to a
+    constant). Not ok where A is not such, or where the certificate does not show the
+    cascade's rank rule keeping every free direction (``min |a_j| > 1e3 rtol ||a||``: ``A Z``
+    has singular values in ``[min |a_j|, max |a_j|]``), or the solve's."""
+    st, _, basis, _ = views(w)
+    n, m, r = A.shape[0], st[S_DEFER_M], basis.r
     a = np.empty(n)
     for i in range(n):
         for j in range(n):
             if i != j and A[i, j] != 0.0:
                 return False, a
         a[i] = A[i, i]
+        if not (basis.identity or a[i] == a[0]):
+            return False, a
     amin, norm2 = math.inf, 0.0
     for i in range(n):
         amin, norm2 = min(amin, abs(a[i])), norm2 + a[i] * a[i]
     if not (amin > 1e3 * rtol * math.sqrt(norm2) and norm2 < math.inf):
         return False, a
-    return complement_solve(fvec(w.f, w.h, W_M)[: m * n].reshape((m, n)), a, c)
+    M = fvec(w.f, w.h, W_M)[: m * r].reshape((m, r))
+    ok, dy = complement_solve(M, a[:r], coords(basis, c))
+    return ok, apply_basis(basis, dy)
 
 
 @kernel

@@ -118,6 +118,7 @@ from wholebody.kernels.hqp_state import (
     level_lsq,
     level_objective,
     level_rows,
+    make_basis,
     max_abs,
     qp_views,
     report_row,
@@ -125,7 +126,6 @@ from wholebody.kernels.hqp_state import (
     restrict_into,
     skip_nonfinite,
     state,
-    views,
     violated,
 )
 from wholebody.kernels.layout import fmat, fvec, ivec
@@ -196,6 +196,7 @@ def advance(f, i, h, wf, wi, wh, par) -> int:
         st[S_K] += 1
     if not st[S_ANYQP]:  # (the candidates were taken: x is the minimum-norm point)
         return _clip(w)
+    make_basis(w)
     _, x, basis, bounds = state(w)
     if basis.r:
         t = coords(basis, x)
@@ -269,6 +270,7 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     if _diagonal_deferred(s, w, par, k):
         return DONE
     tol = par[P_TOL]
+    make_basis(w)
     st, x, basis, bounds = state(w)
     rep = report_row(w, k)
     rows = level_rows(s, k)
@@ -349,7 +351,7 @@ def _diagonal_deferred(s: Arena, w: Arena, par: np.ndarray, k: int) -> bool:
     st = ivec(w.i, w.h, W_STATE)
     if not st[S_DEFER_R]:
         return False
-    _, x, _, bounds = views(w)
+    _, x, _, bounds = state(w)  # (x and the bounds: the basis is read by diagonal_step)
     rows = level_rows(s, k)
     if rows.A.shape[0] != x.shape[0] or rows.C.shape[0]:
         return False

@@ -57,6 +57,7 @@ __all__ = [
     "compose_basis",
     "coords",
     "defer_basis",
+    "deferred_basis",
     "diagonal_step",
     "finish",
     "finite2",
@@ -66,6 +67,7 @@ __all__ = [
     "level_lsq",
     "level_objective",
     "level_rows",
+    "make_basis",
     "max_abs",
     "qp_views",
     "report_row",
@@ -291,24 +293,10 @@ def task_range(tasks: np.ndarray, k: int) -> tuple[int, int]:
 @kernel
 def state(w: Arena):
     """The cascade's state (views of the workspace): ``(st, x, basis, bounds)``, ``st`` the
-    integers ``S_*``; a deferred basis is made first (:func:`defer_basis`)."""
-    st = ivec(w.i, w.h, W_STATE)
-    if st[S_DEFER_R]:
-        r, m = st[S_DEFER_R], st[S_DEFER_M]
-        st[S_R], st[S_DEFER_R] = r, 0
-        compose_basis(w, null_basis(fvec(w.f, w.h, W_M)[: m * r].reshape((m, r))))
-    return views(w)
-
-
-@kernel
-def views(w: Arena):
-    """:func:`state` as the workspace holds it, a deferred basis left deferred (``basis``
-    is then the one before the deferring level)."""
+    integers ``S_*``. Not where the basis is deferred (:func:`make_basis` first)."""
     st = ivec(w.i, w.h, W_STATE)
     x = fvec(w.f, w.h, W_X)
     n, r, ni, P = x.shape[0], st[S_R], st[S_NINH], w.h[W_INHB, 3]
-    if st[S_DEFER_R]:
-        r = st[S_DEFER_R]
     G = fvec(w.f, w.h, W_INH)[: ni * n].reshape((ni, n))
     gb = fvec(w.f, w.h, W_INHB)
     basis = Basis(fvec(w.f, w.h, W_Z)[: n * r].reshape((n, r)), r, st[S_ZI] == 1)
@@ -316,11 +304,31 @@ def views(w: Arena):
 
 
 @kernel
+def make_basis(w: Arena) -> None:
+    """The basis of the free directions made where it was deferred (:func:`defer_basis`):
+    ``Z N``, ``N`` the null space of the deferring level's ``M``. (Only the levels' stage
+    meets a deferred basis: a level that needs a QP never defers its own.)"""
+    st = ivec(w.i, w.h, W_STATE)
+    if st[S_DEFER_R]:
+        r, m = st[S_DEFER_R], st[S_DEFER_M]
+        st[S_R], st[S_DEFER_R] = r, 0
+        compose_basis(w, null_basis(fvec(w.f, w.h, W_M)[: m * r].reshape((m, r))))
+
+
+@kernel
+def deferred_basis(w: Arena) -> Basis:
+    """The basis before the level that deferred its own null space (:func:`defer_basis`)."""
+    st = ivec(w.i, w.h, W_STATE)
+    n, r = fvec(w.f, w.h, W_X).shape[0], st[S_DEFER_R]
+    return Basis(fvec(w.f, w.h, W_Z)[: n * r].reshape((n, r)), r, st[S_ZI] == 1)
+
+
+@kernel
 def defer_basis(w: Arena, m: int) -> None:
     """The free directions become ``Z`` less the row space of the level's ``M = A Z`` (m x r
     in ``W_M``, of full row rank m < r for certain), without computing its null space:
-    :func:`state` makes the basis where a stage needs one; a diagonal level below, where Z is
-    the identity, needs none (:func:`diagonal_step`)."""
+    :func:`make_basis` makes it where the next level needs it; a diagonal level needs none
+    (:func:`diagonal_step`)."""
     st = ivec(w.i, w.h, W_STATE)
     st[S_DEFER_R], st[S_DEFER_M] = st[S_R], m
     st[S_R] -= m
@@ -335,7 +343,7 @@ def diagonal_step(w: Arena, A: np.ndarray, c: np.ndarray, rtol: float):
     constant). Not ok where A is not such, or where the certificate does not show the
     cascade's rank rule keeping every free direction (``min |a_j| > 1e3 rtol ||a||``: ``A Z``
     has singular values in ``[min |a_j|, max |a_j|]``), or the solve's."""
-    st, _, basis, _ = views(w)
+    st, basis = ivec(w.i, w.h, W_STATE), deferred_basis(w)
     n, m, r = A.shape[0], st[S_DEFER_M], basis.r
     a = np.empty(n)
     for i in range(n):

@@ -31,6 +31,7 @@ __all__ = [
     "gather_rows",
     "gram_cols",
     "gram_rows",
+    "gram_solve",
     "level_report",
     "mm",
     "mmt",
@@ -290,6 +291,21 @@ def normal_solve(M: np.ndarray, H: np.ndarray, c: np.ndarray, kappa2: float) -> 
 
 
 @kernel
+def gram_solve(X: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``X^T X v`` for the lower-triangular ``X = L^-1`` of :func:`cholesky_inverse`: ``G^-1
+    v`` where ``G = L L^T`` (only X's lower triangle read)."""
+    m = v.shape[0]
+    y = np.zeros(m)
+    for i in range(m):
+        t = 0.0
+        for k in range(i + 1):
+            t += X[i, k] * v[k]
+        for j in range(i + 1):
+            y[j] += X[i, j] * t
+    return y
+
+
+@kernel
 def complement_solve(M: np.ndarray, a: np.ndarray, c: np.ndarray) -> tuple[bool, np.ndarray]:
     """``(ok, dx)``: ``dx = argmin ||diag(a) dx - c||`` subject to ``M dx = 0`` (M: m x r of
     full row rank, ``a``: r nonzero entries), without a basis of M's null space: with ``D =
@@ -315,7 +331,7 @@ def complement_solve(M: np.ndarray, a: np.ndarray, c: np.ndarray) -> tuple[bool,
     if not k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
         return False, dx
     for _ in range(2 if k2 > REFINE_KAPPA * REFINE_KAPPA else 1):
-        g = mtv(M, mtv(X, mv(X, mv(M, dx))))  # M^T S^-1 M dx: dx's part off M's null space
+        g = mtv(M, gram_solve(X, mv(M, dx)))  # M^T S^-1 M dx: dx's part off M's null space
         for k in range(r):
             dx[k] -= g[k] * dinv[k]
     return True, dx

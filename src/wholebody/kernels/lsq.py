@@ -35,6 +35,7 @@ from wholebody.kernels.linalg import (
     fortran,
     frobenius2,
     gram_rows,
+    gram_solve,
     mtv,
     mv,
 )
@@ -166,14 +167,7 @@ def _normal_step(M: np.ndarray, X: np.ndarray, c: np.ndarray) -> np.ndarray:
         if a != 0.0:
             for j in range(r):
                 g[j] += M[q, j] * a
-    y = np.zeros(r)
-    for i in range(r):  # y = X^T (X g)
-        t = 0.0
-        for k in range(i + 1):
-            t += X[i, k] * g[k]
-        for j in range(i + 1):
-            y[j] += X[i, j] * t
-    return y
+    return gram_solve(X, g)
 
 
 @kernel
@@ -217,12 +211,15 @@ def wide_solve(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: 
     :func:`_tall_solve`: condition at most ``NORMAL_KAPPA``, refined once above
     ``REFINE_KAPPA``); not done where it is not (:func:`cod` then decides the rank)."""
     ok, X = cholesky_inverse(gram_rows(M))
-    k2 = _rank_certificate(M.T, X, rtol, floor) if ok else -1.0
-    if not 0.0 <= k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+    inv2, r, margin = frobenius2(X), M.shape[1], _MARGIN * rtol
+    k2 = inv2 * frobenius2(M)  # (_rank_certificate of M^T)
+    if not (ok and k2 * r * margin * margin < 1.0 and inv2 * r * floor * floor < 1.0):
         return False, t.copy(), X
-    y = combine(mtv(M, mtv(X, mv(X, combine(c, 1.0, mv(M, t))))), -1.0, t)
+    if not k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+        return False, t.copy(), X
+    y = combine(mtv(M, gram_solve(X, combine(c, 1.0, mv(M, t)))), -1.0, t)
     if k2 > REFINE_KAPPA * REFINE_KAPPA:
-        y = combine(y, 1.0, mtv(M, mtv(X, mv(X, residual(M, y, c)))))
+        y = combine(y, 1.0, mtv(M, gram_solve(X, residual(M, y, c))))
     return True, y, X
 
 

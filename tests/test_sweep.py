@@ -3,6 +3,7 @@ results on a local pool, one by one and on Ray, nothing lost or repeated across 
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import shutil
@@ -17,8 +18,10 @@ import numpy as np
 import pytest
 
 import wholebody as wb
+from wholebody.cli import main
 from wholebody.errors import ConfigError
-from wholebody.sweep import load_campaign, run_case, run_sweep
+from wholebody.sweep import executors, load_campaign, run_case, run_sweep
+from wholebody.sweep.executors import run_ray, start_local_ray
 from wholebody.sweep.store import flatten
 
 CAMPAIGN = """
@@ -259,3 +262,56 @@ def test_the_same_campaign_on_a_local_ray_head_gives_the_same_table(tmp_path, mo
     assert [_deterministic(r) for r in remote.rows] == [_deterministic(r) for r in local.rows]
     case = json.loads((tmp_path / "ray" / "cases" / "case_00000.json").read_text())
     assert case["status"] == "ok"
+
+
+def _loopback(ip: str) -> bool:
+    address = ipaddress.ip_address(ip.split("%")[0])
+    mapped = getattr(address, "ipv4_mapped", None)
+    return address.is_loopback or (mapped is not None and mapped.is_loopback)
+
+
+@pytest.mark.slow
+def test_a_local_ray_sweep_listens_on_the_loopback_interface_only(tmp_path):
+    """``--ray`` without an address: while the cases run, every socket this process and the
+    processes it started (Ray's GCS, raylet, agents and workers) listen on is a loopback
+    one; Ray 2.60 left to itself listens on every interface. The results are the pool's."""
+    pytest.importorskip("ray")
+    psutil = pytest.importorskip("psutil")
+    campaign = load_campaign(_campaign(tmp_path))
+    listening: list[str] = []
+    results: list[dict] = []
+
+    def on_result(result: dict) -> None:
+        me = psutil.Process()
+        for proc in [me, *me.children(recursive=True)]:
+            for sock in proc.net_connections(kind="inet"):
+                if sock.status == psutil.CONN_LISTEN:
+                    listening.append(f"{sock.laddr.ip}:{sock.laddr.port} ({proc.name()})")
+        results.append(result)
+
+    run_ray(campaign, campaign.cases(), None, on_result, workers=2)
+    assert any("raylet" in s or "gcs" in s for s in listening), listening  # Ray's were seen
+    assert all(_loopback(s.split(" ")[0].rsplit(":", 1)[0]) for s in listening), listening
+    local = run_sweep(campaign, tmp_path / "local", workers=2, progress=False)
+    rows = {r["index"]: r for r in results}
+    assert sorted(rows) == [r["index"] for r in local.rows]
+    assert all(rows[r["index"]]["status"] == r["status"] == "ok" for r in local.rows)
+
+
+@pytest.mark.slow
+def test_a_local_ray_that_listens_on_the_network_is_stopped_and_refused(monkeypatch):
+    """Where Ray binds a server beyond the loopback interface anyway, the instance is shut
+    down and the sweep refused with what to do, ``--ray-public`` among it."""
+    ray = pytest.importorskip("ray")
+    pytest.importorskip("psutil")
+    monkeypatch.setattr(executors, "exposed_listeners", lambda: ["192.0.2.2:6379 (gcs_server)"])
+    with pytest.raises(ConfigError, match=r"192\.0\.2\.2:6379.*--ray-public"):
+        start_local_ray(1)
+    assert not ray.is_initialized()
+
+
+def test_ray_public_is_for_a_local_instance_only(tmp_path, capsys):
+    for argv in (["--ray-public"], ["--ray", "10.0.0.1:6379", "--ray-public"]):
+        code = main(["sweep", str(_campaign(tmp_path)), "--out", str(tmp_path / "o"), *argv])
+        assert code != 0
+        assert "--ray-public is for a local Ray instance" in capsys.readouterr().err

@@ -383,6 +383,10 @@ def _add_sweep_command(sub: argparse._SubParsersAction) -> None:
     sweep.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                        help="run the cases as Ray tasks: on the cluster at ADDRESS "
                        "(HOST:PORT), or without it on a local Ray instance")  # fmt: skip
+    sweep.add_argument("--ray-public", action="store_true",
+                       help="let the local Ray instance listen on the network, as Ray "
+                       "chooses (by default it is kept on 127.0.0.1, or refused): anyone "
+                       "who reaches this host can then submit work to it")  # fmt: skip
     sweep.add_argument("--retry-failed", action="store_true",
                        help="run the cases that failed before again")  # fmt: skip
     sweep.set_defaults(func=_sweep)
@@ -404,12 +408,15 @@ def _sweep(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {args.workers}")
+    if args.ray_public and args.ray != "":
+        raise ConfigError("--ray-public is for a local Ray instance: --ray without an address")
     campaign = load_campaign(_campaign_path(args.campaign))
     out = _output_dir(Path(args.out))
     signal.signal(signal.SIGTERM, _terminated)  # a scheduler's stop: as a Ctrl-C
     try:
         result = run_sweep(campaign, out, workers=args.workers, ray=args.ray is not None,
-                           address=args.ray or None, retry_failed=args.retry_failed)  # fmt: skip
+                           address=args.ray or None, retry_failed=args.retry_failed,
+                           ray_public=args.ray_public)  # fmt: skip
     except KeyboardInterrupt:
         done = len(list((out / "cases").glob("case_*.json")))
         print(f"wholebody: interrupted: {done} finished cases are in {out / 'cases'} (and "

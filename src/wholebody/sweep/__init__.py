@@ -40,11 +40,13 @@ class SweepResult:
 
 def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None,
               ray: bool = False, address: str | None = None, retry_failed: bool = False,
-              progress: bool = True) -> SweepResult:  # fmt: skip
+              progress: bool = True, ray_public: bool = False) -> SweepResult:  # fmt: skip
     """Run the campaign's missing cases into ``out``: on ``workers`` local processes
     (default: every core) or, with ``ray``, as Ray tasks (``address`` of a cluster, or a
-    local instance). Results are written one file per case as each ends; on Ctrl-C the
-    table and report of the finished cases are written before the interrupt goes on.
+    local instance on the loopback interface only, unless ``ray_public``: see
+    :func:`wholebody.sweep.executors.start_local_ray`). Results are written one file per
+    case as each ends; on Ctrl-C the table and report of the finished cases are written
+    before the interrupt goes on.
 
     The kernels are compiled (or loaded) here first (:func:`wholebody.warmup.warmup`), into
     the cache every worker on this machine reads: the workers load them instead of each
@@ -78,7 +80,7 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
         warmup()
     try:
         if ray:
-            run_ray(campaign, todo, address, on_result, workers)
+            run_ray(campaign, todo, address, on_result, workers, ray_public)
         else:
             run_local(campaign, todo, workers or _cores(), on_result)
     finally:

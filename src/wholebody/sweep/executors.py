@@ -10,8 +10,8 @@ need no shared disk: results come back as values).
 * :func:`run_ray`: one Ray task per case (``num_cpus=1``; a case's own error is its result,
   never retried; Ray retries a task only when its worker dies), on
   ``ray.init(address=...)``; without an address, a new local Ray instance for this sweep
-  with 127.0.0.1 as its node address (Ray 2.60's own servers still listen on every
-  interface: the README says so). The cluster's nodes need the same wholebody
+  that listens on the loopback interface only (:func:`start_local_ray`: refused where Ray
+  binds a server elsewhere, unless ``public``). The cluster's nodes need the same wholebody
   (``pip install "wholebody[cluster]"``), and the scenario's files where the campaign names
   them (the bundled ones come with the package).
 
@@ -23,7 +23,10 @@ goes on.
 
 from __future__ import annotations
 
+import ipaddress
 import multiprocessing
+import os
+import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -33,7 +36,7 @@ from wholebody.errors import ConfigError
 from wholebody.sweep.campaign import Campaign, Case
 from wholebody.sweep.case import run_case
 
-__all__ = ["run_local", "run_ray"]
+__all__ = ["exposed_listeners", "run_local", "run_ray", "start_local_ray"]
 
 OnResult = Callable[[dict[str, Any]], None]
 
@@ -85,22 +88,28 @@ def _drain(pool: ProcessPoolExecutor, campaign: Campaign, todo: list[Case], wind
                 return
 
 
+LOCAL_ONLY = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+"""Ray's switch (Ray 2.x, read when ``ray`` is imported, inherited by the processes it
+starts): at "0" a local instance takes the loopback address as its node's and binds its
+servers there; otherwise Ray replaces 127.0.0.1 by the host's address and its servers listen
+on the network (measured with Ray 2.60: GCS, raylet and workers on every interface, the
+runtime-env agent on the host's address)."""
+
+
 def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
-            on_result: OnResult, workers: int | None = None) -> None:  # fmt: skip
+            on_result: OnResult, workers: int | None = None,
+            public: bool = False) -> None:  # fmt: skip
     """Run ``cases`` as Ray tasks on the cluster at ``address`` (``"HOST:PORT"``) or, with
-    None, on a new local Ray instance (node address 127.0.0.1, ``workers`` CPUs); at most
-    1000 in flight; ``on_result`` for each as it ends. A task lost to a crashed worker or
-    node is recorded as failed."""
-    try:
-        import ray
-        from ray.exceptions import RayError
-    except ImportError:
-        raise ConfigError('--ray needs Ray: pip install "wholebody[cluster]"') from None
+    None, on a new local Ray instance (:func:`start_local_ray`; ``workers`` CPUs, ``public``
+    as there); at most 1000 in flight; ``on_result`` for each as it ends. A task lost to a
+    crashed worker or node is recorded as failed."""
     if address:
+        ray = _ray()
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
     else:
-        ray.init(address="local", _node_ip_address="127.0.0.1", num_cpus=workers,
-                 include_dashboard=False, log_to_driver=False)  # fmt: skip
+        ray = start_local_ray(workers, public)
+    from ray.exceptions import RayError
+
     pending: dict = {}
     try:
         remote = ray.remote(num_cpus=1)(run_case)
@@ -123,3 +132,76 @@ def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
         raise
     finally:
         ray.shutdown()
+
+
+def _ray() -> Any:
+    """The ``ray`` module, or a :class:`ConfigError` that says what to install."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError('--ray needs Ray: pip install "wholebody[cluster]"') from None
+    return ray
+
+
+def start_local_ray(workers: int | None = None, public: bool = False) -> Any:
+    """A local Ray instance (``workers`` CPUs, no dashboard) whose servers listen on the
+    loopback interface only; returns the ``ray`` module. Ray is put in its local-only mode
+    (:data:`LOCAL_ONLY`), then every listening socket of this process and the processes it
+    started is checked (:func:`exposed_listeners`): one that another host could reach stops
+    the instance with a :class:`ConfigError`, unless ``public`` (``--ray-public``), which
+    leaves Ray's own choice, the host's address, for a machine meant to take other nodes."""
+    ray = _ray()
+    constants = sys.modules.get("ray._private.ray_constants")  # (this process read it then)
+    saved_env, saved = os.environ.get(LOCAL_ONLY), getattr(constants, "ENABLE_RAY_CLUSTER", None)
+    os.environ[LOCAL_ONLY] = "1" if public else "0"  # (for the processes Ray starts)
+    if saved is not None:
+        constants.ENABLE_RAY_CLUSTER = public
+    try:
+        ray.init(address="local", num_cpus=workers, include_dashboard=False,
+                 log_to_driver=False)  # fmt: skip
+    finally:  # (a later ray.init in this process: Ray's own default again)
+        if saved_env is None:
+            os.environ.pop(LOCAL_ONLY, None)
+        else:
+            os.environ[LOCAL_ONLY] = saved_env
+        if saved is not None:
+            constants.ENABLE_RAY_CLUSTER = saved
+    exposed = [] if public else exposed_listeners()
+    if exposed:
+        ray.shutdown()
+        raise ConfigError(
+            f"the local Ray instance listens on the network ({', '.join(exposed)}), which "
+            "this Ray could not be kept from: anyone who reaches this host could submit work "
+            "to it. Use the process pool (no --ray), start a head on a private network and "
+            "pass its address, or pass --ray-public to allow it"
+        )
+    return ray
+
+
+def exposed_listeners() -> list[str]:
+    """The listening sockets of this process and of the processes it started (a local Ray
+    instance's servers) that another host could reach, as ``"ADDRESS:PORT (process)"``:
+    those not bound to a loopback address (``0.0.0.0`` and ``::`` included)."""
+    try:
+        import psutil
+    except ImportError:
+        raise ConfigError("--ray needs psutil to check what Ray listens on: "
+                          'pip install "wholebody[cluster]"') from None  # fmt: skip
+    me = psutil.Process()
+    out = []
+    for proc in [me, *me.children(recursive=True)]:
+        try:
+            name, sockets = proc.name(), proc.net_connections(kind="inet")
+        except psutil.Error:  # (a process that ended meanwhile)
+            continue
+        for sock in sockets:
+            if sock.status == psutil.CONN_LISTEN and not _loopback(sock.laddr.ip):
+                out.append(f"{sock.laddr.ip}:{sock.laddr.port} ({name})")
+    return out
+
+
+def _loopback(ip: str) -> bool:
+    """Whether ``ip`` is a loopback address (an IPv4-mapped one, ``::ffff:127.0.0.1``, too)."""
+    address = ipaddress.ip_address(ip.split("%")[0])
+    mapped = getattr(address, "ipv4_mapped", None)
+    return address.is_loopback or (mapped is not None and mapped.is_loopback)

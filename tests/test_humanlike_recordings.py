@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,31 @@ def test_tasks_are_selected_by_name(tmp_path: Path):
     assert len(load_recordings(tmp_path)) == 4  # all tasks by default
     with pytest.raises(DataError, match="no recording of task"):
         load_recordings(tmp_path, tasks=["reaching"])
+
+
+def test_a_directory_laid_out_like_the_bundled_data_is_read_from_its_joint_centres(
+    tmp_path: Path,
+):
+    """``--recordings DIR`` with DIR as shipped (``joint_centres/``, ``participants.csv``,
+    ``quality_check.csv``): its recordings, not its tables, are read; a flat directory with
+    a table among its recordings still says which file is not a recording."""
+    bundled = real_recordings_dir().parent
+    (tmp_path / "joint_centres").mkdir()
+    for name in ("ADL002_forward_R1", "ADL005_combing_L3"):
+        shutil.copy(real_recordings_dir() / f"{name}.csv", tmp_path / "joint_centres")
+    for table in ("participants.csv", "quality_check.csv"):
+        shutil.copy(bundled / table, tmp_path)
+    recs = load_recordings(tmp_path)
+    assert sorted(r.name for r in recs) == sorted(
+        load_recording(real_recordings_dir() / f"{n}.csv").name
+        for n in ("ADL002_forward_R1", "ADL005_combing_L3")
+    )
+    flat = tmp_path / "flat"
+    flat.mkdir()
+    shutil.copy(real_recordings_dir() / "ADL002_forward_R1.csv", flat)
+    shutil.copy(bundled / "participants.csv", flat)
+    with pytest.raises(DataError, match=r"participants\.csv"):
+        load_recordings(flat)
 
 
 def test_drinking_and_combing_raise_the_hand_above_the_table():

@@ -170,9 +170,13 @@ class Recording:
         return np.linalg.norm(self.wrist - self.elbow, axis=1)
 
 
+JOINT_CENTRES = "joint_centres"
+"""The bundled data's directory of recordings (beside its ``participants.csv``)."""
+
+
 def real_recordings_dir() -> Path:
     """The bundled real recordings: ``data_dir() / "human_reaching" / "joint_centres"``."""
-    return data_dir() / "human_reaching" / "joint_centres"
+    return data_dir() / "human_reaching" / JOINT_CENTRES
 
 
 @dataclass(frozen=True)
@@ -579,7 +583,9 @@ def load_recordings(
     progress: bool = False,
     tasks: Iterable[str] | None = None,
 ) -> list[Recording]:
-    """Read many recordings: a directory (every ``*.csv`` and ``*.npz`` in it, sorted), or an
+    """Read many recordings: a directory (every ``*.csv`` and ``*.npz`` in it, sorted; a
+    directory laid out like the bundled data, its recordings in ``joint_centres/`` beside
+    ``participants.csv`` and ``quality_check.csv``, is read from ``joint_centres/``), or an
     iterable of files. ``None`` reads the bundled real recordings (all four :data:`TASKS`).
 
     ``tasks`` keeps only the recordings of those tasks (for example ``("forward",
@@ -597,6 +603,8 @@ def load_recordings(
         root = Path(paths)
         if not root.is_dir():
             raise DataError(f"{root}: not a directory of recordings")
+        if (root / JOINT_CENTRES).is_dir():  # the bundled data's layout
+            root = root / JOINT_CENTRES
         files = sorted([*root.glob("*.csv"), *root.glob("*.npz")])
         if not files:
             raise DataError(f"{root}: no .csv or .npz recordings in this directory")

@@ -231,6 +231,31 @@ def test_a_killed_sweep_restarted_loses_and_repeats_nothing(tmp_path):
     assert len(after) == 8 and all(after[name] == data for name, data in before.items())
 
 
+@pytest.mark.slow
+def test_a_case_over_the_time_limit_is_stopped_and_the_sweep_goes_on(tmp_path, capsys):
+    """A case that runs longer than ``--timeout`` stops there (not at its end: its wall time
+    is the limit's, not the run's) and is recorded as ``"timeout"``; the others run, the
+    table and report are written, and ``--retry-failed`` runs the stopped ones again."""
+    campaign = load_campaign(_campaign(tmp_path, CAMPAIGN.replace("0.05", "3.0")))
+    run_case(campaign, campaign.cases()[0])  # (the kernels loaded)
+    full = run_case(campaign, campaign.cases()[0])
+    assert full["status"] == "ok" and full["wall_s"] > 0.4, full["wall_s"]
+    stopped = run_case(campaign, campaign.cases()[0], timeout=0.1)
+    assert stopped["status"] == "timeout" and "0.1 s" in stopped["error"]
+    assert stopped["wall_s"] < 0.5 * full["wall_s"], (stopped["wall_s"], full["wall_s"])
+    out = tmp_path / "out"
+    code = main(["sweep", str(campaign.path), "--out", str(out), "--workers", "1",
+                 "--timeout", "0.1"])  # fmt: skip
+    assert code == 1, capsys.readouterr().err  # (every case failed)
+    results = [json.loads(p.read_text()) for p in sorted((out / "cases").glob("case_*.json"))]
+    assert [r["status"] for r in results] == ["timeout"] * 4
+    assert (out / "results.csv").is_file()
+    again = run_sweep(campaign, out, workers=1, retry_failed=True, progress=False)
+    assert again.ran == 4 and again.failed == 0
+    assert main(["sweep", str(campaign.path), "--out", str(out), "--timeout", "0"]) != 0
+    assert "time limit must be > 0 s" in capsys.readouterr().err
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -296,6 +321,9 @@ def test_a_local_ray_sweep_listens_on_the_loopback_interface_only(tmp_path):
     rows = {r["index"]: r for r in results}
     assert sorted(rows) == [r["index"] for r in local.rows]
     assert all(rows[r["index"]]["status"] == r["status"] == "ok" for r in local.rows)
+    stopped: list[dict] = []  # a Ray worker runs the case's time limit too
+    run_ray(campaign, campaign.cases()[:1], None, stopped.append, workers=1, timeout=1e-3)
+    assert [r["status"] for r in stopped] == ["timeout"], stopped
 
 
 @pytest.mark.slow

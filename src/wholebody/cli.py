@@ -387,6 +387,9 @@ def _add_sweep_command(sub: argparse._SubParsersAction) -> None:
                        help="let the local Ray instance listen on the network, as Ray "
                        "chooses (by default it is kept on 127.0.0.1, or refused): anyone "
                        "who reaches this host can then submit work to it")  # fmt: skip
+    sweep.add_argument("--timeout", type=float, default=None, metavar="S",
+                       help="stop a case after S seconds of wall time and record it as "
+                       "'timeout' (default: no limit)")  # fmt: skip
     sweep.add_argument("--retry-failed", action="store_true",
                        help="run the cases that failed before again")  # fmt: skip
     sweep.set_defaults(func=_sweep)
@@ -416,7 +419,7 @@ def _sweep(args: argparse.Namespace) -> int:
     try:
         result = run_sweep(campaign, out, workers=args.workers, ray=args.ray is not None,
                            address=args.ray or None, retry_failed=args.retry_failed,
-                           ray_public=args.ray_public)  # fmt: skip
+                           ray_public=args.ray_public, timeout=args.timeout)  # fmt: skip
     except KeyboardInterrupt:
         done = len(list((out / "cases").glob("case_*.json")))
         print(f"wholebody: interrupted: {done} finished cases are in {out / 'cases'} (and "

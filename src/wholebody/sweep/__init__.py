@@ -1,6 +1,6 @@
 """Sweeps: many runs of a scenario with keys varied, on all local cores or on a Ray cluster.
 
-``wholebody sweep CAMPAIGN --out DIR [--workers N] [--ray [ADDRESS]]`` (or
+``wholebody sweep CAMPAIGN --out DIR [--workers N] [--ray [ADDRESS]] [--timeout S]`` (or
 :func:`run_sweep`) reads a campaign file (:mod:`wholebody.sweep.campaign`), runs every case
 not yet in ``DIR`` (:mod:`wholebody.sweep.store`) with the same function locally or on Ray
 (:mod:`wholebody.sweep.executors`), writes each result as soon as it comes back, then
@@ -16,6 +16,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+from wholebody.errors import ConfigError
 from wholebody.sweep.campaign import Axis, Campaign, Case, load_campaign
 from wholebody.sweep.case import run_case
 from wholebody.sweep.store import SweepStore
@@ -40,13 +41,15 @@ class SweepResult:
 
 def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None,
               ray: bool = False, address: str | None = None, retry_failed: bool = False,
-              progress: bool = True, ray_public: bool = False) -> SweepResult:  # fmt: skip
+              progress: bool = True, ray_public: bool = False,
+              timeout: float | None = None) -> SweepResult:  # fmt: skip
     """Run the campaign's missing cases into ``out``: on ``workers`` local processes
     (default: every core) or, with ``ray``, as Ray tasks (``address`` of a cluster, or a
     local instance on the loopback interface only, unless ``ray_public``: see
-    :func:`wholebody.sweep.executors.start_local_ray`). Results are written one file per
-    case as each ends; on Ctrl-C the table and report of the finished cases are written
-    before the interrupt goes on.
+    :func:`wholebody.sweep.executors.start_local_ray`). A case running longer than
+    ``timeout`` s of wall time is stopped and recorded as ``"timeout"``. Results are written
+    one file per case as each ends; on Ctrl-C the table and report of the finished cases are
+    written before the interrupt goes on.
 
     The kernels are compiled (or loaded) here first (:func:`wholebody.warmup.warmup`), into
     the cache every worker on this machine reads: the workers load them instead of each
@@ -55,6 +58,8 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
     from wholebody.sweep.executors import run_local, run_ray
     from wholebody.sweep.report import write_report
 
+    if timeout is not None and not timeout > 0:
+        raise ConfigError(f"a case's time limit must be > 0 s, got {timeout}")
     store = SweepStore(Path(out), campaign)
     cases = campaign.cases()
     results = store.finished(cases, retry_failed)
@@ -80,9 +85,9 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
         warmup()
     try:
         if ray:
-            run_ray(campaign, todo, address, on_result, workers, ray_public)
+            run_ray(campaign, todo, address, on_result, workers, ray_public, timeout)
         else:
-            run_local(campaign, todo, workers or _cores(), on_result)
+            run_local(campaign, todo, workers or _cores(), on_result, timeout)
     finally:
         bar.close()
         table, rows = store.table(results)

@@ -2,15 +2,22 @@
 
 :func:`run_case` is a plain top-level function of picklable arguments, so that a process
 pool and Ray run the same code. It never raises: a case that fails returns its error (type,
-message and the traceback's last lines) and the sweep goes on.
+message and the traceback's last lines), a case that runs longer than the sweep's time limit
+is stopped and returns ``"timeout"`` (a timer of the worker's main thread, :func:`_limit`:
+the run stops at its next Python step, a control step being microseconds to milliseconds),
+and the sweep goes on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import signal
+import threading
 import time
 import traceback
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -18,7 +25,7 @@ import numpy as np
 from wholebody.control.log import json_default
 from wholebody.sweep.campaign import Campaign, Case
 
-__all__ = ["headline", "run_case"]
+__all__ = ["CaseTimeoutError", "headline", "run_case"]
 
 
 def headline(run) -> dict[str, float]:
@@ -43,25 +50,56 @@ def _worst(values) -> float:
     return float(values.max()) if values.size and not np.isnan(values).any() else math.nan
 
 
-def run_case(campaign: Campaign, case: Case) -> dict[str, Any]:
+class CaseTimeoutError(BaseException):
+    """A case ran longer than the sweep's time limit (raised by :func:`_limit`'s timer; a
+    ``BaseException``, as ``KeyboardInterrupt``, so that no handler of errors in the run
+    swallows it)."""
+
+
+@contextlib.contextmanager
+def _limit(seconds: float | None) -> Iterator[None]:
+    """Raise :class:`CaseTimeoutError` in this thread after ``seconds`` of wall time (a real-time
+    interval timer; Unix, main thread: a worker's). No limit where ``seconds`` is None; a
+    thread or system without the timer runs unlimited."""
+    usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+    if seconds is None or not usable:
+        yield
+        return
+
+    def expire(signum: int, frame: object) -> None:
+        raise CaseTimeoutError(f"ran longer than the time limit of {seconds:g} s (--timeout)")
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> dict[str, Any]:
     """Run one case; its result: ``index``, ``values``, ``status`` (``"ok"``, ``"error"``,
-    or ``"stopped"``: a physics run ended early, its reason in ``error``), ``metrics``
-    (those of ``wholebody run``'s ``metrics.json`` and the :func:`headline` numbers),
-    ``error`` and ``wall_s``."""
+    ``"timeout"``: it ran longer than ``timeout`` seconds of wall time, or ``"stopped"``: a
+    physics run ended early, its reason in ``error``), ``metrics`` (those of ``wholebody
+    run``'s ``metrics.json`` and the :func:`headline` numbers), ``error`` and ``wall_s``."""
     from wholebody.scenarios.runner import run_scenario
 
     start = time.perf_counter()
     result: dict[str, Any] = {"index": case.index, "values": case.values}
     try:
-        spec, options = campaign.case_spec(case)
-        run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
-                           engine=options.get("engine"),
-                           duration_scale=campaign.duration_scale)  # fmt: skip
+        with _limit(timeout):
+            spec, options = campaign.case_spec(case)
+            run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
+                               engine=options.get("engine"),
+                               duration_scale=campaign.duration_scale)  # fmt: skip
         metrics = json.loads(json.dumps(run.metrics, default=json_default))
         metrics.update(headline(run))
         stopped = metrics.get("stopped")  # a physics run the plant ended early
         result.update(status="stopped" if stopped else "ok", metrics=metrics,
                       error=stopped or "")  # fmt: skip
+    except CaseTimeoutError as exc:
+        result.update(status="timeout", metrics={}, error=str(exc))
     except Exception as exc:  # recorded, not raised: the sweep goes on
         tail = traceback.format_exc().strip().splitlines()[-6:]
         result.update(status="error", metrics={}, error=f"{type(exc).__name__}: {exc}",

@@ -49,16 +49,17 @@ def _lost(case: Case, why: str) -> dict[str, Any]:
 
 
 def run_local(campaign: Campaign, cases: Sequence[Case], workers: int,
-              on_result: OnResult) -> None:  # fmt: skip
+              on_result: OnResult, timeout: float | None = None) -> None:  # fmt: skip
     """Run ``cases`` on ``workers`` local processes, at most two cases a worker queued at a
-    time; ``on_result`` for each as it ends. A worker that dies (a crash, out of memory)
-    fails the cases it held, the pool is started again and the sweep goes on."""
+    time, each stopped after ``timeout`` s (:func:`~wholebody.sweep.case.run_case`);
+    ``on_result`` for each as it ends. A worker that dies (a crash, out of memory) fails the
+    cases it held, the pool is started again and the sweep goes on."""
     todo = list(reversed(cases))
     while todo:
         pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
                                    mp_context=multiprocessing.get_context("spawn"))  # fmt: skip
         try:
-            _drain(pool, campaign, todo, 2 * workers, on_result)
+            _drain(pool, campaign, todo, 2 * workers, on_result, timeout)
         except BaseException:
             for process in list(getattr(pool, "_processes", {}).values()):
                 process.terminate()  # running cases abandoned: a restart runs them
@@ -68,14 +69,14 @@ def run_local(campaign: Campaign, cases: Sequence[Case], workers: int,
 
 
 def _drain(pool: ProcessPoolExecutor, campaign: Campaign, todo: list[Case], window: int,
-           on_result: OnResult) -> None:  # fmt: skip
+           on_result: OnResult, timeout: float | None) -> None:  # fmt: skip
     """Feed ``todo`` (popped from its end) to ``pool``, ``window`` cases in flight; return
     when it is empty or the pool broke (its cases in flight recorded as lost)."""
     pending: dict = {}
     while todo or pending:
         while todo and len(pending) < window:
             case = todo.pop()
-            pending[pool.submit(run_case, campaign, case)] = case
+            pending[pool.submit(run_case, campaign, case, timeout)] = case
         done, _ = wait(pending, return_when=FIRST_COMPLETED)
         for future in done:
             case = pending.pop(future)
@@ -97,12 +98,12 @@ runtime-env agent on the host's address)."""
 
 
 def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
-            on_result: OnResult, workers: int | None = None,
-            public: bool = False) -> None:  # fmt: skip
+            on_result: OnResult, workers: int | None = None, public: bool = False,
+            timeout: float | None = None) -> None:  # fmt: skip
     """Run ``cases`` as Ray tasks on the cluster at ``address`` (``"HOST:PORT"``) or, with
     None, on a new local Ray instance (:func:`start_local_ray`; ``workers`` CPUs, ``public``
-    as there); at most 1000 in flight; ``on_result`` for each as it ends. A task lost to a
-    crashed worker or node is recorded as failed."""
+    as there); at most 1000 in flight, each stopped after ``timeout`` s; ``on_result`` for
+    each as it ends. A task lost to a crashed worker or node is recorded as failed."""
     if address:
         ray = _ray()
         ray.init(address=address, include_dashboard=False, log_to_driver=False)
@@ -118,7 +119,7 @@ def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
         while todo or pending:
             while todo and len(pending) < 1000:
                 case = todo.pop()
-                pending[remote.remote(shared, case)] = case
+                pending[remote.remote(shared, case, timeout)] = case
             done, _ = ray.wait(list(pending), num_returns=min(len(pending), 16), timeout=1.0)
             for ref in done:
                 case = pending.pop(ref)

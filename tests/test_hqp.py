@@ -19,6 +19,7 @@ import pytest
 from scipy.optimize import lsq_linear
 
 from wholebody.errors import SolverError
+from wholebody.kernels.hqp_state import S_DEFER_M
 from wholebody.solvers import Level, SolverStatus, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.solvers.qp import ENGINES, QPStatus, available_engines, make_engine
@@ -252,7 +253,7 @@ def test_a_wide_level_then_a_diagonal_one_are_exact_at_every_condition_number(rn
     # level below them, with and without the box binding: the recursive pseudo-inverse where
     # no bound is active, the levels' optimality conditions everywhere.
     solver = HierarchicalQPSolver()
-    n, qp = 9, 0
+    n, qp, deferred = 9, 0, 0
     for trial in range(24):
         U, _ = np.linalg.qr(rng.normal(size=(4, 4)))
         V, _ = np.linalg.qr(rng.normal(size=(n, 4)))
@@ -271,6 +272,7 @@ def test_a_wide_level_then_a_diagonal_one_are_exact_at_every_condition_number(rn
         problem = StackProblem(levels, lower, upper, np.ones(n), {})
         u = solver.solve_problem(problem).u
         qp += any(r.qp for r in solver.levels)
+        deferred += solver._workspace.state[S_DEFER_M] > 0  # the first level took the route
         kkt = kkt_residuals(equalities(problem), problem.lower, problem.upper, u)
         assert kkt.max() < 1e-6, (trial, kkt)
         if trial % 4 == 3:  # the recursive pseudo-inverse on orthonormal null-space bases (SVD)
@@ -282,6 +284,7 @@ def test_a_wide_level_then_a_diagonal_one_are_exact_at_every_condition_number(rn
                 Z = Z @ Vt[rank:].T
             assert np.abs(u - x).max() <= 1e-12 * kappa * max(1.0, np.abs(x).max())
     assert qp >= 6
+    assert deferred >= (6 if kappa <= 3e3 else 0), deferred  # (where its candidate held)
 
 
 # ---------------------------------------------------------------------- the robot

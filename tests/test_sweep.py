@@ -254,6 +254,8 @@ def test_a_case_over_the_time_limit_is_stopped_and_the_sweep_goes_on(tmp_path, c
     assert again.ran == 4 and again.failed == 0
     assert main(["sweep", str(campaign.path), "--out", str(out), "--timeout", "0"]) != 0
     assert "time limit must be > 0 s" in capsys.readouterr().err
+    assert main(["sweep", str(campaign.path), "--out", str(out), "--timeout", "inf"]) != 0
+    assert "and finite" in capsys.readouterr().err
 
 
 def _free_port() -> int:

@@ -603,8 +603,8 @@ def load_recordings(
         root = Path(paths)
         if not root.is_dir():
             raise DataError(f"{root}: not a directory of recordings")
-        if (root / JOINT_CENTRES).is_dir():  # the bundled data's layout
-            root = root / JOINT_CENTRES
+        if (root / JOINT_CENTRES).is_dir() and (root / "participants.csv").is_file():
+            root = root / JOINT_CENTRES  # the bundled data's layout
         files = sorted([*root.glob("*.csv"), *root.glob("*.npz")])
         if not files:
             raise DataError(f"{root}: no .csv or .npz recordings in this directory")

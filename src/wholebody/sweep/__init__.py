@@ -9,6 +9,7 @@ not yet in ``DIR`` (:mod:`wholebody.sweep.store`) with the same function locally
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -58,8 +59,8 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
     from wholebody.sweep.executors import run_local, run_ray
     from wholebody.sweep.report import write_report
 
-    if timeout is not None and not timeout > 0:
-        raise ConfigError(f"a case's time limit must be > 0 s, got {timeout}")
+    if timeout is not None and not 0 < timeout < math.inf:
+        raise ConfigError(f"a case's time limit must be > 0 s and finite, got {timeout}")
     store = SweepStore(Path(out), campaign)
     cases = campaign.cases()
     results = store.finished(cases, retry_failed)

@@ -3,21 +3,19 @@
 :func:`run_case` is a plain top-level function of picklable arguments, so that a process
 pool and Ray run the same code. It never raises: a case that fails returns its error (type,
 message and the traceback's last lines), a case that runs longer than the sweep's time limit
-is stopped and returns ``"timeout"`` (a timer of the worker's main thread, :func:`_limit`:
+is stopped and returns ``"timeout"`` (a timer of the worker's main thread, :class:`_Limit`:
 the run stops at its next Python step, a control step being microseconds to milliseconds),
 and the sweep goes on.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import signal
 import threading
 import time
 import traceback
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -51,31 +49,46 @@ def _worst(values) -> float:
 
 
 class CaseTimeoutError(BaseException):
-    """A case ran longer than the sweep's time limit (raised by :func:`_limit`'s timer; a
+    """A case ran longer than the sweep's time limit (raised by :class:`_Limit`'s timer; a
     ``BaseException``, as ``KeyboardInterrupt``, so that no handler of errors in the run
     swallows it)."""
 
 
-@contextlib.contextmanager
-def _limit(seconds: float | None) -> Iterator[None]:
-    """Raise :class:`CaseTimeoutError` in this thread after ``seconds`` of wall time (a real-time
-    interval timer; Unix, main thread: a worker's). No limit where ``seconds`` is None; a
-    thread or system without the timer runs unlimited."""
-    usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
-    if seconds is None or not usable:
-        yield
-        return
+class _Limit:
+    """A wall-time limit on this thread: :meth:`start` arms a real-time interval timer whose
+    signal raises :class:`CaseTimeoutError` (Unix, main thread: a worker's; elsewhere, or with
+    ``seconds`` None, nothing is armed); :meth:`stop` disarms it and gives the signal back its
+    handler, and may be called again. The handler raises only while armed, so a signal that
+    lands after :meth:`stop` began is ignored."""
 
-    def expire(signum: int, frame: object) -> None:
-        raise CaseTimeoutError(f"ran longer than the time limit of {seconds:g} s (--timeout)")
+    def __init__(self, seconds: float | None) -> None:
+        self.seconds = seconds
+        self.armed = self._installed = self.expired = False
+        self._previous: Any = None
 
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0.0)
-        signal.signal(signal.SIGALRM, previous)
+    def start(self) -> None:
+        usable = (
+            hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+        )
+        if self.seconds is None or not usable:
+            return
+        self._previous = signal.signal(signal.SIGALRM, self._expire)
+        self._installed = self.armed = True
+        signal.setitimer(signal.ITIMER_REAL, self.seconds)
+
+    def _expire(self, signum: int, frame: object) -> None:
+        if self.armed:
+            self.armed, self.expired = False, True
+            raise CaseTimeoutError(f"ran longer than the time limit of {self.seconds:g} s "
+                                   "(--timeout)")  # fmt: skip
+
+    def stop(self) -> None:
+        self.armed = False
+        if self._installed:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            previous = self._previous
+            signal.signal(signal.SIGALRM, signal.SIG_DFL if previous is None else previous)
+            self._installed = False
 
 
 def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> dict[str, Any]:
@@ -87,12 +100,14 @@ def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> di
 
     start = time.perf_counter()
     result: dict[str, Any] = {"index": case.index, "values": case.values}
+    limit = _Limit(timeout)
     try:
-        with _limit(timeout):
-            spec, options = campaign.case_spec(case)
-            run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
-                               engine=options.get("engine"),
-                               duration_scale=campaign.duration_scale)  # fmt: skip
+        limit.start()
+        spec, options = campaign.case_spec(case)
+        run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
+                           engine=options.get("engine"),
+                           duration_scale=campaign.duration_scale)  # fmt: skip
+        limit.stop()
         metrics = json.loads(json.dumps(run.metrics, default=json_default))
         metrics.update(headline(run))
         stopped = metrics.get("stopped")  # a physics run the plant ended early
@@ -101,8 +116,14 @@ def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> di
     except CaseTimeoutError as exc:
         result.update(status="timeout", metrics={}, error=str(exc))
     except Exception as exc:  # recorded, not raised: the sweep goes on
-        tail = traceback.format_exc().strip().splitlines()[-6:]
-        result.update(status="error", metrics={}, error=f"{type(exc).__name__}: {exc}",
-                      traceback="\n".join(tail))  # fmt: skip
+        limit.stop()
+        tail = "\n".join(traceback.format_exc().strip().splitlines()[-6:])
+        error = f"{type(exc).__name__}: {exc}"
+        if limit.expired:  # the timeout, turned into another error by code it crossed
+            error = f"ran longer than the time limit of {timeout:g} s (--timeout): {error}"
+        result.update(status="timeout" if limit.expired else "error", metrics={}, error=error,
+                      traceback=tail)  # fmt: skip
+    finally:
+        limit.stop()
     result["wall_s"] = time.perf_counter() - start
     return result

@@ -111,6 +111,8 @@ def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
         ray = start_local_ray(workers, public)
     from ray.exceptions import RayError
 
+    guard = not (address or public)  # (Ray starts workers on demand: checked as it goes)
+
     pending: dict = {}
     try:
         remote = ray.remote(num_cpus=1)(run_case)
@@ -121,6 +123,8 @@ def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
                 case = todo.pop()
                 pending[remote.remote(shared, case, timeout)] = case
             done, _ = ray.wait(list(pending), num_returns=min(len(pending), 16), timeout=1.0)
+            if guard:
+                _refuse_exposed()
             for ref in done:
                 case = pending.pop(ref)
                 try:
@@ -148,10 +152,13 @@ def start_local_ray(workers: int | None = None, public: bool = False) -> Any:
     """A local Ray instance (``workers`` CPUs, no dashboard) whose servers listen on the
     loopback interface only; returns the ``ray`` module. Ray is put in its local-only mode
     (:data:`LOCAL_ONLY`), then every listening socket of this process and the processes it
-    started is checked (:func:`exposed_listeners`): one that another host could reach stops
-    the instance with a :class:`ConfigError`, unless ``public`` (``--ray-public``), which
-    leaves Ray's own choice, the host's address, for a machine meant to take other nodes."""
+    started is checked (:func:`exposed_listeners`; again after each wait of :func:`run_ray`,
+    Ray starting workers on demand): one that another host could reach stops the instance
+    with a :class:`ConfigError`, unless ``public`` (``--ray-public``), which leaves Ray's own
+    choice, the host's address, for a machine meant to take other nodes."""
     ray = _ray()
+    if not public:
+        exposed_listeners()  # (psutil there before Ray starts)
     constants = sys.modules.get("ray._private.ray_constants")  # (this process read it then)
     saved_env, saved = os.environ.get(LOCAL_ONLY), getattr(constants, "ENABLE_RAY_CLUSTER", None)
     os.environ[LOCAL_ONLY] = "1" if public else "0"  # (for the processes Ray starts)
@@ -167,16 +174,26 @@ def start_local_ray(workers: int | None = None, public: bool = False) -> Any:
             os.environ[LOCAL_ONLY] = saved_env
         if saved is not None:
             constants.ENABLE_RAY_CLUSTER = saved
-    exposed = [] if public else exposed_listeners()
+    if not public:
+        try:
+            _refuse_exposed()
+        except BaseException:
+            ray.shutdown()
+            raise
+    return ray
+
+
+def _refuse_exposed() -> None:
+    """A :class:`ConfigError` naming the sockets of a local Ray instance that another host
+    could reach (:func:`exposed_listeners`), if there is one."""
+    exposed = exposed_listeners()
     if exposed:
-        ray.shutdown()
         raise ConfigError(
             f"the local Ray instance listens on the network ({', '.join(exposed)}), which "
             "this Ray could not be kept from: anyone who reaches this host could submit work "
             "to it. Use the process pool (no --ray), start a head on a private network and "
             "pass its address, or pass --ray-public to allow it"
         )
-    return ray
 
 
 def exposed_listeners() -> list[str]:

@@ -11,6 +11,7 @@ import numpy as np
 
 from wholebody.errors import SolverError
 from wholebody.robot import RobotState
+from wholebody.solvers.plan import BoundCall, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack
 
@@ -95,9 +96,45 @@ class Solver(ABC):
     def result(self, arena: Arena, solve_time: float, stack: Stack | None = None) -> SolverResult:
         """The outcome of the last :meth:`run` in ``arena`` (a plan) as a result."""
 
+    def kernel_run(
+        self,
+        arena: Arena,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+        workspace: control.Arena | None,
+    ) -> None:
+        """``steps`` steps of each state of ``batch`` in one call of the solver's step kernel
+        (:meth:`_kernel_call`) on an arena (a plan's, or a copy of it: a thread's share of a
+        batch) and its workspace (None where the kernel takes none)."""
+        first_call(*self._kernel_call(arena, workspace, kinematics, batch, steps, what))
+
     def stepper(
         self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
     ) -> Callable[[], None]:
         """One step of the batch's first state on ``plan``, as a call without arguments (what
-        :meth:`wholebody.control.Controller.step` makes every period)."""
-        return lambda: self.run(plan, kinematics, batch, 1, what)
+        :meth:`wholebody.control.Controller.step` makes every period): the step kernel with
+        its arguments bound (:class:`~wholebody.solvers.plan.BoundCall`; the settings are
+        read from their vector at each call)."""
+        arena = plan.step_buffers(batch.refs.shape[1]).arena
+        workspace = self._step_workspace(plan)
+        return BoundCall(*self._kernel_call(arena, workspace, kinematics, batch, 1, what))
+
+    def _step_workspace(self, plan: Plan) -> control.Arena | None:
+        """The workspace the step kernel takes for ``plan`` (None: it takes none)."""
+        return None
+
+    @abstractmethod
+    def _kernel_call(
+        self,
+        arena: Arena,
+        workspace: control.Arena | None,
+        kinematics: control.Kinematics,
+        batch: control.Batch,
+        steps: int,
+        what: int,
+    ) -> tuple[Any, ...]:
+        """The step kernel's name, notice, dispatcher and arguments (for
+        :func:`~wholebody.solvers.plan.first_call` and
+        :class:`~wholebody.solvers.plan.BoundCall`)."""

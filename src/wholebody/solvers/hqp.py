@@ -114,7 +114,7 @@ from wholebody.robot import RobotState
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.base import Setting, Solver
 from wholebody.solvers.level_report import LevelReport
-from wholebody.solvers.plan import Arena, BoundCall, Plan, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, Plan, ProblemArena
 from wholebody.solvers.qp import QPEngine, make_engine
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
@@ -290,18 +290,19 @@ class HierarchicalQPSolver(Solver):
                 f"HierarchicalQPSolver({self.engine_name!r}): a batch or several steps in "
                 "one call need the engine 'daqp' (the QPs are then solved inside the kernel)"
             )
-        first_call(*self._kernel_call(arena, workspace, kinematics, batch, steps, what))
+        super().kernel_run(arena, kinematics, batch, steps, what, workspace)
 
     def stepper(
         self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
     ) -> Callable[[], None]:
         """The kernel call of one step with its arguments bound (daqp; another engine's step
-        is the cascade's stages with its QPs in between)."""
+        is the cascade's stages with its QPs in between: :meth:`run`)."""
         if not self.in_kernel:
-            return super().stepper(plan, kinematics, batch, what)
-        arena = plan.step_buffers(batch.refs.shape[1]).arena
-        ws = self.workspace(plan).record
-        return BoundCall(*self._kernel_call(arena, ws, kinematics, batch, 1, what))
+            return lambda: self.run(plan, kinematics, batch, 1, what)
+        return super().stepper(plan, kinematics, batch, what)
+
+    def _step_workspace(self, plan: Plan) -> control.Arena:
+        return self.workspace(plan).record
 
     def _kernel_call(
         self,
@@ -312,8 +313,7 @@ class HierarchicalQPSolver(Solver):
         steps: int,
         what: int,
     ) -> tuple[Any, ...]:
-        """The step kernel's name, notice, dispatcher and arguments (for :func:`first_call`
-        and :class:`BoundCall`)."""
+        """:func:`wholebody.kernels.control.hqp_run`'s call."""
         return (
             "hqp",
             "the hierarchical QP kernels",

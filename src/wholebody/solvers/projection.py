@@ -102,7 +102,6 @@ Everything runs in one kernel call after the stack's evaluation
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -120,7 +119,7 @@ from wholebody.kernels.pinv import (
 )
 from wholebody.robot import RobotState
 from wholebody.solvers.base import Setting, Solver
-from wholebody.solvers.plan import Arena, BoundCall, Plan, ProblemArena, first_call
+from wholebody.solvers.plan import Arena, Plan, ProblemArena, first_call
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
 
@@ -204,37 +203,17 @@ class ProjectionSolver(Solver):
         arena = plan.step_buffers(batch.refs.shape[1]).arena
         self.kernel_run(arena, kinematics, batch, steps, what, None)
 
-    def kernel_run(
-        self,
-        arena: control.Arena,
-        kinematics: control.Kinematics,
-        batch: control.Batch,
-        steps: int,
-        what: int,
-        workspace: control.Arena | None,
-    ) -> None:
-        """:func:`wholebody.kernels.control.projection_run` on an arena (a plan's, or a copy
-        of it: a thread's share of a batch); ``workspace``: unused (the HQP's)."""
-        first_call(*self._kernel_call(arena, kinematics, batch, steps, what))
-
-    def stepper(
-        self, plan: Plan, kinematics: control.Kinematics, batch: control.Batch, what: int
-    ) -> Callable[[], None]:
-        """The kernel call of one step with its arguments bound (the settings are read from
-        their vector at each call)."""
-        arena = plan.step_buffers(batch.refs.shape[1]).arena
-        return BoundCall(*self._kernel_call(arena, kinematics, batch, 1, what))
-
     def _kernel_call(
         self,
         arena: control.Arena,
+        workspace: control.Arena | None,
         kinematics: control.Kinematics,
         batch: control.Batch,
         steps: int,
         what: int,
     ) -> tuple[Any, ...]:
-        """The step kernel's name, notice, dispatcher and arguments (for :func:`first_call`
-        and :class:`BoundCall`)."""
+        """:func:`wholebody.kernels.control.projection_run`'s call (``workspace``: unused,
+        the HQP's)."""
         return (
             "projection",
             "the projection kernels",

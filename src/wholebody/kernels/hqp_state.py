@@ -35,6 +35,7 @@ from wholebody.kernels.layout import fmat, fvec, imat, ivec
 from wholebody.kernels.linalg import (
     combine,
     complement_solve,
+    diagonal,
     dot,
     finite1,
     level_report,
@@ -345,14 +346,11 @@ def diagonal_step(w: Arena, A: np.ndarray, c: np.ndarray, rtol: float):
     has singular values in ``[min |a_j|, max |a_j|]``), or the solve's."""
     st, basis = ivec(w.i, w.h, W_STATE), deferred_basis(w)
     n, m, r = A.shape[0], st[S_DEFER_M], basis.r
-    a = np.empty(n)
+    ok, a = diagonal(A)
     for i in range(n):
-        for j in range(n):
-            if i != j and A[i, j] != 0.0:
-                return False, a
-        a[i] = A[i, i]
-        if not (basis.identity or a[i] == a[0]):
-            return False, a
+        ok = ok and (basis.identity or a[i] == a[0])
+    if not ok:
+        return False, a
     amin, norm2 = math.inf, 0.0
     for i in range(n):
         amin, norm2 = min(amin, abs(a[i])), norm2 + a[i] * a[i]

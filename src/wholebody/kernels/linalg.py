@@ -24,6 +24,7 @@ __all__ = [
     "cholesky_inverse",
     "combine",
     "complement_solve",
+    "diagonal",
     "dot",
     "finite1",
     "fortran",
@@ -196,6 +197,20 @@ def fortran(A: np.ndarray) -> np.ndarray:
         for i in range(m):
             out[i, j] = A[i, j]
     return out
+
+
+@kernel
+def diagonal(A: np.ndarray) -> tuple[bool, np.ndarray]:
+    """``(ok, a)``: whether the square ``A`` is diagonal (no entry off its diagonal other
+    than 0; NaN is other), and its diagonal ``a``."""
+    n = A.shape[0]
+    a = np.empty(n)
+    for i in range(n):
+        for j in range(n):
+            if i != j and A[i, j] != 0.0:
+                return False, a
+        a[i] = A[i, i]
+    return True, a
 
 
 @kernel

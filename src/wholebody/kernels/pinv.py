@@ -32,6 +32,7 @@ from wholebody.kernels.linalg import (
     cholesky_inverse,
     combine,
     complement_solve,
+    diagonal,
     fortran,
     frobenius2,
     gram_cols,
@@ -436,11 +437,10 @@ def diagonal_step(A: np.ndarray, c: np.ndarray, free: Free, par: np.ndarray):
     dx = np.zeros(n)
     if not is_mask or M.shape[0] == 0 or r == 0 or A.shape[0] != n:
         return False, dx
-    for i in range(n):
-        for j in range(n):
-            if i != j and A[i, j] != 0.0:
-                return False, dx
-    a, cm = _gather(np.diag(A).copy(), mask), _gather(c, mask)
+    ok, diag = diagonal(A)
+    if not ok:
+        return False, dx
+    a, cm = _gather(diag, mask), _gather(c, mask)
     top, amin2 = 0.0, math.inf
     for k in range(a.shape[0]):
         top, amin2 = top + a[k] * a[k], min(amin2, a[k] * a[k])
@@ -470,13 +470,12 @@ def identity_rows(A: np.ndarray, scale: float, par: np.ndarray) -> float:
     n = A.shape[1]
     if A.shape[0] != n or n == 0 or n > NORMAL_KAPPA:
         return 0.0
-    for i in range(n):  # (A itself a I: then scale A is s I)
-        nonzero = 0
-        for j in range(n):
-            nonzero += A[i, j] != 0.0
-        if nonzero != 1 or A[i, i] != A[0, 0]:
-            return 0.0
-    s = scale * A[0, 0]
+    ok, a = diagonal(A)  # (A itself a I: then scale A is s I)
+    for i in range(n):
+        ok = ok and a[i] == a[0]
+    if not ok:
+        return 0.0
+    s = scale * a[0]
     eps, rank_tol = par[PAR_THRESHOLD], par[PAR_RANK]
     floor = max((rank_tol * max(1.0, s * math.sqrt(n))) ** 2, 10.0 * n * n * _EPS * s * s)
     if not (0.0 < s < math.inf and s * s >= 2.0 * eps * eps and eps * eps > 2.0 * floor):

@@ -129,11 +129,11 @@ def _transposed(M: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------- the COD
 @kernel
 def _rank_certificate(M: np.ndarray, Rinv: np.ndarray, rtol: float, floor: float) -> float:
-    """``kappa_F^2 = ||R^-1||_F^2 ||M||_F^2`` (``R``: the triangular factor of a tall M) when
-    the rank rule is certain to find full column rank, else -1."""
+    """``kappa_F^2 = ||R^-1||_F^2 ||M||_F^2`` (``R``: the triangular factor of a tall M, or of
+    ``M M^T`` for a wide one) when the rank rule is certain to find full rank, else -1."""
     inv2 = frobenius2(Rinv)
     k2 = inv2 * frobenius2(M)
-    m = M.shape[0]
+    m = max(M.shape[0], M.shape[1])  # (the longer side: the rows of a tall M)
     margin = _MARGIN * rtol
     if k2 * m * margin * margin < 1.0 and inv2 * m * floor * floor < 1.0:
         return k2
@@ -211,11 +211,8 @@ def wide_solve(M: np.ndarray, c: np.ndarray, t: np.ndarray, rtol: float, floor: 
     :func:`_tall_solve`: condition at most ``NORMAL_KAPPA``, refined once above
     ``REFINE_KAPPA``); not done where it is not (:func:`cod` then decides the rank)."""
     ok, X = cholesky_inverse(gram_rows(M))
-    inv2, r, margin = frobenius2(X), M.shape[1], _MARGIN * rtol
-    k2 = inv2 * frobenius2(M)  # (_rank_certificate of M^T)
-    if not (ok and k2 * r * margin * margin < 1.0 and inv2 * r * floor * floor < 1.0):
-        return False, t.copy(), X
-    if not k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
+    k2 = _rank_certificate(M, X, rtol, floor) if ok else -1.0
+    if not 0.0 <= k2 <= NORMAL_KAPPA * NORMAL_KAPPA:
         return False, t.copy(), X
     y = combine(mtv(M, gram_solve(X, combine(c, 1.0, mv(M, t)))), -1.0, t)
     if k2 > REFINE_KAPPA * REFINE_KAPPA:

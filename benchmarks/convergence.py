@@ -1,39 +1,41 @@
 #!/usr/bin/env python3
-"""Convergence to random reachable targets from the singular neutral posture, against pink.
+"""Convergence to random reachable targets with the defaults a user gets, against pink.
 
-From ``mobile_humanoid``'s neutral posture (arms hanging straight: singular), each case
-sets both hands' targets to their tool poses at a random configuration inside the joint
-limits (``random_configuration(margin=0.05, base_range=0.5)``: reachable by construction,
-the base within 0.5 m with any heading) and runs ``--duration`` seconds at 100 Hz. A run
+Each target sets both hands of ``mobile_humanoid`` to their tool poses at a random
+configuration inside the joint limits (``random_configuration(margin=0.05, base_range=0.5)``:
+reachable by construction, the base within 0.5 m with any heading). A run starts from the
+neutral posture (arms hanging straight: singular) or from home, and lasts ``--duration`` s at
+100 Hz. The hands get their targets as a **step** (the target from the first step) or as a
+**minimum-jerk** reference from their start poses, ``--reference`` s long, then held. A run
 **converges** when both hands end within 1 mm and 1e-2 rad of their targets.
 
-Stacks, each on both wholebody backends:
+wholebody, as a user writes it: ``paper_stack(robot, hands, acceleration=...)`` with
+``FrameTask(robot, frame)`` hands and ``Controller(robot, stack, solver, dt=...)``, every other
+argument at its default (which includes the stall recovery), on both backends (the HQP on
+``--engine``), with the robot's acceleration limits off and on. ``--plain`` adds the same runs
+with ``recovery=False``.
 
-* ``paper``: the paper's stack (hands, PI law kp = 20 1/s, ki = 5 1/s^2; then ``H``),
-  position and velocity limits (:func:`wholebody.presets.paper_stack`);
-* ``paper + recovery``: the same with :class:`~wholebody.control.StallRecovery` at its
-  defaults (retreat to the middle of the joint ranges when the hands stall, then retry);
-* ``hierarchy``: hands strictly above a posture task towards the neutral posture,
-  dead-beat gains (``kp = 1/dt``), the problem of ``benchmarks/peers.py``;
+pink: hands and posture as weighted costs (``single`` of ``peers.py``, daqp), its posture and
+base costs 100 times weaker than in ``peers.py`` (with those, the weighted compromise alone
+leaves the hands millimetres off their targets), fed the same steps or references. pink has
+no acceleration limits: its row is under "off" only. See ``peers.py`` for how its base is
+matched.
 
-and pink (hands and posture as weighted costs, ``single`` of ``peers.py``, daqp; pink's
-hierarchy, the hands as equality constraints, has no solution on most of these targets
-while they are out of reach of one step), its posture and base costs 100 times weaker than
-in ``peers.py`` (with those, the weighted compromise alone leaves the hands millimetres off
-their targets). See ``peers.py`` for how the base is matched.
+    python benchmarks/convergence.py [--n N] [--seed S] [--duration T] [--reference T]
+                                     [--engine daqp|proxsuite|osqp|qpsolvers:NAME] [--plain]
 
-    python benchmarks/convergence.py [--n N] [--seed S] [--duration T] [--acceleration]
-                                     [--engine daqp|proxsuite|osqp|qpsolvers:NAME]
-
-Prints per case the success rate, the final position and orientation error percentiles (the
-worse hand), the share of steps whose solve FAILED (pink: found no solution), the retreats,
-and the targets where each wholebody case and pink disagree.
+Prints the matrix of convergence rates (backend x start x reference x acceleration limits),
+then per case the final position error percentiles (the worse hand), the runs that oscillate
+at the end (a joint velocity, above 1e-3 rad/s or m/s, changing sign on more than 10 of the
+last 100 steps) and the retreats.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import itertools
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -42,33 +44,42 @@ import numpy as np
 import pinocchio as pin
 
 import wholebody
-from wholebody.control.recovery import StallRecovery
+from wholebody.control import Controller
+from wholebody.planning import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
-from wholebody.solvers import Level, ProjectionSolver, SolverStatus, Stack
+from wholebody.solvers import ProjectionSolver
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.tasks import (
-    AccelerationLimits,
-    FrameTask,
-    JointPositionLimits,
-    PostureTask,
-    VelocityLimits,
-)
+from wholebody.tasks import FrameTask
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import peers
 
 DT = peers.DT
 POSITION_TOL, ANGLE_TOL = 1e-3, 1e-2  # m, rad
+TAIL, REVERSALS, SLOW = 100, 10, 1e-3  # oscillating: > 10 reversals in the last 100 steps
 PINK_REGULARISATION = 1e-2  # pink's posture and base costs, times those of peers.py
 
+Goal = list[np.ndarray]
+Outcome = tuple[list[np.ndarray], bool, int]  # final hand poses, still moving, retreats
 
-def targets(robot: wholebody.Robot, rng: np.random.Generator) -> list[np.ndarray]:
+
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """How a run starts and what it follows."""
+
+    start: str  # "neutral" or "home"
+    reference: str  # "step" or "min-jerk"
+    steps: int
+    reference_steps: int
+
+
+def targets(robot: wholebody.Robot, rng: np.random.Generator) -> Goal:
     """Both tool poses (4x4, world) at a random configuration inside the limits."""
     q = robot.random_configuration(rng, margin=0.05, base_range=0.5)
     return [robot.frame_pose(q, f) for f in peers.HANDS]
 
 
-def errors(poses: list[np.ndarray], goal: list[np.ndarray]) -> tuple[float, float]:
+def errors(poses: list[np.ndarray], goal: Goal) -> tuple[float, float]:
     """The worse hand's position (m) and orientation (rad) error."""
     p = max(float(np.linalg.norm(a[:3, 3] - b[:3, 3])) for a, b in zip(poses, goal, strict=True))
     r = max(float(np.linalg.norm(pin.log3(a[:3, :3].T @ b[:3, :3])))
@@ -76,133 +87,136 @@ def errors(poses: list[np.ndarray], goal: list[np.ndarray]) -> tuple[float, floa
     return p, r
 
 
+def oscillates(u: np.ndarray) -> bool:
+    """Whether some joint's velocity reversed (``u_k u_{k-1} < 0``, both above ``SLOW``) on
+    more than ``REVERSALS`` of the last ``TAIL`` steps."""
+    a, b = u[-TAIL - 1 : -1], u[-TAIL:]
+    flips = (a * b < 0) & (np.abs(a) > SLOW) & (np.abs(b) > SLOW)
+    return bool(flips.sum(axis=0).max() > REVERSALS)
+
+
+def start_configuration(robot: wholebody.Robot, start: str) -> np.ndarray:
+    return robot.neutral() if start == "neutral" else robot.home()
+
+
+def references(robot: wholebody.Robot, q0: np.ndarray, goal: Goal, run: Run) -> list:
+    """Per hand, a minimum-jerk trajectory from its pose at ``q0`` to its target."""
+    return [MinimumJerkTrajectory(robot.frame_pose(q0, f), T, run.reference_steps * DT)
+            for f, T in zip(peers.HANDS, goal, strict=True)]  # fmt: skip
+
+
 def wholebody_case(
-    robot: wholebody.Robot,
-    stack_kind: str,
-    backend: str,
-    acceleration: bool,
-    recovery: bool,
-    engine: str = "daqp",
-) -> Callable:
-    """A run function ``goal -> (final hand poses, failed steps, retreats)`` for one wholebody
-    stack and backend (with ``acceleration``: the robot's acceleration limits too; with
-    ``recovery``: :class:`~wholebody.control.recovery.StallRecovery` at its defaults)."""
-    solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(engine=engine)
+    robot: wholebody.Robot, backend: str, acceleration: bool, recovery: bool, engine: str
+) -> Callable[[Goal, Run], Outcome]:
+    """A run of the defaults: the paper's stack, a plain Controller (``recovery`` False only
+    for ``--plain``)."""
 
-    def run(goal: list[np.ndarray], steps: int) -> tuple[list[np.ndarray], int, int]:
-        if stack_kind == "paper":
-            hands = [FrameTask(robot, f, kp=20.0, ki=5.0) for f in peers.HANDS]
-            stack = paper_stack(robot, hands, acceleration=acceleration)
+    def run_one(goal: Goal, run: Run) -> Outcome:
+        solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(engine)
+        hands = [FrameTask(robot, f) for f in peers.HANDS]
+        stack = paper_stack(robot, hands, acceleration=acceleration)
+        q = start_configuration(robot, run.start)
+        refs = None
+        if run.reference == "step":
+            for hand, T in zip(hands, goal, strict=True):
+                hand.set_target(T)
         else:
-            hands = [FrameTask(robot, f, kp=1.0 / DT) for f in peers.HANDS]
-            posture = PostureTask(robot, kp=1.0 / DT, weight=peers.W_POSTURE)
-            posture.set_target(robot.joint_positions(robot.neutral()))
-            limits = [JointPositionLimits(robot, gain=peers.LIMIT_GAIN), VelocityLimits(robot)]
-            limits += [AccelerationLimits(robot)] if acceleration else []
-            stack = Stack(robot, [Level(hands), Level([posture])], limits)
-        for hand, T in zip(hands, goal, strict=True):
-            hand.set_target(T)
-        watch = StallRecovery(robot, stack) if recovery else None
-        q, failed = robot.neutral(), 0
-        for _ in range(steps):
-            state = robot.update(q)
-            result = solver.solve(stack if watch is None else watch.stack, state, DT)
-            failed += result.status == SolverStatus.FAILED
-            if watch is None:
-                stack.advance(state, DT, result=result)
-            else:
-                watch.advance(state, DT, result)
-            q = robot.integrate(q, result.u, DT)
-        state = robot.update(q)
-        poses = [state.pose(robot.frame(f)) for f in peers.HANDS]
-        return poses, failed, 0 if watch is None else len(watch.retreats)
+            refs = dict(zip(hands, references(robot, q, goal, run), strict=True))
+        ctrl = Controller(robot, stack, solver, dt=DT, references=refs, recovery=recovery)
+        u = np.zeros((run.steps, robot.nu))
+        for k in range(run.steps):
+            u[k] = ctrl.step(q)
+            q = ctrl.q_next.copy()
+        poses = [robot.frame_pose(q, f) for f in peers.HANDS]
+        retreats = 0 if ctrl.recovery is None else len(ctrl.recovery.retreats)
+        return poses, oscillates(u), retreats
 
-    return run
+    return run_one
 
 
-def pink_case(robot: wholebody.Robot) -> Callable | None:
-    """pink's hierarchy from the neutral posture, or None without pink."""
+def pink_case(robot: wholebody.Robot, start: str) -> Callable[[Goal, Run], Outcome] | None:
+    """pink's weighted problem from ``start``, or None without pink."""
     try:
         setup = peers.make_setup(robot)
     except ImportError:
         return None
-    neutral = robot.neutral()
-    jp = robot.joint_positions(neutral)
+    q0 = start_configuration(robot, start)
+    jp = robot.joint_positions(q0)
     home = {j: float(jp[robot.index(j)]) for j in setup.joints}
-    setup = dataclasses.replace(setup, q0=neutral, home=home)
     try:
-        case = peers.PinkCase(setup, "daqp", peers.SINGLE)
+        case = peers.PinkCase(dataclasses.replace(setup, q0=q0, home=home), "daqp", peers.SINGLE)
     except ImportError:
         return None
     for task in case.tasks[len(peers.HANDS) :]:  # posture and base: a weaker pull than the
         task.cost = task.cost * PINK_REGULARISATION  # hands', not a compromise with them
 
-    def run(goal: list[np.ndarray], steps: int) -> tuple[list[np.ndarray], int, int]:
+    def run_one(goal: Goal, run: Run) -> Outcome:
         case.reset()
-        failed = 0
-        for _ in range(steps):
-            try:
-                case.step(goal)
-            except case._pink.exceptions.NoSolutionFound:
-                failed += 1  # no step found: the robot stays (the final error counts it)
+        refs = references(robot, q0, goal, run) if run.reference == "min-jerk" else None
+        v = []
+        for k in range(run.steps):
+            now = goal if refs is None else [r.sample(k * DT).pose for r in refs]
+            with contextlib.suppress(case._pink.exceptions.NoSolutionFound):
+                case.step(now)  # (no step found: the robot stays; the final error counts it)
+            v.append(case.velocity())
         poses = [case.conf.get_transform_frame_to_world(f).homogeneous for f in peers.HANDS]
-        return poses, failed, 0
+        return poses, oscillates(np.array(v)), 0
 
-    return run
+    return run_one
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=50, help="number of random targets")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--duration", type=float, default=3.0, help="s per run")
+    parser.add_argument("--duration", type=float, default=6.0, help="s per run")
+    parser.add_argument("--reference", type=float, default=3.0,
+                        help="s of the minimum-jerk references")  # fmt: skip
     parser.add_argument("--engine", default="daqp",
-                        help="the HQP cases' QP engine (daqp, proxsuite, osqp, ...)")  # fmt: skip
-    parser.add_argument("--acceleration", action="store_true",
-                        help="wholebody's stacks with the robot's acceleration limits")  # fmt: skip
+                        help="the HQP's QP engine (daqp, proxsuite, osqp, ...)")  # fmt: skip
+    parser.add_argument("--plain", action="store_true",
+                        help="also the runs with recovery=False")  # fmt: skip
     args = parser.parse_args()
     robot = wholebody.load_robot("mobile_humanoid")
-    cases: dict[str, Callable] = {}
-    for kind, recovery in (("paper", False), ("paper", True), ("hierarchy", False)):
-        for backend in ("projection", "hqp"):
-            engine = f" {args.engine}" if backend == "hqp" and args.engine != "daqp" else ""
-            name = f"wholebody {kind}{' + recovery' if recovery else ''} {backend}{engine}"
-            cases[name] = wholebody_case(robot, kind, backend, args.acceleration, recovery,
-                                         args.engine)  # fmt: skip
-    pink = pink_case(robot)
-    if pink is not None:
-        cases["pink single daqp"] = pink
-    else:
-        print("pink not installed (the bench extra): skipped")
     rng = np.random.default_rng(args.seed)
-    steps = round(args.duration / DT)
     goals = [targets(robot, rng) for _ in range(args.n)]
-    results, failed, retreats = {}, {}, {}
-    for name, run in cases.items():
-        runs = [run(g, steps) for g in goals]
-        results[name] = np.array([errors(r[0], g) for r, g in zip(runs, goals, strict=True)])
-        failed[name] = sum(r[1] for r in runs) / (steps * args.n)
-        retreats[name] = sum(r[2] for r in runs)
-    print(
-        f"{args.n} random reachable targets (seed {args.seed}), {args.duration} s from the "
-        f"neutral posture{' with acceleration limits' if args.acceleration else ''}; "
-        f"converged: both hands within {POSITION_TOL * 1e3:g} mm and {ANGLE_TOL:g} rad"
-    )
-    print(f"{'case':<42} {'converged':>9}   position error mm p50 / p90 / max"
-          f"   angle rad p50 / p90 / max   failed steps   retreats")  # fmt: skip
-    ok = {}
-    for name, e in results.items():
-        ok[name] = (e[:, 0] <= POSITION_TOL) & (e[:, 1] <= ANGLE_TOL)
+    steps, ref_steps = round(args.duration / DT), round(args.reference / DT)
+    recoveries = (True, False) if args.plain else (True,)
+    rates: dict[tuple[str, str, str, bool], float] = {}
+    rows = []
+    for start, reference in itertools.product(("neutral", "home"), ("step", "min-jerk")):
+        run = Run(start, reference, steps, ref_steps)
+        cases: dict[tuple[str, bool], Callable[[Goal, Run], Outcome] | None] = {}
+        for backend, recovery, acc in itertools.product(("projection", "hqp"), recoveries,
+                                                        (False, True)):  # fmt: skip
+            name = backend + ("" if recovery else ", recovery=False")
+            cases[(name, acc)] = wholebody_case(robot, backend, acc, recovery, args.engine)
+        cases[("pink", False)] = pink_case(robot, start)
+        for (name, acc), case in cases.items():
+            if case is None:
+                continue
+            out = [case(g, run) for g in goals]
+            e = np.array([errors(o[0], g) for o, g in zip(out, goals, strict=True)])
+            ok = (e[:, 0] <= POSITION_TOL) & (e[:, 1] <= ANGLE_TOL)
+            rates[(name, start, reference, acc)] = ok.mean()
+            rows.append((name, start, reference, acc, ok.mean(), e, sum(o[1] for o in out),
+                         sum(o[2] for o in out)))  # fmt: skip
+    print(f"{args.n} random reachable targets (seed {args.seed}), {args.duration:g} s runs, "
+          f"minimum-jerk references of {args.reference:g} s; converged: both hands within "
+          f"{POSITION_TOL * 1e3:g} mm and {ANGLE_TOL:g} rad")  # fmt: skip
+    print(f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc. limits off':>15} "
+          f"{'acc. limits on':>15}")  # fmt: skip
+    for name, start, reference in dict.fromkeys((r[0], r[1], r[2]) for r in rows):
+        cells = [rates.get((name, start, reference, acc)) for acc in (False, True)]
+        text = [f"{c:>15.0%}" if c is not None else f"{'n/a':>15}" for c in cells]
+        print(f"{name:<32} {start:<8} {reference:<9} {text[0]} {text[1]}")
+    print(f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc':<4} {'converged':>9}   "
+          f"position error mm p50 / p90 / max   oscillating   retreats")  # fmt: skip
+    for name, start, reference, acc, rate, e, oscillating, retreats in rows:
         p = np.percentile(e[:, 0] * 1e3, [50, 90, 100])
-        r = np.percentile(e[:, 1], [50, 90, 100])
-        print(f"{name:<42} {ok[name].mean():>8.0%}   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}"
-              f"   {r[0]:6.3f} / {r[1]:6.3f} / {r[2]:6.3f}   {failed[name]:>11.2%}"
-              f"   {retreats[name]:>8}")  # fmt: skip
-    if pink is not None:
-        for name in (n for n in ok if n.startswith("wholebody")):
-            only_pink = np.flatnonzero(ok["pink single daqp"] & ~ok[name]).tolist()
-            only_wb = np.flatnonzero(ok[name] & ~ok["pink single daqp"]).tolist()
-            print(f"{name}: pink only {only_pink}; wholebody only {only_wb}")
+        print(f"{name:<32} {start:<8} {reference:<9} {'on' if acc else 'off':<4} {rate:>9.0%}"
+              f"   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}   {oscillating:>11}"
+              f"   {retreats:>8}")  # fmt: skip
 
 
 if __name__ == "__main__":

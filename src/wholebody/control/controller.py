@@ -104,9 +104,13 @@ class Controller:
     feedforward
         ``"midpoint"`` (default) or ``"start"``: when the reference twist is sampled.
     recovery
-        A :class:`~wholebody.control.recovery.StallRecovery` for ``stack`` (default none):
-        retreat to a ready posture when the tasks stall in a local minimum, then retry. The
-        run log's ``meta["retreats"]`` lists them (``[start, end]`` in s; end None if the run
+        Retreat to a ready posture when the pose tasks stall in a local minimum, then retry
+        (:class:`~wholebody.control.recovery.StallRecovery`): True (default) watches every
+        :class:`FrameTask` of the stack with the recovery's defaults (none if it has none), a
+        :class:`StallRecovery` made for ``stack`` is used as it is, False turns it off. It
+        acts only when a watched task has been unmet, its target at rest, for 0.15 s while
+        the error stopped shrinking; then it changes nothing else. The run log's
+        ``meta["retreats"]`` lists the retreats (``[start, end]`` in s; end None if the run
         ended during one).
     plant
         What the commands drive (default: the exact integration :meth:`Robot.integrate`):
@@ -133,7 +137,7 @@ class Controller:
         references: Mapping[TargetTask, Trajectory] | None = None,
         monitors: Sequence[Objective] = (),
         feedforward: str = "midpoint",
-        recovery: StallRecovery | None = None,
+        recovery: StallRecovery | bool | None = True,
         plant: Plant | None = None,
         threads: int | None = 1,
     ) -> None:
@@ -173,11 +177,7 @@ class Controller:
                     f"JointLimitAvoidance, ...), got {m!r}"
                 )
         self.feedforward = feedforward
-        if recovery is not None and recovery.main is not stack:
-            raise WholebodyError(
-                "recovery must be made for the controller's stack: StallRecovery(robot, stack)"
-            )
-        self.recovery = recovery
+        self.recovery = _recovery(robot, stack, recovery)
         if plant is not None and not callable(getattr(plant, "step", None)):
             raise WholebodyError(
                 f"plant must have step(q, u, dt) -> q (e.g. "
@@ -196,6 +196,9 @@ class Controller:
         self._batch: Batch | None = None  # its batch
         self._limits: object | None = None
         self._plan_of_step: Plan | None = None
+        self._watched_rows: list[int] = []  # the recovery's tasks in the plan's task order
+        self._watch_flags = np.zeros(0, np.intp)  # and the plan's flags of tasks unmet
+        self._main: Plan | None = None  # that plan
         self._u = np.zeros(robot.nu)
         self._q_next = np.zeros(robot.nq)
         self.solve_time = 0.0
@@ -311,18 +314,22 @@ class Controller:
         self.solve_time = time.perf_counter() - start
         plan.evaluated = -1.0 if state is None else state.stamp  # type: ignore[union-attr]
         plan.last_result = None  # type: ignore[union-attr]
+        self._observe(q)
         self._k += 1
+
+    def _active(self) -> Stack:
+        """The stack to solve at this step: the controller's, or its recovery's retreat."""
+        return self.stack if self.recovery is None else self.recovery.stack
 
     def _step(self, q: np.ndarray, state: RobotState | None) -> None:
         """The step of :meth:`step` (module docstring), ``state`` the kinematics at ``q`` if
         the caller has them."""
-        if self._call is not None and self.stack.plan() is self._bound:
+        if self._call is not None and self._active().plan() is self._bound:
             return self._call_step(q, state)
         if not math.isfinite(q.dot(q)):
             raise self._not_finite(q)
         rec = self.recovery
-        stack = self.stack if rec is None else rec.stack
-        plan = stack.plan()
+        plan = self._active().plan()
         if plan is not self._bound:
             self._bind(plan)
         j = self._k % _BLOCK
@@ -334,7 +341,8 @@ class Controller:
         if self.references:
             batch.refs[0] = self._refs[j]  # type: ignore[index]
         start = time.perf_counter()
-        if self._fast and rec is None:
+        fast = self._fast and (rec is None or rec.poses_only)
+        if fast:
             plan.sync(state, self.dt)
             if plan.stale:  # an entry changed shape: lay the stack out anew, then step
                 self._bound = None
@@ -351,9 +359,24 @@ class Controller:
         plan.last_result = None
         batch = plan.step_buffers(len(self.references)).batch
         self._plan, self._u, self._q_next = plan, batch.U[0], batch.Q_next[0]
-        if rec is not None:
+        if fast:
+            self._observe(q)
+        elif rec is not None:
             rec.advance(state, self.dt, self.result)  # (the stack's advance: after the solve)
         self._k += 1
+
+    def _observe(self, q: np.ndarray) -> None:
+        """After a step of one kernel call (which advanced the stack): the recovery's watch,
+        from the kernel's outcome (the watched tasks unmet) and the errors it kept."""
+        rec = self.recovery
+        if rec is None:
+            return
+        unmet = False
+        if self._bound is self._main:  # (the retreat's plan: the watched tasks are not in it)
+            flags = self._watch_flags
+            for t in self._watched_rows:
+                unmet = unmet or flags[t] != 0
+        rec.observe(q, self.dt, unmet, rec.last_error)
 
     def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None, j: int) -> RobotState:
         """A step with the Python entries' own code around the kernel call, and Pinocchio's
@@ -401,6 +424,11 @@ class Controller:
         self._fast = movable and not plan.python and not self._python_refs
         self._bound = plan
         self._call = None
+        if self.recovery is not None and plan is self.stack.current_plan:
+            names = {t.name for t in self.recovery.watched}
+            self._watched_rows = [k for k, n in enumerate(plan.task_names) if n in names]
+            self._watch_flags = plan.view(lay.I_INFEASIBLE)
+            self._main = plan
 
     def _sample(self, k0: int) -> None:
         """Each reference's poses at steps ``k0 .. k0 + block - 1`` and its twists at the
@@ -508,6 +536,22 @@ class Controller:
             if self.plant is not None and getattr(self.plant, "stop_reason", None):
                 return q, k + 1
         return q, n
+
+
+def _recovery(robot: Robot, stack: Stack, recovery: object) -> StallRecovery | None:
+    """The controller's recovery from its ``recovery`` argument (see :class:`Controller`)."""
+    if recovery is True:
+        watched = any(isinstance(t, FrameTask) for t in stack.tasks)
+        return StallRecovery(robot, stack) if watched else None
+    if recovery is False or recovery is None:
+        return None
+    if not isinstance(recovery, StallRecovery):
+        raise WholebodyError(f"recovery must be True, False or a StallRecovery, got {recovery!r}")
+    if recovery.main is not stack:
+        raise WholebodyError(
+            "recovery must be made for the controller's stack: StallRecovery(robot, stack)"
+        )
+    return recovery
 
 
 _BLOCK = 1024  # steps of reference sampled at once (memory: 176 bytes a step a reference)

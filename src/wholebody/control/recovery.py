@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,6 +95,9 @@ class StallRecovery:
         The time over which that rate is measured (s).
     min_error
         ``E`` below this (m + rad) never stalls.
+    min_rate
+        Nor does a reach whose ``E`` shrinks faster than this (m/s + rad/s), however large
+        ``E``: far from the target the velocity limits, not a local minimum, set the pace.
     gain
         The retreat's posture gain (1/s).
     tolerance
@@ -115,13 +118,15 @@ class StallRecovery:
         horizon: float = 1.0,
         window: float = 0.15,
         min_error: float = 0.02,
+        min_rate: float = 0.2,
         gain: float = 20.0,
         tolerance: float = 0.2,
         max_retreat: float = 2.0,
         max_retreats: int = 2,
     ) -> None:
         for name, value in (("horizon", horizon), ("window", window), ("gain", gain),
-                            ("tolerance", tolerance), ("max_retreat", max_retreat)):  # fmt: skip
+                            ("tolerance", tolerance), ("max_retreat", max_retreat),
+                            ("min_rate", min_rate)):  # fmt: skip
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise DimensionError(f"StallRecovery: {name} must be a finite number > 0, "
                                      f"got {value!r}")  # fmt: skip
@@ -151,8 +156,10 @@ class StallRecovery:
                                            Level([self.posture_task], name="retreat")],
                                    stack.constraints, metric=stack.metric)  # fmt: skip
         self.horizon, self.window, self.min_error = float(horizon), float(window), min_error
+        self.min_rate = float(min_rate)
         self.tolerance, self.max_retreat, self.max_retreats = tolerance, max_retreat, max_retreats
         self._names = {t.name for t in self.watched}
+        self._poses = [t for t in self.watched if isinstance(t, PoseTask)]
         self.reset()
 
     def reset(self) -> None:
@@ -179,19 +186,39 @@ class StallRecovery:
     def advance(self, state: RobotState, dt: float, result: SolverResult) -> None:
         """After the step solved at ``state`` with ``result``: advance the stack that was
         solved (its integrators and constraints), then watch the reach or the retreat and
-        switch between them."""
-        active = self.stack
-        active.advance(state, dt, result=result)
-        self._time += dt
-        if self.retreating:
-            self._watch_retreat(state)
-        else:
-            self._watch_reach(state, dt, result)
-
-    def _watch_reach(self, state: RobotState, dt: float, result: SolverResult) -> None:
+        switch between them (:meth:`observe`)."""
+        self.stack.advance(state, dt, result=result)
         unmet = any(task in self._names for _, task in result.infeasible)
-        error = self.error(state)
-        if not unmet or error <= self.min_error:
+        self.observe(state.q, dt, unmet, lambda: self.error(state))
+
+    def observe(self, q: np.ndarray, dt: float, unmet: bool, error: Callable[[], float]) -> None:
+        """Watch one step, solved at the configuration ``q``, whose stack has advanced
+        already: ``unmet`` whether it left a watched task unmet, ``error()`` gives ``E`` at
+        ``q`` (called only when needed). Switches between the reach and the retreat."""
+        self._time += dt
+        if self.retreats and self.retreats[-1].end is None:
+            self._watch_retreat(q)
+        elif not unmet:
+            if self._history:
+                self._history.clear()
+        elif self._moving():
+            self._history.clear()
+        else:
+            self._watch_reach(dt, error())
+
+    @property
+    def poses_only(self) -> bool:
+        """Whether every watched task is a pose task, whose error a stack's kernel keeps
+        (:meth:`last_error`): the watch then needs no kinematics of its own."""
+        return len(self._poses) == len(self.watched)
+
+    def last_error(self) -> float:
+        """``E`` from the errors the watched pose tasks' last rows were computed with (m +
+        rad)."""
+        return float(sum(np.linalg.norm(t.last_error) for t in self._poses))
+
+    def _watch_reach(self, dt: float, error: float) -> None:
+        if error <= self.min_error:
             self._history.clear()
             return
         n = max(1, round(self.window / dt))
@@ -200,20 +227,24 @@ class StallRecovery:
             self._history.popleft()
         if len(self._history) <= n or len(self.retreats) >= self.max_retreats:
             return
-        if self._history[0] - error < error * self.window / self.horizon:
+        if self._history[0] - error < min(error / self.horizon, self.min_rate) * self.window:
             self.retreats.append(Retreat(self._time, None, error))
             self._history.clear()
 
-    def _watch_retreat(self, state: RobotState) -> None:
+    def _moving(self) -> bool:
+        """Whether a watched pose task's reference moves (a target twist not 0): its error
+        then measures the lag behind a moving target, which need not shrink."""
+        return any(t.target_twist.any() for t in self._poses)
+
+    def _watch_retreat(self, q: np.ndarray) -> None:
         retreat = self.retreats[-1]
-        gap = np.abs(state.joint_positions()[self._joints] - self.ready[self._joints])
+        gap = np.abs(self.robot.joint_positions(q)[self._joints] - self.ready[self._joints])
         wrapped = ~self.robot.positional[self._joints]
         gap[wrapped] = np.abs((gap[wrapped] + np.pi) % (2 * np.pi) - np.pi)
         if gap.max() <= self.tolerance or self._time - retreat.start >= self.max_retreat:
             retreat.end = self._time
-            for task in self.watched:
-                if isinstance(task, PoseTask):
-                    task.integral[:] = 0.0
+            for task in self._poses:
+                task.integral[:] = 0.0
 
 
 def _first_level(stack: Stack, watched: Sequence[Task]) -> int:

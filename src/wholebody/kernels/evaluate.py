@@ -290,28 +290,42 @@ def _nan_min(a: float, b: float) -> float:
 
 @kernel
 def _box(f: np.ndarray, i: np.ndarray, h: np.ndarray) -> None:
-    """The intersection of every limit's box, a crossed entry set to the bound that moves the
-    joint back (the velocity limit wins over position recovery), in scaled coordinates; and
-    the anchor: the acceleration limits' last velocity (scaled; 0 without them)."""
+    """The box of every limit (rows 0 and 1 of ``F_BOX``) and of every limit but the
+    acceleration limits (rows 2 and 3), in scaled coordinates (:func:`_intersect`); and the
+    anchor: the acceleration limits' last velocity (scaled; 0 without them)."""
     boxes, D = ften(f, h, lay.F_BOXES), fmat(f, h, lay.F_METRIC)[0]
     box, anchor = fmat(f, h, lay.F_BOX), fvec(f, h, lay.F_ANCHOR)
     entries = imat(i, h, lay.I_ENTRY)
     nu = D.shape[0]
-    lo, hi = box[0], box[1]
-    lo[:] = -np.inf
-    hi[:] = np.inf
     anchor[:] = 0.0
     par = fvec(f, h, lay.F_PAR)
-    for c in range(boxes.shape[0]):
-        for j in range(nu):
-            lo[j] = boxes[c, 0, j] if c == 0 else _nan_max(lo[j], boxes[c, 0, j])
-            hi[j] = boxes[c, 1, j] if c == 0 else _nan_min(hi[j], boxes[c, 1, j])
+    skip = np.zeros(boxes.shape[0], np.bool_)
     for e in range(entries.shape[0]):
         if entries[e, lay.E_KIND] == lay.KIND_ACCELERATION:
+            skip[entries[e, lay.E_SLOT]] = True
             previous = par[entries[e, lay.E_F0] + 3 * nu : entries[e, lay.E_F0] + 4 * nu]
             for j in range(nu):
                 anchor[j] = previous[j] / D[j]
-    for j in range(nu):
+    _intersect(boxes, np.zeros(boxes.shape[0], np.bool_), D, box[0], box[1])
+    _intersect(boxes, skip, D, box[2], box[3])
+
+
+@kernel
+def _intersect(
+    boxes: np.ndarray, skip: np.ndarray, D: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> None:
+    """Into ``lo, hi``: the intersection of the boxes not in ``skip``, a crossed entry set to
+    the bound that moves the joint back (the velocity limit wins over position recovery),
+    scaled by ``D``."""
+    lo[:] = -np.inf
+    hi[:] = np.inf
+    for c in range(boxes.shape[0]):
+        if skip[c]:
+            continue
+        for j in range(D.shape[0]):
+            lo[j] = _nan_max(lo[j], boxes[c, 0, j])
+            hi[j] = _nan_min(hi[j], boxes[c, 1, j])
+    for j in range(D.shape[0]):
         if lo[j] > hi[j]:
             mid = hi[j] if lo[j] > 0 else lo[j]
             lo[j] = mid

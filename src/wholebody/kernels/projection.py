@@ -6,9 +6,12 @@ A pass runs the levels in order, each on the free directions the levels above le
 (:mod:`~wholebody.kernels.pinv`), and, where the box must be enforced, saturates it
 (:mod:`~wholebody.kernels.sns`). The box-free pass comes first: when its solution is inside
 the box it is the answer; otherwise SNS runs from the start for ``d = u - u_c``, ``u_c`` the
-box's point closest to the anchor. Inequality rows of the stack are held above every level:
-the rows the solution violates become equality rows at their bound in a first level, and the
-stack is solved again, until none is violated.
+box's point closest to rest. This is done in the box of every limit but the acceleration
+limits; where that solution ``u*`` leaves the acceleration window, a second SNS pass asks the
+levels for ``A u*`` from the last velocity, then for ``u*`` in what they leave free
+(:mod:`wholebody.solvers.projection`, "Acceleration limits"). Inequality rows of the stack are
+held above every level: the rows the solution violates become equality rows at their bound in
+a first level, and the stack is solved again, until none is violated.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from wholebody.kernels.pinv import (
     basis,
     diagonal_step,
     free_of,
+    free_rank,
     identity_rows,
     level_step,
     project_free,
@@ -111,11 +115,14 @@ def _pass(
     box: Box,
     u_c: np.ndarray,
     sns: bool,
+    goal: np.ndarray,
     par: np.ndarray,
 ) -> np.ndarray:
     """One pass over the held rows' level (if any) and the stack's levels, for ``d = u - u_c``
     (right-hand sides shifted by ``A u_c``): box-free, or with SNS (``sns``; the levels'
-    scale factors into ``F_LEVEL_OUT``). Returns ``d``."""
+    scale factors into ``F_LEVEL_OUT``). With a ``goal`` velocity (else empty) the levels ask
+    for its velocities, ``A goal``, instead of their own, and a last level for ``goal`` itself
+    takes what they leave free. Returns ``d``."""
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
     A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
     lev_out = fmat(f, h, lay.F_LEVEL_OUT)
@@ -129,37 +136,73 @@ def _pass(
             mask[j] = not sat[j]
     free = free_of(np.zeros((n, 0)), True, mask)
     first = -1 if held.A.shape[0] else 0
+    to_goal = combine(goal, -1.0, u_c) if goal.shape[0] else goal
     for k in range(first, L):
         if k < 0:
             rows = Rows(held.A, combine(held.b, -1.0, mv(held.A, u_c)), 1.0, 0.0)
         else:
             r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
-            bk = combine(b[r0:r1], -1.0, mv(A[r0:r1], u_c)) if sns else b[r0:r1]
+            if goal.shape[0]:
+                bk = mv(A[r0:r1], to_goal)
+            else:
+                bk = combine(b[r0:r1], -1.0, mv(A[r0:r1], u_c)) if sns else b[r0:r1]
             rows = Rows(A[r0:r1], bk, lf[k, lay.LEVEL_REFERENCE], lf[k, lay.LEVEL_IDENTITY])
         u, free, sat, s = _level(rows, u, free, sat, box, sns, par)
         if sns and k >= 0:
             lev_out[k, 1] = s
+    if goal.shape[0] and free_rank(free) > 0:
+        u, free, sat, s = _level(Rows(np.zeros((n, 0)), to_goal, 1.0, 1.0), u, free, sat, box,
+                                 sns, par)  # fmt: skip
     return u
 
 
 @kernel
 def _solve(f: np.ndarray, i: np.ndarray, h: np.ndarray, held: Rows, par: np.ndarray):
-    """The stack (with the held rows on top) in the box: the box-free pass, then SNS around
-    the anchor where its solution leaves the box. ``(u, u_free, sns)``."""
+    """The stack (with the held rows on top) in the box. First in the box of every limit but
+    the acceleration limits (:func:`_solve_in`): ``u*``. Where acceleration limits leave
+    ``u*`` out of reach, the levels then ask, in order, for ``u*``'s velocities ``A u*``, a
+    change the acceleration box can deliver level by level (:func:`_pass` with a goal, SNS
+    from the last velocity). ``(u, u_free, sns)``."""
     box = fmat(f, h, lay.F_BOX)
+    fmat(f, h, lay.F_LEVEL_OUT)[:, 1] = 1.0
+    goal, u_free, sns = _solve_in(f, i, h, held, box[2], box[3], par)
     lo, hi = box[0], box[1]
+    wide = _widened(lo, hi)
+    if par[PAR_SATURATE] == 0.0 or inside(goal, wide.lo_tol, wide.hi_tol):
+        return goal, u_free, sns
     anchor = fvec(f, h, lay.F_ANCHOR)
     n = lo.shape[0]
-    fmat(f, h, lay.F_LEVEL_OUT)[:, 1] = 1.0
-    wide = _widened(lo, hi)
-    u_free = _pass(f, i, h, held, wide, np.zeros(n), False, par)
-    if par[PAR_SATURATE] == 0.0 or inside(u_free, wide.lo_tol, wide.hi_tol):
-        return u_free, u_free, False
-    u_c = np.empty(n)  # SNS for d = u - u_c from d = 0, u_c the box's point closest to the anchor
+    u_c = np.empty(n)  # from the box's point closest to the last velocity
     for j in range(n):
         u_c[j] = min(max(anchor[j], lo[j]), hi[j])
     shifted = _widened(combine(lo, -1.0, u_c), combine(hi, -1.0, u_c))
-    d = _pass(f, i, h, held, shifted, u_c, True, par)
+    d = _pass(f, i, h, held, shifted, u_c, True, goal, par)
+    return combine(d, 1.0, u_c), u_free, True
+
+
+@kernel
+def _solve_in(
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    held: Rows,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    par: np.ndarray,
+):
+    """The stack in the box ``lo, hi``: the box-free pass, then SNS from the box's point
+    closest to rest where its solution leaves the box. ``(u, u_free, sns)``."""
+    n = lo.shape[0]
+    wide = _widened(lo, hi)
+    none = np.zeros(0)
+    u_free = _pass(f, i, h, held, wide, np.zeros(n), False, none, par)
+    if par[PAR_SATURATE] == 0.0 or inside(u_free, wide.lo_tol, wide.hi_tol):
+        return u_free, u_free, False
+    u_c = np.empty(n)  # SNS for d = u - u_c from d = 0, u_c the box's point closest to rest
+    for j in range(n):
+        u_c[j] = min(max(0.0, lo[j]), hi[j])
+    shifted = _widened(combine(lo, -1.0, u_c), combine(hi, -1.0, u_c))
+    d = _pass(f, i, h, held, shifted, u_c, True, none, par)
     return combine(d, 1.0, u_c), u_free, True
 
 

@@ -206,7 +206,7 @@ class ProblemArena(Arena):
                 lay.F_B: (K,),
                 lay.F_C: (P, n),
                 lay.F_CB: (2, P),
-                lay.F_BOX: (2, n),
+                lay.F_BOX: (4, n),
                 lay.F_ANCHOR: (n,),
                 lay.F_U: (2, n),
                 lay.F_LEVEL_OUT: (L, 2),
@@ -228,6 +228,7 @@ class ProblemArena(Arena):
         metric[1] = problem.scale**2
         box = v(lay.F_BOX)
         box[0], box[1] = problem.lower, problem.upper
+        box[2], box[3] = problem.lower, problem.upper  # (no separate velocity box known)
         if problem.anchor is not None:
             v(lay.F_ANCHOR)[:] = problem.anchor
         A, b, C, CB = v(lay.F_A), v(lay.F_B), v(lay.F_C), v(lay.F_CB)
@@ -378,7 +379,7 @@ class Plan(Arena):
             lay.F_B: (self.K,),
             lay.F_C: (self.P, nu),
             lay.F_CB: (2, self.P),
-            lay.F_BOX: (2, nu),
+            lay.F_BOX: (4, nu),
             lay.F_ANCHOR: (nu,),
             lay.F_U: (2, nu),
             lay.F_LEVEL_OUT: (L, 2),

@@ -71,6 +71,20 @@ needs no factorisation at all: its move is ``F (b/s - base)``. The best task sca
 that is still outside the box is moved along the segment from the (feasible) solution of the
 higher levels, so the box always holds and the result is never NaN.
 
+Acceleration limits (:class:`~wholebody.tasks.AccelerationLimits`) make the box a narrow
+window around the last velocity, ``|u - u_prev| <= a dt``. SNS in that window from rest
+asks each level for its whole velocity in one step: a far target then scales a level by
+0.001-0.005 and the robot crawls or oscillates. So the stack is first solved, as above, in
+the box of the other limits: ``u*``, the velocity the levels want and the position and
+velocity limits allow. When ``u*`` is outside the window the levels ask for ``u*``'s own
+velocities, ``A_k u*``, from the last velocity (``d = u - u_c``, ``u_c`` the window's point
+closest to ``u_prev``), with SNS in the window, and a last level of rows ``I`` asks for
+``u*`` itself in the directions left free: each level gets as much of the change towards
+``u*`` as the window delivers, in priority order (a closed chain on top keeps its rows, the
+hands' level is scaled, the joints it does not need go to ``u*``). Measured in
+``benchmarks/convergence.py``: with acceleration limits the default controller converges as
+often as without them.
+
 Cost: every factorisation of an SNS iteration is also its rank test (the rank the level needs
 is that of the first iteration), a snapshot of the free directions is a reference (they are
 never modified in place) and the scaling factor is one pass over the stacked bounds.

@@ -193,6 +193,12 @@ class PoseTask(Task):
         return self._params[POSE_INTEGRAL : POSE_INTEGRAL + 6]
 
     @property
+    def last_error(self) -> np.ndarray:
+        """The (6,) error ``[p_d - p; log3(E)]`` (m, rad) the last rows were computed with,
+        by this task or by the kernel of a stack that runs it (read-only; zeros before)."""
+        return self._view(POSE_ERROR, 6)
+
+    @property
     def target(self) -> np.ndarray | None:
         """The target pose (4x4, read-only), or None before it is set or captured."""
         if self._params[POSE_HAS] == TARGET_NONE:

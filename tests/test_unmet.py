@@ -81,6 +81,33 @@ def test_a_joint_asked_past_its_position_limit_is_a_joint_limit(torso, backend):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+def test_a_hand_held_off_by_an_inequality_above_it_is_held_by_design(torso, backend):
+    """A table 5 cm under the hand, in a level above it, and the hand asked 20 cm down: the
+    hand stops on the table, unmet because the inequality holds it (not a joint limit, not
+    a failure); the summary names the cause."""
+    from wholebody.cli import _unmet_words
+    from wholebody.tasks.inequality import FrameHalfSpace
+
+    q0 = torso.home()
+    z0 = torso.frame_pose(q0, "left_tool")[2, 3]
+    table = FrameHalfSpace(torso, "left_tool", [0, 0, 1], z0 - 0.05, name="table")
+    hand = FrameTask(torso, "left_tool", kp=5.0, orientation=False)
+    pose = torso.frame_pose(q0, "left_tool")
+    pose[2, 3] -= 0.2
+    hand.set_target(pose)
+    stack = Stack(torso, [Level([table], name="table"), Level([hand], name="hand")],
+                  [JointPositionLimits(torso), VelocityLimits(torso)])  # fmt: skip
+    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 3.0)
+    m = summary(log)
+    causes = log.unmet["left_tool"]
+    assert m["solver_failures"] == 0
+    assert np.all(causes[-100:] == UnmetCause.INEQUALITY)
+    assert m["unmet_steps"]["inequality"] >= 0.9 * len(log)
+    assert "held back by an inequality task" in _unmet_words(m)
+    assert m["final_error"]["left_tool"]["position_m"] == pytest.approx(0.15, abs=2e-3)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_a_posture_under_the_hand_unmet_is_not_a_failure(torso, backend):
     """A posture level far from the start under a met hand: the solver reports it unmet
     and the status reads INFEASIBLE (the velocity limits cost it part of its optimum), but

@@ -18,16 +18,24 @@ coordinates ``u~``, the ones the solvers work in), keeping what the higher level
    a posture under the hands). A task that only a velocity more than ``UNREACHABLE_RATIO``
    times its rate limits would meet (a nearly straight arm asked to stretch) is UNREACHABLE
    too;
-3. else the bounds hold it back: with the joint position limits' box alone it is met, so the
-   rate bounds (velocity, acceleration) cannot deliver the demanded rate this step:
-   :attr:`UnmetCause.SATURATED`; else a joint position limit keeps it from its target:
-   :attr:`UnmetCause.JOINT_LIMIT`.
+3. else the constraints hold it back: met with the joint position limits' box (and the
+   inequality rows) alone, the rate bounds (velocity, acceleration) cannot deliver the
+   demanded rate this step: :attr:`UnmetCause.SATURATED`; else met once the inequality rows
+   are dropped too, an inequality task (a collision distance) holds it:
+   :attr:`UnmetCause.INEQUALITY` (by design); else a joint position limit keeps it from its
+   target: :attr:`UnmetCause.JOINT_LIMIT`.
+
+When the solver itself says that no bound limited any task (a status below INFEASIBLE: both
+backends compare each task's residual with its box-free optimum) and no inequality row sits
+at or above the level, an unmet task of a level below the first is PRIORITY (or UNREACHABLE
+if its own rows are inconsistent) without a QP.
 
 Only FAILED is a failure: the others are tasks that could not be met this step. The causes
 are ordered by severity; a step's cause is the largest of its tasks'.
 
-This is an analysis after the solve (about 1 ms for a step with unmet tasks; nothing for one
-without), not part of the control step.
+This is an analysis after the solve (about 1 ms for a step whose status is INFEASIBLE, 0.1 ms
+for a lower level unmet by priority, nothing for a step with every task met), not part of
+the control step.
 """
 
 from __future__ import annotations
@@ -57,18 +65,22 @@ class UnmetCause(enum.IntEnum):
     MET = 0
     PRIORITY = 1
     """The levels above use the freedom the task needs (by design, not a failure)."""
-    SATURATED = 2
+    INEQUALITY = 2
+    """An inequality task of its level or above (a collision distance) holds it back (by
+    design)."""
+    SATURATED = 3
     """A velocity or acceleration bound cannot deliver the demanded rate this step."""
-    JOINT_LIMIT = 3
+    JOINT_LIMIT = 4
     """A joint position limit keeps the task from its target: no feasible step meets it."""
-    UNREACHABLE = 4
+    UNREACHABLE = 5
     """The task's own rows cannot be met by any velocity (a singular arm; out of reach)."""
-    FAILED = 5
-    """The solve failed, or left the task's level worse than the constraints force."""
+    FAILED = 6
+    """The solve failed, or left the task unmet where the constraints allowed meeting it."""
 
 
 CAUSE_WORDS: dict[UnmetCause, str] = {
     UnmetCause.PRIORITY: "yielding to a higher level (by design)",
+    UnmetCause.INEQUALITY: "held back by an inequality task, e.g. a collision distance (by design)",
     UnmetCause.SATURATED: "held back by a velocity/acceleration limit (saturated)",
     UnmetCause.JOINT_LIMIT: "at a joint position limit",
     UnmetCause.UNREACHABLE: "out of reach (no velocity meets it)",
@@ -127,21 +139,22 @@ class _Level:
         unreachable in both)."""
         return self._least(*self._objective())
 
-    def boxed(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
-        """The level's best ``u~`` within ``[lo, hi]`` and the inequality rows (a QP in the
-        higher levels' null space); None if the QP engine does not solve it."""
+    def boxed(self, lo: np.ndarray, hi: np.ndarray, rows: bool = True) -> np.ndarray | None:
+        """The level's best ``u~`` within ``[lo, hi]`` and (``rows``) the inequality rows (a
+        QP in the higher levels' null space); None if the QP engine does not solve it."""
         N = self.N
         if N.shape[1] == 0:
             return self.u
         H, g = self._objective()
         fin = np.isfinite(lo) | np.isfinite(hi)
-        if not fin.any() and not self.C.shape[0]:
+        C, c_lo, c_hi = (self.C, self.c_lo, self.c_hi) if rows else (self.C[:0], [], [])
+        if not fin.any() and not C.shape[0]:
             return self._least(H, g)
-        Cz = np.vstack([N[fin], self.C @ N])
-        lower = np.concatenate([lo[fin] - self.u[fin], self.c_lo - self.C @ self.u])
-        upper = np.concatenate([hi[fin] - self.u[fin], self.c_hi - self.C @ self.u])
+        Cz = np.vstack([N[fin], C @ N])
+        lower = np.concatenate([lo[fin] - self.u[fin], c_lo - C @ self.u])
+        upper = np.concatenate([hi[fin] - self.u[fin], c_hi - C @ self.u])
         # the solution is feasible (z = 0): widen by round-off so that it stays so
-        slack = 1e-12 * (1.0 + np.abs(np.concatenate([lo[fin], self.c_lo])))
+        slack = 1e-12 * (1.0 + np.abs(np.concatenate([lo[fin], c_lo])))
         lower = np.minimum(lower, 0.0) - slack
         upper = np.maximum(upper, 0.0) + slack
         sol = DaqpEngine(warm_start=False).solve(H, g, Cz, lower, upper)
@@ -175,9 +188,13 @@ class _Level:
     def alone(self, t: int) -> bool:
         """Whether task ``t`` (index in the level) can be met by its own rows alone."""
         a, z = self.tasks[t, 1] - self.r0, self.tasks[t, 2] - self.r0
-        A, b = self.A[a:z], self.b[a:z]
-        x = np.linalg.lstsq(A, b, rcond=None)[0]
-        return bool(np.linalg.norm(A @ x - b) <= self.tol * (1.0 + np.linalg.norm(b)))
+        return _consistent(self.A[a:z], self.b[a:z], self.tol)
+
+
+def _consistent(A: np.ndarray, b: np.ndarray, tol: float) -> bool:
+    """Whether some ``x`` meets ``A x = b`` within ``tol (1 + ||b||)`` (least squares)."""
+    x = np.linalg.lstsq(A, b, rcond=None)[0]
+    return bool(np.linalg.norm(A @ x - b) <= tol * (1.0 + np.linalg.norm(b)))
 
 
 def _null_space(A: np.ndarray, n: int) -> np.ndarray:
@@ -221,13 +238,38 @@ def _level_causes(level: _Level, unmet: np.ndarray, box, pos, rate) -> np.ndarra
         far[t] = level.rate_ratio(int(t), rate) > UNREACHABLE_RATIO
     causes[far] = UnmetCause.UNREACHABLE
     limited = unmet & free & ~far
-    if limited.any():
-        only_pos = level.boxed(pos[0], pos[1])
-        rate = level.met(only_pos) if only_pos is not None else np.zeros_like(free)
-        causes[limited & rate] = UnmetCause.SATURATED
-        causes[limited & ~rate] = UnmetCause.JOINT_LIMIT
+    if limited.any():  # met without the rate bounds: saturated
+        rated = _met_or_not(level, level.boxed(pos[0], pos[1]))
+        causes[limited & rated] = UnmetCause.SATURATED
+        limited = limited & ~rated
+    if limited.any() and level.C.shape[0]:  # ... and without the inequality rows
+        held = limited & _met_or_not(level, level.boxed(pos[0], pos[1], rows=False))
+        causes[held] = UnmetCause.INEQUALITY
+        limited = limited & ~held
+    causes[limited] = UnmetCause.JOINT_LIMIT
     for t in np.flatnonzero(unmet & ~free):
         if level.k == 0 or not level.alone(int(t)):
+            causes[t] = UnmetCause.UNREACHABLE
+    return causes
+
+
+def _met_or_not(level: _Level, x: np.ndarray | None) -> np.ndarray:
+    """Per task of the level, whether it is met at ``x`` (none when the QP gave no ``x``)."""
+    return level.met(x) if x is not None else np.zeros(level.tasks.shape[0], dtype=bool)
+
+
+def _unlimited_causes(plan, k: int, unmet: np.ndarray, tol: float) -> np.ndarray:
+    """The causes of the unmet tasks of level ``k > 0`` when the solver says no bound limited
+    any task (its status below INFEASIBLE) and no inequality row sits at or above the level:
+    the levels above leave them their residual (PRIORITY), unless a task's own rows are
+    inconsistent (UNREACHABLE). The solver's own account, without a QP."""
+    v = plan.view
+    A, b = v(lay.F_A), v(lay.F_B)
+    tasks = v(lay.I_TASK)[v(lay.I_TASK)[:, 0] == k]
+    causes = np.where(unmet, UnmetCause.PRIORITY, UnmetCause.MET).astype(np.int8)
+    for t in np.flatnonzero(unmet):
+        rows = slice(tasks[t, 1], tasks[t, 2])
+        if not _consistent(A[rows], b[rows], tol):
             causes[t] = UnmetCause.UNREACHABLE
     return causes
 
@@ -241,14 +283,20 @@ def classify(plan, tol: float = 1e-6) -> tuple[np.ndarray, bool]:
     unmet = v(lay.I_INFEASIBLE).astype(bool)
     tasks = v(lay.I_TASK)
     causes = np.zeros(unmet.size, dtype=np.int8)
-    if int(v(lay.I_OUT)[lay.OUT_STATUS]) == SolverStatus.FAILED:
+    status = int(v(lay.I_OUT)[lay.OUT_STATUS])
+    if status == SolverStatus.FAILED:
         causes[unmet] = UnmetCause.FAILED
         return causes, True
     if not unmet.any():
         return causes, False
-    box, pos, rate = _boxes(plan)
-    for k in np.unique(tasks[unmet, 0]):
-        level = _Level(plan, int(k), tol)
+    ineq = v(lay.I_INEQ)
+    top_rows = int(ineq[:, 0].min()) if ineq.size else np.iinfo(np.int64).max
+    boxes = None
+    for k in np.unique(tasks[unmet, 0]).tolist():
         mask = tasks[:, 0] == k
-        causes[mask] = _level_causes(level, unmet[mask], box, pos, rate)
+        if status < SolverStatus.INFEASIBLE and 0 < k < top_rows:
+            causes[mask] = _unlimited_causes(plan, k, unmet[mask], tol)
+            continue
+        boxes = boxes or _boxes(plan)
+        causes[mask] = _level_causes(_Level(plan, k, tol), unmet[mask], *boxes)
     return causes, bool(np.any(causes == UnmetCause.FAILED))

@@ -9,8 +9,10 @@ coordinates ``u~``, the ones the solvers work in), keeping what the higher level
 (``A_hi u~ = A_hi u~*``, their inequality rows no worse than at ``u~*``):
 
 1. the level's *achievable minimum* under the whole box and the inequality rows (a QP): if
-   the task is met there, it could have been met: :attr:`UnmetCause.FAILED` (so is every
-   task of a step whose solve failed);
+   the task is met there, it could have been met: :attr:`UnmetCause.FAILED` when the
+   solver's residual exceeds that minimum's by more than ``FAILURE_TOLERANCE (1 + ||b_t||)``
+   (so is every task of a step whose solve failed), else :attr:`UnmetCause.INEXACT` (met to
+   within the solver's regularisation);
 2. else the task's best residual without any bound (least squares): unmet there too, the task
    cannot be met by any velocity: :attr:`UnmetCause.UNREACHABLE` when its own rows are
    inconsistent (a singular arm, a target out of reach: its rows alone cannot be met), else
@@ -53,6 +55,10 @@ __all__ = ["CAUSE_WORDS", "UnmetCause", "classify", "worst"]
 
 _RANK = 1e-9  # singular values below this times the largest (at least 1) are zero
 _TIKHONOV = 1e-12  # added to the QP's Hessian (daqp wants it positive definite)
+FAILURE_TOLERANCE = 1e-4
+"""A task the constraints let meet counts as a failure only when the solver's weighted
+residual exceeds the least by more than this times ``1 + ||b_t||`` (the solvers'
+regularisation leaves up to about 1e-5 on weakly conditioned rows)."""
 UNREACHABLE_RATIO = 100.0
 """A task met without bounds only at more than this many times the rate limits (a nearly
 straight arm) counts as unreachable, not saturated."""
@@ -63,22 +69,26 @@ class UnmetCause(enum.IntEnum):
     docstring); 0: met."""
 
     MET = 0
-    PRIORITY = 1
+    INEXACT = 1
+    """Met where the constraints allow it to the solver's tolerance, and the solver's answer
+    within ``FAILURE_TOLERANCE`` of that (its regularisation): not a failure."""
+    PRIORITY = 2
     """The levels above use the freedom the task needs (by design, not a failure)."""
-    INEQUALITY = 2
+    INEQUALITY = 3
     """An inequality task of its level or above (a collision distance) holds it back (by
     design)."""
-    SATURATED = 3
+    SATURATED = 4
     """A velocity or acceleration bound cannot deliver the demanded rate this step."""
-    JOINT_LIMIT = 4
+    JOINT_LIMIT = 5
     """A joint position limit keeps the task from its target: no feasible step meets it."""
-    UNREACHABLE = 5
+    UNREACHABLE = 6
     """The task's own rows cannot be met by any velocity (a singular arm; out of reach)."""
-    FAILED = 6
+    FAILED = 7
     """The solve failed, or left the task unmet where the constraints allowed meeting it."""
 
 
 CAUSE_WORDS: dict[UnmetCause, str] = {
+    UnmetCause.INEXACT: "met only to the solver's accuracy",
     UnmetCause.PRIORITY: "yielding to a higher level (by design)",
     UnmetCause.INEQUALITY: "held back by an inequality task, e.g. a collision distance (by design)",
     UnmetCause.SATURATED: "held back by a velocity/acceleration limit (saturated)",
@@ -230,7 +240,10 @@ def _level_causes(level: _Level, unmet: np.ndarray, box, pos, rate) -> np.ndarra
     best = level.boxed(box[0], box[1])
     if best is not None:  # met at the level's best under every constraint: a failure
         could = unmet & level.met(best)
-        causes[could] = UnmetCause.FAILED
+        at, least = level.residuals(level.u)[1], level.residuals(best)[1]
+        gap = at[:, 0] - least[:, 0] > FAILURE_TOLERANCE * (1.0 + at[:, 2])
+        causes[could & gap] = UnmetCause.FAILED
+        causes[could & ~gap] = UnmetCause.INEXACT
         unmet = unmet & ~could
     free = level.met(level.free())
     far = np.zeros_like(free)

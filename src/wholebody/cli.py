@@ -227,7 +227,7 @@ def _unmet_words(m: dict) -> str:
         key = cause.name.lower()
         if steps.get(key):
             names = ", ".join(t for t, c in tasks.items() if c.get(key))
-            parts.append(f"{steps[key]} {CAUSE_WORDS[cause]} ({names})")
+            parts.append(f"{steps[key]} {CAUSE_WORDS[cause]}: {names}")
     total = sum(steps.values())
     failed = steps.get(UnmetCause.FAILED.name.lower(), 0)
     verdict = f"{failed} of them failures" if failed else "none a failure"

@@ -21,7 +21,7 @@ Printed per scenario and case: the worst per-axis MAE of the hands (mm), the wai
 (rad), both arms' energy at the last posture by the same measure (the paper's energy with the
 learned stiffness, whatever the case ran with, J), the median arm angle of each arm (deg,
 frames where it is defined), the share of those frames in the human range [0, 0.8] rad, and
-the failures (steps with the first level unmet).
+the failures (steps where a task that could have been met was not).
 
     python benchmarks/ablations.py [--scenarios a,b] [--k 0.27]
 """

@@ -4,8 +4,8 @@
 For every scenario and both energy-shaped backends, runs it with ``[stack] acceleration``
 off and on and prints the largest velocity change per step relative to the robot's limit
 (``max |u_k - u_{k-1}| / (a dt)`` over steps, phase boundaries included, and joints), the
-steps above it, the solver failures (steps whose top level was not met) and the worst
-per-axis MAE of a hand over the run.
+steps above it, the solver failures (steps where a task that could have been met was not)
+and the worst per-axis MAE of a hand over the run.
 
     python benchmarks/smoothness.py [SCENARIO ...]
 """

@@ -213,9 +213,49 @@ def _report_physics(m: dict) -> None:
         print(f"  contact {c['pair']} from {c['first_s']:.2f} s, up to {c['peak_force_n']:.1f} N")
 
 
+def _unmet_words(m: dict) -> str:
+    """The steps with a task unmet in words, by cause, most severe first, with the tasks
+    concerned (``m``: a run's metrics, :func:`wholebody.control.metrics.summary`); "" when
+    every task was met (or the log did not record why)."""
+    from wholebody.solvers.unmet import CAUSE_WORDS, UnmetCause
+
+    steps, tasks = m.get("unmet_steps") or {}, m.get("unmet_tasks") or {}
+    if not steps:
+        return ""
+    parts = []
+    for cause in sorted(CAUSE_WORDS, reverse=True):
+        key = cause.name.lower()
+        if steps.get(key):
+            names = ", ".join(t for t, c in tasks.items() if c.get(key))
+            parts.append(f"{steps[key]} {CAUSE_WORDS[cause]}: {names}")
+    total = sum(steps.values())
+    failed = steps.get(UnmetCause.FAILED.name.lower(), 0)
+    verdict = f"{failed} of them failures" if failed else "none a failure"
+    return f"{total} steps with a task unmet, {verdict}: " + "; ".join(parts)
+
+
+def _goal_words(m: dict) -> str:
+    """Where each tracked hand ended against its goal, in words: "reached", or "ends 11.5 mm
+    / 0.020 rad from its goal" beyond the tolerance (stated); "" without tracked hands."""
+    from wholebody.control.metrics import GOAL_TOLERANCE_M, GOAL_TOLERANCE_RAD
+
+    ends = m.get("final_error") or {}
+    if not ends:
+        return ""
+    words = []
+    for task, e in ends.items():
+        if e["reached"]:
+            words.append(f"{task} reached")
+            continue
+        rot = "" if e["rotation_rad"] is None else f" / {e['rotation_rad']:.3f} rad"
+        words.append(f"{task} ends {e['position_m'] * 1e3:.1f} mm{rot} from its goal")
+    return (", ".join(words) + f" (tolerance {GOAL_TOLERANCE_M * 1e3:g} mm / "
+            f"{GOAL_TOLERANCE_RAD:g} rad)")  # fmt: skip
+
+
 def _report_run(run, files: dict[str, Path]) -> None:
-    """The run's summary lines: steps, control step timing, safety counts, worst hand error
-    per phase, the files written."""
+    """The run's summary lines: steps, control step timing, safety counts, the unmet tasks by
+    cause, where the hands ended, worst hand error per phase, the files written."""
     m = run.metrics
     print(
         f"{run.spec.name} [{run.backend}{', MuJoCo' if m.get('sim') == 'mujoco' else ''}]: "
@@ -224,6 +264,9 @@ def _report_run(run, files: dict[str, Path]) -> None:
         f"(1/median = {m['median_step_rate_hz']:.0f} Hz); limit violations "
         f"{m['limit_violations']}{_overshoot(m)}, solver failures {m['solver_failures']}"
     )
+    for label, text in (("unmet", _unmet_words(m)), ("goals", _goal_words(m))):
+        if text:
+            print(f"  {label:16s} {text}")
     for phase, entry in m["phases"].items():
         worst = max((v for hand in entry["mae_m"].values() for v in hand.values()), default=0.0)
         chain = entry.get("closed_chain_error_max_m")

@@ -52,6 +52,7 @@ from wholebody.solvers.base import Solver
 from wholebody.solvers.plan import Plan
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import Stack
+from wholebody.solvers.unmet import classify
 from wholebody.tasks.arm_energy import ArmPotentialEnergy
 from wholebody.tasks.base import Objective, Task
 from wholebody.tasks.frame import FrameTask
@@ -474,7 +475,8 @@ class Controller:
         if n < 1:
             raise DimensionError(f"duration {duration} s is shorter than one step of {self.dt} s")
         tracked = [t for t in self.stack.tasks if isinstance(t, FrameTask)]
-        log = _Recorder(robot, self.stack, self.monitors, tracked, n)
+        log = _Recorder(robot, self.stack, self.monitors, tracked, n,
+                        float(getattr(self.solver, "tolerance", 1e-6)))  # fmt: skip
         self.reset(u0)
         bar = _progress(n, progress)
         with _threads(self.threads), _gc_paused():  # no collection mid-step
@@ -489,6 +491,8 @@ class Controller:
             "actuated_joints": list(robot.actuated_joints),
             "groups": {g: grp.indices.tolist() for g, grp in robot.groups.items()},
             "position_limits": [lim.tolist() for lim in robot.position_limits],
+            # which entries of each tracked frame task's error are its rotation (rad)
+            "orientation_rows": {t.name: np.flatnonzero(t.rows >= 3).tolist() for t in tracked},
             "phases": {k: list(v) for k, v in (phases or {}).items()},
             "final_q": q.tolist(),
             **self._retreats(),
@@ -598,9 +602,11 @@ class _Recorder:
         monitors: Sequence[ArmPotentialEnergy],
         tracked: list[FrameTask],
         n: int,
+        tolerance: float = 1e-6,
     ) -> None:
         self.robot, self.monitors, self.tracked = robot, monitors, tracked
         self.stack = stack
+        self.tolerance = tolerance  # the solver's: a task above it is unmet
         self.tasks: list[Task] = stack.tasks
         self.t = np.zeros(n)
         self.q = np.zeros((n, robot.nq))
@@ -611,7 +617,7 @@ class _Recorder:
         self.status = np.zeros(n, dtype=np.int8)
         self.limit_hit = np.zeros(n, dtype=bool)
         self.failed = np.zeros(n, dtype=bool)
-        self.top = stack.levels[0].name
+        self.causes = {t.name: np.zeros(n, dtype=np.int8) for t in self.tasks}
         self.level_res = np.zeros((n, len(stack.levels)))
         self.errors = {t.name: np.zeros((n, t.dim)) for t in self.tasks}
         self.pos = {t.name: np.zeros((n, 3)) for t in tracked}
@@ -635,7 +641,6 @@ class _Recorder:
         the controller's stack (else a retreat's, whose level residuals are not the stack's:
         NaN)."""
         out, U, levels = plan.view(lay.I_OUT), plan.view(lay.F_U), plan.view(lay.F_LEVEL_OUT)
-        unmet, tasks = plan.view(lay.I_INFEASIBLE), plan.view(lay.I_TASK)
         status = int(out[lay.OUT_STATUS])
         self.t[k] = t
         self.q[k] = q
@@ -648,8 +653,11 @@ class _Recorder:
             or plan.view(lay.I_ACTIVE).any()
             or (levels[:, 1] < 1.0).any()
         )
-        top_unmet = plan.level_names[0] == self.top and unmet[tasks[:, 0] == 0].any()
-        self.failed[k] = status == SolverStatus.FAILED or bool(top_unmet)
+        causes, self.failed[k] = classify(plan, self.tolerance)
+        if causes.any():
+            for name, cause in zip(plan.task_names, causes.tolist(), strict=True):
+                if cause and name in self.causes:
+                    self.causes[name][k] = cause
         self.level_res[k] = levels[:, 0] if own else np.nan
         for task in self.tasks:
             self.errors[task.name][k] = task.error(state)
@@ -681,6 +689,7 @@ class _Recorder:
             objectives={k: v[:n] for k, v in self.values.items()},
             meta=meta,
             failed=self.failed[:n],
+            unmet={k: v[:n] for k, v in self.causes.items()},
         )
 
 

@@ -3,8 +3,10 @@
 Arrays have one row per control step. Keys in the file (no pickle; metadata as JSON)::
 
     t, q, u, joint_positions, step_time, solve_time, status, limit_hit, level_residuals
-    failed                          (N,) bool: status FAILED, or the first level not met
-                                    within the solver's tolerance (any backend)
+    failed                          (N,) bool: a task that could be met was not (the solve
+                                    failed, or left a level worse than the constraints force:
+                                    :mod:`wholebody.solvers.unmet`; any backend)
+    unmet/<task>                    (N,) int8 why the task was unmet (UnmetCause; 0: met)
     task_error/<task>               (N, dim)  task errors (m, rad)
     frame_position/<task>           (N, 3)    tracked frame position (m, world)
     reference_position/<task>       (N, 3)    its reference (m, world)
@@ -72,11 +74,15 @@ class RunLog:
     arms: dict[str, ArmTrace] = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
     failed: np.ndarray | None = None
-    """Per step: the solve failed (status FAILED) or left a task of the first level unmet
-    (see :attr:`SolverResult.infeasible`), by the same rule for every backend; None in logs
-    written before it was recorded."""
+    """Per step: a task that could be met was not (the solve failed, or left a level worse
+    than the constraints force; :func:`wholebody.solvers.unmet.classify`), by the same rule
+    for every backend; None in logs written before it was recorded (logs written before
+    the causes were recorded have the older rule: the first level unmet)."""
     objectives: dict[str, np.ndarray] = field(default_factory=dict)
     """Per monitored objective other than an arm energy, its value each step."""
+    unmet: dict[str, np.ndarray] | None = None
+    """Per equality task, each step's :class:`~wholebody.solvers.unmet.UnmetCause` (int8, 0:
+    met); None in logs written before it was recorded."""
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -125,6 +131,7 @@ class RunLog:
             ("frame_position", self.frame_positions),
             ("reference_position", self.reference_positions),
             ("objective", self.objectives),
+            ("unmet", self.unmet or {}),
         ):
             for name, value in table.items():
                 arrays[f"{prefix}/{name}"] = value
@@ -159,6 +166,7 @@ class RunLog:
             "frame_position": {},
             "reference_position": {},
             "objective": {},
+            "unmet": {},
         }
         arms: dict[str, dict[str, np.ndarray]] = {}
         for key, value in data.items():
@@ -182,7 +190,13 @@ class RunLog:
             meta=_meta(path, data["meta"]),
             failed=data.get("failed"),
             objectives=tables["objective"],
+            unmet=tables["unmet"] if "unmet" in _heads(data) else None,
         )
+
+
+def _heads(data: dict[str, np.ndarray]) -> set[str]:
+    """The first parts of a log file's keys (``unmet`` for ``unmet/<task>``)."""
+    return {key.partition("/")[0] for key in data}
 
 
 def _meta(path: Path, value: np.ndarray) -> dict:
@@ -283,4 +297,15 @@ def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
             else np.concatenate([log.failed for log in logs])
         ),
         objectives=merge([log.objectives for log in logs]),
+        unmet=_merge_causes(logs),
     )
+
+
+def _merge_causes(logs: list[RunLog]) -> dict[str, np.ndarray] | None:
+    """The runs' per-task unmet causes end to end, 0 (met) where a run lacks the task; None
+    if a run did not record them."""
+    if any(log.unmet is None for log in logs):
+        return None
+    names = list(dict.fromkeys(name for log in logs for name in log.unmet))  # type: ignore[union-attr]
+    return {name: np.concatenate([log.unmet.get(name, np.zeros(len(log), dtype=np.int8))  # type: ignore[union-attr]
+                                  for log in logs]) for name in names}  # fmt: skip

@@ -11,9 +11,15 @@
   defined (``rho >= ARM_ANGLE_MIN_RHO``: not a straight arm, not a vertical shoulder-wrist
   line),
 * limit violations (steps with a joint outside its limits by more than 1e-9 rad) and solver
-  failures (steps whose solve failed or left a task of the first level unmet within the
-  solver's tolerance: :attr:`RunLog.failed`, the same rule for every backend; in logs without
-  it, steps with status INFEASIBLE or FAILED).
+  failures: steps where a task that could be met was not (the solve failed, or left a level
+  worse than the constraints force: :attr:`RunLog.failed`, the same rule for every backend;
+  in logs without it, steps with status INFEASIBLE or FAILED),
+* where each tracked hand ends: its distance from its last reference (its goal) at the last
+  step, position (m) and rotation (rad), and whether that is within ``GOAL_TOLERANCE_M`` and
+  ``GOAL_TOLERANCE_RAD`` (:func:`final_errors`),
+* the steps with a task unmet, by cause (:func:`unmet_steps`): a task held back by a rate
+  limit, at a joint limit, out of reach or yielding to a higher level is unmet but not a
+  failure.
 """
 
 from __future__ import annotations
@@ -25,19 +31,26 @@ import numpy as np
 from wholebody.control.log import RunLog
 from wholebody.errors import DataError
 from wholebody.solvers.result import SolverStatus
+from wholebody.solvers.unmet import UnmetCause, worst
 
 __all__ = [
+    "GOAL_TOLERANCE_M",
+    "GOAL_TOLERANCE_RAD",
     "Tracking",
     "closed_chain_error",
+    "final_errors",
     "limit_overshoot",
     "limit_violations",
     "step_timing",
     "summary",
     "tracking",
+    "unmet_steps",
 ]
 
 AXES = ("x", "y", "z")
 ARM_ANGLE_MIN_RHO = 0.005  # m
+GOAL_TOLERANCE_M = 1e-3  # a hand ending farther from its goal has not reached it (m)
+GOAL_TOLERANCE_RAD = 0.01  # ... or turned farther from it (rad)
 
 
 @dataclass(frozen=True)
@@ -110,6 +123,50 @@ def step_timing(step_time: np.ndarray) -> dict[str, float]:
     }
 
 
+def final_errors(log: RunLog) -> dict[str, dict]:
+    """Per tracked frame task in the stack at the last step: ``position_m``, its distance
+    from its reference there (m, world), ``rotation_rad``, the angle of its orientation
+    error (rad; None for a task without orientation rows, or a log that does not say which
+    rows those are: ``meta["orientation_rows"]``), and ``reached``: both within
+    ``GOAL_TOLERANCE_M`` and ``GOAL_TOLERANCE_RAD``."""
+    out: dict[str, dict] = {}
+    if not len(log):
+        return out
+    rows = log.meta.get("orientation_rows", {})
+    for task, position in log.frame_positions.items():
+        off = position[-1] - log.reference_positions[task][-1]
+        if not np.all(np.isfinite(off)):
+            continue  # not in the stack at the end (no goal)
+        rot = None
+        if rows.get(task):
+            rot = float(np.linalg.norm(log.task_errors[task][-1, rows[task]]))
+        dist = float(np.linalg.norm(off))
+        out[task] = {
+            "position_m": dist,
+            "rotation_rad": rot,
+            "reached": dist <= GOAL_TOLERANCE_M and (rot is None or rot <= GOAL_TOLERANCE_RAD),
+        }
+    return out
+
+
+def unmet_steps(log: RunLog) -> tuple[dict[str, int], dict[str, dict[str, int]]]:
+    """Steps with a task unmet, by cause (:class:`~wholebody.solvers.unmet.UnmetCause`,
+    lower-case names): each step once, under the most severe cause of its tasks; and per
+    task, its steps by cause. Causes with no step are left out; empty for a log that did
+    not record causes."""
+    if not log.unmet:
+        return {}, {}
+    causes = np.stack(list(log.unmet.values()))
+    name = {c.value: c.name.lower() for c in UnmetCause}
+    steps = np.bincount(worst(causes, axis=0), minlength=len(name))
+    per_task = {task: np.bincount(c, minlength=len(name)) for task, c in log.unmet.items()}
+    return (
+        {name[c]: int(n) for c, n in enumerate(steps) if c and n},
+        {t: {name[c]: int(n) for c, n in enumerate(v) if c and n}
+         for t, v in per_task.items() if v[1:].any()},
+    )  # fmt: skip
+
+
 def summary(log: RunLog) -> dict:
     """The metrics of a run as a JSON-ready dictionary (a :class:`DataError` for a log
     without steps)."""
@@ -138,6 +195,9 @@ def summary(log: RunLog) -> dict:
             )
         ),
         "limit_hit_steps": int(np.count_nonzero(log.limit_hit)),
+        # steps with a task unmet by cause, and per task ("failed" is solver_failures' share)
+        **dict(zip(("unmet_steps", "unmet_tasks"), unmet_steps(log), strict=True)),
+        "final_error": final_errors(log),
         "arm_energy_j": {},
         "arm_angle_rad": {},
     }

@@ -30,7 +30,10 @@ class SolverStatus(enum.IntEnum):
     INFEASIBLE = 3
     """A level could not be met within tolerance: a task of the first level is unmet, or a
     task of any level is limited by the hard constraints (see ``infeasible``); ``u`` is the
-    best feasible answer."""
+    best feasible answer. Not a failure in itself: a posture level under the hands that the
+    velocity limits hold back reads INFEASIBLE on every step of a reach that succeeds.
+    :func:`wholebody.solvers.unmet.classify` tells why each task was unmet, and whether it
+    could have been met (the run logs record it: ``RunLog.unmet``, ``unmet_steps``)."""
     FAILED = 4
     """A numerical failure; ``u`` is a safe fallback that respects the bounds."""
 

@@ -12,6 +12,9 @@ end of the last, the ratio of the last block's median step to the first's, and t
 the block medians (a least-squares line, us per 100 000 steps).
 
     python benchmarks/soak.py [--steps 300000] [--block 10000] [--backends projection,hqp]
+
+Its physics half, the carry under MuJoCo read with sensor noise and delay, is
+``benchmarks/soak_physics.py``.
 """
 
 from __future__ import annotations

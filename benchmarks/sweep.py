@@ -24,6 +24,7 @@ from pathlib import Path
 from wholebody.sweep import load_campaign, run_sweep
 
 CAMPAIGN = """
+format = 1
 [campaign]
 name = "throughput"
 scenario = "coordinated_carry"

@@ -14,6 +14,7 @@ from wholebody.cli import main
 from wholebody.control import RunLog
 
 SMALL = """
+format = 2
 [scenario]
 name = "small"
 robot = "mobile_humanoid"
@@ -195,7 +196,7 @@ def test_errors_are_reported_without_a_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no scenario 'no_such_scenario'" in err and "coordinated_carry" in err
     bad = tmp_path / "bad.toml"
-    bad.write_text('[scenario]\nname = "x"\nbackend = "mpc"\n')
+    bad.write_text('format = 2\n[scenario]\nname = "x"\nbackend = "mpc"\n')
     assert main(["run", str(bad)]) == 2
     assert "[scenario.backend]" in capsys.readouterr().err
     taken = tmp_path / "a_file"

@@ -496,7 +496,7 @@ DIFF_DRIVE_URDF = """<?xml version="1.0"?>
 def test_differential_base(tmp_path, rng):
     (tmp_path / "robot.urdf").write_text(DIFF_DRIVE_URDF)
     (tmp_path / "robot.toml").write_text(
-        '[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
+        'format = 1\n[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
         'wheels = ["wheel_left", "wheel_right"]\nwheel_radius = 0.1\ntrack = 0.4\n'
     )
     r = wholebody.load_robot(tmp_path)
@@ -524,7 +524,7 @@ def test_differential_base(tmp_path, rng):
 def _diff_robot(tmp_path: Path, urdf: str) -> wholebody.Robot:
     (tmp_path / "robot.urdf").write_text(urdf)
     (tmp_path / "robot.toml").write_text(
-        '[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
+        'format = 1\n[robot]\nname = "diff"\nurdf = "robot.urdf"\n\n[base]\ntype = "differential"\n'
         'wheels = ["wheel_left", "wheel_right"]\nwheel_radius = 0.1\ntrack = 0.4\n'
     )
     return wholebody.load_robot(tmp_path)

@@ -14,6 +14,7 @@ from wholebody.planning import minimum_jerk_scaling
 from wholebody.scenarios import load_scenario, run_scenario
 
 HEAD = """
+format = 2
 [scenario]
 name = "small"
 robot = "mobile_humanoid"

@@ -25,6 +25,7 @@ from wholebody.sweep.executors import run_ray, start_local_ray
 from wholebody.sweep.store import flatten
 
 CAMPAIGN = """
+format = 1
 [campaign]
 name = "small"
 scenario = "reach_generalisation"
@@ -107,6 +108,7 @@ def test_random_targets_are_reachable_and_shared_by_the_backends(tmp_path):
     far the hand ended from it (a local minimum may keep it away: that is what such a
     campaign measures)."""
     text = """
+format = 1
 [campaign]
 builtin = "random_targets"
 robot = "mobile_humanoid"

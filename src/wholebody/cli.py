@@ -164,7 +164,7 @@ def _replay(scene, run, out: Path, hold: bool) -> None:
 
 
 def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool,
-             sim: str = "kinematic") -> int:  # fmt: skip
+             sim: str = "kinematic", sensor=None) -> int:  # fmt: skip
     """Run a scenario, write its outputs, report it; 1 if a physics run was stopped."""
     from wholebody.scenarios import load_scenario, run_scenario
     from wholebody.scenarios.outputs import write_run
@@ -173,7 +173,8 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool,
     scene, live = _start_viewer(spec) if viz else (None, None)
     try:
         run = run_scenario(spec, backend=backend, progress=True, on_step=live, sim=sim,
-                           on_objects=live.update_objects if live else None)  # fmt: skip
+                           on_objects=live.update_objects if live else None,
+                           sensor=sensor)  # fmt: skip
         files = write_run(run, out)
         _report_run(run, files)
         if scene is not None:
@@ -199,6 +200,14 @@ def _report_physics(m: dict) -> None:
     peaks = ", ".join(f"{g} {v:.0f} N m ({100 * m['torque_peak_fraction'][g]:.0f} %)"
                       for g, v in m["torque_peak_nm"].items())  # fmt: skip
     print(f"  physics (MuJoCo)  {m['real_time_factor']:.1f}x real time; peak torque {peaks}")
+    if "sensor" in m:
+        s = m["sensor"]
+        hands = ", ".join(f"{h} {1e3 * m['true_mean_tracking_error_m'][h]:.3f} / {1e3 * v:.3f}"
+                          for h, v in m["true_max_tracking_error_m"].items())  # fmt: skip
+        print(f"  sensor: noise {s['noise_rad_or_m']:g} rad or m, delay {s['delay_periods']} "
+              f"periods ({s['latency_compensated_periods']} compensated); true hand error "
+              f"mean / max (mm) {hands}; true closed chain <= "
+              f"{1e3 * m['true_closed_chain_error_max_m']:.3f} mm")  # fmt: skip
     if m["torque_saturated"]:
         worst = sorted(m["torque_saturated"].items(), key=lambda x: -x[1])[:3]
         print("  at the torque limit: " + ", ".join(f"{j} {100 * f:.1f} % of steps"
@@ -301,7 +310,7 @@ def _run(args: argparse.Namespace) -> int:
     path = _scenario_path(args.scenario)
     out = _output_dir(Path(args.out) if args.out else Path("runs") / path.stem)
     return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty(),
-                    sim=args.sim)  # fmt: skip
+                    sim=args.sim, sensor=_sensor(args))  # fmt: skip
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -330,7 +339,8 @@ def _compare(args: argparse.Namespace) -> int:
     try:
         for backend in args.backends:  # each run's log, metrics, figures kept as it ends
             print(f"running {spec.name} with {backend} ...")
-            run = run_scenario(spec, backend=backend, progress=True, sim=args.sim)
+            run = run_scenario(spec, backend=backend, progress=True, sim=args.sim,
+                               sensor=_sensor(args))  # fmt: skip
             write_run(run, out / backend, figures=False)
             runs.append(run)
             write_figures(run, out / backend)
@@ -373,6 +383,29 @@ def _add_sim_option(parser: argparse.ArgumentParser) -> None:
                         help="kinematic: the commands integrated exactly (default); mujoco: "
                         "physics in the loop (the sim extra): joint servos with torque "
                         "limits, objects with mass, grasps as welds")  # fmt: skip
+    parser.add_argument("--sensor-noise", type=float, default=0.0, metavar="A",
+                        help="with --sim mujoco: uniform noise of half-width A on every "
+                        "encoder the controller reads (rad, m for a prismatic joint; "
+                        "default 0)")  # fmt: skip
+    parser.add_argument("--sensor-delay", type=int, default=0, metavar="N",
+                        help="with --sim mujoco: the controller sees the state measured N "
+                        "control periods ago (default 0)")  # fmt: skip
+    parser.add_argument("--sensor-seed", type=int, default=0, metavar="S",
+                        help="seed of the sensor noise (default 0)")  # fmt: skip
+
+
+def _sensor(args: argparse.Namespace):
+    """The ``--sensor-*`` options as a :class:`~wholebody.control.JointSensor` (None when
+    exact); a :class:`ConfigError` for a bad value or without ``--sim mujoco``."""
+    from wholebody.control import JointSensor
+
+    sensor = JointSensor(args.sensor_noise, args.sensor_delay, args.sensor_seed)
+    if sensor.exact:
+        return None
+    if args.sim != "mujoco":
+        raise ConfigError("--sensor-noise and --sensor-delay model what a physics run's "
+                          "controller reads: add --sim mujoco")  # fmt: skip
+    return sensor
 
 
 def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:

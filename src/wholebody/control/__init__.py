@@ -12,13 +12,16 @@ from wholebody.control.metrics import (
     tracking,
 )
 from wholebody.control.recovery import Retreat, StallRecovery, mid_range_posture
+from wholebody.control.sensor import JointSensor, SensorReadout
 
 __all__ = [
     "ArmTrace",
     "Controller",
+    "JointSensor",
     "ReferenceTask",
     "Retreat",
     "RunLog",
+    "SensorReadout",
     "StallRecovery",
     "Tracking",
     "closed_chain_error",

@@ -7,6 +7,9 @@ particular robot: another robot is another ``robot.toml``.
 
 Schema (every key is checked; unknown keys are errors, to catch typos)::
 
+    format = 1                   # required, first: the format this file is written for
+                                 # (wholebody.formats)
+
     [robot]
     name = "my_robot"            # required
     urdf = "robot.urdf"          # required, relative to this file, or a ROS package path
@@ -75,6 +78,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from wholebody.errors import ConfigError, ModelError
+from wholebody.formats import FORMAT_KEY, ROBOT, check_format
 from wholebody.robot.sim import SimSettings
 from wholebody.robot.urdf import PACKAGE, resolve_package
 from wholebody.tomlreader import TomlReader as _Reader
@@ -192,9 +196,10 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     path = Path(path)
     r = _Reader(path)
     data = load_toml(path, "robot configuration")
+    check_format(r, data, ROBOT)
 
-    r.only(data, "", ("robot", "base", "groups", "arms", "home", "acceleration", "locked",
-                      "frames", "collision", "sim"))  # fmt: skip
+    r.only(data, "", (FORMAT_KEY, "robot", "base", "groups", "arms", "home", "acceleration",
+                      "locked", "frames", "collision", "sim"))  # fmt: skip
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")

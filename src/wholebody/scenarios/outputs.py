@@ -75,9 +75,11 @@ def physics_arrays(run: ScenarioRun) -> dict[str, np.ndarray]:
     """A physics run's records as flat arrays (``physics.npz``): ``t`` (s); per group
     ``torque/GROUP`` (N, joints; N m) and ``torque_limit/GROUP``; per grasp
     ``grasp_force/OBJECT/FRAME`` (N, 3; N, world); ``squeeze/OBJECT`` (N; N, NaN unless two
-    hands hold it); ``pose/OBJECT`` (N, 4, 4) of the free objects; ``saturated`` (N, nv)."""
+    hands hold it); ``pose/OBJECT`` (N, 4, 4) of the free objects; ``saturated`` (N, nv);
+    ``configuration`` (N, nq): the simulated configuration (``run.npz``'s ``q`` is what the
+    controller saw: the same unless a sensor perturbs or delays it)."""
     p = run.physics
-    out = {"t": run.log.t, "saturated": p["saturated"]}
+    out = {"t": run.log.t, "saturated": p["saturated"], "configuration": p["configuration"]}
     out.update({f"torque/{g}": v for g, v in p["group_torque"].items()})
     out.update({f"torque_limit/{g}": v for g, v in p["group_limit"].items()})
     out.update({f"grasp_force/{o}/{f}": v for (o, f), v in p["grasp_force"].items()})

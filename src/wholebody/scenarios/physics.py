@@ -11,6 +11,10 @@ object, its **squeeze** is the internal force along the line between the hands::
 with ``F_a``, ``F_b`` the hands' forces on the object and ``p_a``, ``p_b`` their tool frames:
 positive when the hands press the object together, negative when they pull it apart; the
 object's weight and acceleration, which both hands share, cancel from it.
+
+A run through a sensor (:class:`~wholebody.control.JointSensor`: noise, a delay) logs what
+the controller saw; :func:`true_tracking` measures the hands and the closed chain on the
+simulated configuration instead (``PhysicsLog.configuration``), the robot's true state.
 """
 
 from __future__ import annotations
@@ -20,10 +24,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from wholebody.control import RunLog
-from wholebody.robot import Frame
+from wholebody.robot import Frame, Robot
 from wholebody.scenarios.spec import ObjectSpec
 
-__all__ = ["physics_metrics", "physics_poses", "physics_records"]
+__all__ = ["physics_metrics", "physics_poses", "physics_records", "true_tracking"]
 
 
 def physics_poses(objects: Mapping[str, ObjectSpec], physics: dict) -> dict[str, np.ndarray]:
@@ -111,3 +115,41 @@ def _squeeze(forces: Mapping[tuple[str, str], np.ndarray], log: RunLog,
         s = 0.5 * (np.einsum("ij,ij->i", Fa, n) - np.einsum("ij,ij->i", Fb, n))
         out[obj] = np.where(both, s, np.nan)
     return out
+
+
+def true_tracking(robot: Robot, log: RunLog, configuration: np.ndarray,
+                  hands: Mapping[str, Frame],
+                  chains: list[tuple[np.ndarray, Frame, Frame]]) -> dict:  # fmt: skip
+    """The hands' tracking and the closed chain on the simulated configuration
+    ``configuration`` ((N, nq), one row per logged step), not on the one the controller saw.
+
+    ``hands``: hand -> its frame (the log's tracked tasks); ``chains``: per closed-chain phase
+    its steps' mask and the chain's primary and secondary frames. Returned (m):
+    ``true_max_tracking_error_m`` and ``true_mean_tracking_error_m`` (hand -> over the steps
+    with a reference) and ``true_closed_chain_error_max_m``: the largest distance of the
+    secondary's true position in the primary's frame from the chain's target, the target
+    being what the controller saw plus its logged error (``e = target - p`` in the primary's
+    axes, :mod:`wholebody.kernels.rows`).
+    """
+    q = configuration[: len(log)]
+    out: dict = {"true_max_tracking_error_m": {}, "true_mean_tracking_error_m": {}}
+    for hand, frame in hands.items():
+        ref = log.reference_positions[hand]
+        rows = np.flatnonzero(np.isfinite(ref).all(axis=1))
+        p = np.array([robot.frame_pose(q[k], frame)[:3, 3] for k in rows]).reshape(-1, 3)
+        e = np.linalg.norm(p - ref[rows], axis=1)
+        out["true_max_tracking_error_m"][hand] = float(e.max(initial=0.0))
+        out["true_mean_tracking_error_m"][hand] = float(e.mean()) if e.size else 0.0
+    chain = 0.0
+    for mask, a, b in chains:
+        for k in np.flatnonzero(mask):
+            target = _relative(robot, log.q[k], a, b) + log.task_errors["closed_chain"][k, :3]
+            chain = max(chain, float(np.linalg.norm(target - _relative(robot, q[k], a, b))))
+    out["true_closed_chain_error_max_m"] = chain
+    return out
+
+
+def _relative(robot: Robot, q: np.ndarray, a: Frame, b: Frame) -> np.ndarray:
+    """Frame b's position in frame a (m, a's axes): ``R_a^T (p_b - p_a)``."""
+    Ta, Tb = robot.frame_pose(q, a), robot.frame_pose(q, b)
+    return Ta[:3, :3].T @ (Tb[:3, 3] - Ta[:3, 3])

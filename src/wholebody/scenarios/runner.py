@@ -35,7 +35,7 @@ import pinocchio as pin
 
 from wholebody.arm.stiffness import StiffnessModel
 from wholebody.collision import CollisionModel, Obstacle, PairDistance
-from wholebody.control import Controller, RunLog, summary
+from wholebody.control import Controller, JointSensor, RunLog, summary
 from wholebody.control.controller import _progress
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
@@ -52,9 +52,14 @@ from wholebody.planning.trajectory import (
     minimum_jerk_scaling,
 )
 from wholebody.presets import default_stiffness, paper_stack
-from wholebody.robot import Robot, RobotState, load_robot
+from wholebody.robot import Frame, Robot, RobotState, load_robot
 from wholebody.robot.sim import SimSettings
-from wholebody.scenarios.physics import physics_metrics, physics_poses, physics_records
+from wholebody.scenarios.physics import (
+    physics_metrics,
+    physics_poses,
+    physics_records,
+    true_tracking,
+)
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.solvers import ProjectionSolver, Solver
 from wholebody.solvers.hqp import HierarchicalQPSolver
@@ -238,6 +243,8 @@ def run_scenario(
     sim_settings: SimSettings | None = None,
     on_objects: Callable[[dict[str, np.ndarray]], None] | None = None,
     engine: str | None = None,
+    sensor: JointSensor | None = None,
+    latency: int | None = None,
 ) -> ScenarioRun:
     """Run every phase of a scenario with a backend (default: the scenario's).
 
@@ -248,11 +255,19 @@ def run_scenario(
     carried objects welded to their hands, both hands of a closed chain; a run the plant
     stops ends there, its reason in ``metrics["stopped"]``); ``on_objects(poses)`` is called
     after every step of a physics run with the free objects' poses (4x4, world).
-    ``engine``: the hierarchical QP's QP engine (:func:`make_solver`).
+    ``engine``: the hierarchical QP's QP engine (:func:`make_solver`). ``sensor``: what the
+    controller of a physics run reads of the plant (:class:`~wholebody.control.JointSensor`:
+    encoder noise, rad or m, and a delay of whole control periods); the log then holds what
+    it saw, and ``metrics`` the hands and chain on the true state too
+    (:func:`~wholebody.scenarios.physics.true_tracking`) and ``metrics["sensor"]``.
+    ``latency``: the control periods by which the controller advances what it reads
+    (:class:`~wholebody.control.Controller`'s state predictor); default the sensor's delay
+    (a controller knows its own latency), 0 to leave the delay uncompensated.
     """
     backend = backend or spec.backend
     robot = scenario_robot(spec)
-    plant = _plant(spec, robot, sim, sim_settings)
+    plant = _plant(spec, robot, sim, sim_settings, sensor)
+    latency = (sensor.delay if sensor is not None else 0) if latency is None else latency
     weights = spec.stack
     stiffness = _stiffness(spec, robot)
     for hand in spec.hands.values():
@@ -302,6 +317,7 @@ def run_scenario(
             references={tasks[h]: r for h, r in refs.items()},
             monitors=monitors,
             plant=plant,
+            latency=latency,
         )
         if plant is not None:
             plant.hold(_grips(phase, tasks))
@@ -335,9 +351,7 @@ def run_scenario(
     if plant is None:
         poses, physics = _object_poses(robot, log, spec.objects, carries, frames), None
     else:
-        physics = physics_records(plant, log, frames)
-        poses = physics_poses(spec.objects, physics)
-        metrics.update(physics_metrics(plant, physics))
+        poses, physics = _physics_outcome(spec, robot, plant, log, frames, metrics, latency)
     if collision_model is not None:
         masks = [(model, log.phase_mask(name)) for name, model in phase_models]
         metrics.update(closest_approach(masks, log, spec.collision.safety))
@@ -376,10 +390,41 @@ def _callback(bar, on_step, on_objects, plant, offset: float, done: int):
     return callback
 
 
-def _plant(spec: ScenarioSpec, robot: Robot, sim: str, settings: SimSettings | None):
+def _physics_outcome(spec: ScenarioSpec, robot: Robot, plant, log: RunLog,
+                     frames: dict[str, Frame], metrics: dict,
+                     latency: int) -> tuple[dict, dict]:  # fmt: skip
+    """A physics run's object poses and records; its metrics added to ``metrics`` (read
+    through a sensor: the true state's tracking and ``sensor`` too)."""
+    physics = physics_records(plant, log, frames)
+    metrics.update(physics_metrics(plant, physics))
+    if not plant.sensor.exact:
+        metrics["sensor"] = {**plant.sensor.describe(), "latency_compensated_periods": latency}
+        metrics.update(true_tracking(robot, log, physics["configuration"], frames,
+                                     _chains(spec, log, frames)))  # fmt: skip
+    return physics_poses(spec.objects, physics), physics
+
+
+def _chains(spec: ScenarioSpec, log: RunLog, frames: dict[str, Frame]) -> list:
+    """Per closed-chain phase that ran: its steps' mask, the primary's and the secondary's
+    frames."""
+    out = []
+    for phase in spec.phases:
+        if phase.closed_chain and phase.name in log.meta["phases"]:
+            secondary = next(h for h in phase.hands if h != phase.primary)
+            out.append((log.phase_mask(phase.name), frames[phase.primary], frames[secondary]))
+    return out
+
+
+def _plant(spec: ScenarioSpec, robot: Robot, sim: str, settings: SimSettings | None,
+           sensor: JointSensor | None = None):  # fmt: skip
     """The physics plant of a ``sim="mujoco"`` run (None for ``"kinematic"``), with a weld
-    for every (object, hand) a phase carries."""
+    for every (object, hand) a phase carries, read through ``sensor``."""
+    if sensor is not None and not isinstance(sensor, JointSensor):
+        raise ConfigError(f"sensor must be a wholebody.control.JointSensor, got {sensor!r}")
     if sim == "kinematic":
+        if sensor is not None and not sensor.exact:
+            raise ConfigError("a sensor model (noise, delay) reads a simulated plant: it needs "
+                              "sim='mujoco' (--sim mujoco)")  # fmt: skip
         return None
     if sim != "mujoco":
         raise ConfigError(f"unknown sim {sim!r}: expected 'kinematic' or 'mujoco'")
@@ -391,7 +436,7 @@ def _plant(spec: ScenarioSpec, robot: Robot, sim: str, settings: SimSettings | N
     frames = {h: s.frame for h, s in spec.hands.items()}
     grasps = {(o, frames[h]) for phase in spec.phases for h, o in _carried(phase).items()}
     return MujocoPlant(robot, spec.objects.values(), sorted(grasps),
-                       settings or robot.sim_settings)  # fmt: skip
+                       settings or robot.sim_settings, sensor)  # fmt: skip
 
 
 def _carried(phase: PhaseSpec) -> dict[str, str]:

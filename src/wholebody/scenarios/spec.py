@@ -5,6 +5,9 @@ its weights), the hands (frame tasks and their gains), the planner (a DMP learne
 demonstration), the objects in the world (props and obstacles) and a list of phases, each
 with one planner per hand. Layout (every key is checked; unknown keys are errors)::
 
+    format = 2                         # required, first: the format this file is written
+                                       # for (wholebody.formats; 2: start defaults to home)
+
     [scenario]
     name = "coordinated_carry"         # required
     title = "..."                      # optional, for plots and reports
@@ -97,6 +100,7 @@ from typing import Any
 import numpy as np
 
 from wholebody.errors import ConfigError
+from wholebody.formats import FORMAT_KEY, SCENARIO, check_format
 from wholebody.presets import SPRINGS, PaperWeights
 from wholebody.tomlreader import TomlReader, config_error, load_toml
 
@@ -265,8 +269,9 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
     their scenario file with keys changed)."""
     path = Path(path)
     r = TomlReader(path)
-    r.only(data, "", ("scenario", "stack", "hands", "planner", "objects", "phases",
-                      "collision"))  # fmt: skip
+    check_format(r, data, SCENARIO)
+    r.only(data, "", (FORMAT_KEY, "scenario", "stack", "hands", "planner", "objects",
+                      "phases", "collision"))  # fmt: skip
 
     head = r.table(data, "scenario", "", required=True)
     r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz", "start"))

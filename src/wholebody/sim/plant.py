@@ -18,7 +18,9 @@ the model when ``gravity_compensation``. ``M`` and ``b`` are the robot's own: a 
 object's weight and the grasp's forces are not in them, the servo's lag holds them. Velocity
 commands are ramped over the period from the last one (first-order hold), as a drive
 interpolates its setpoints. The controller then reads the simulated configuration, not its
-own integration.
+own integration: as it is, or through a ``sensor``
+(:class:`~wholebody.control.sensor.JointSensor`: noise on the encoders, a delay of whole
+control periods).
 
 Per control period the plant records the applied torque's peak, the joints that saturated,
 every grasp's force on its object, the contacts and the free objects' poses
@@ -36,6 +38,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from wholebody.control.sensor import JointSensor
 from wholebody.errors import DimensionError, ModelError
 from wholebody.robot import Robot
 from wholebody.robot.sim import SimSettings
@@ -66,6 +69,10 @@ class PhysicsLog:
         period's end (N, world; zero while not grasping).
     object_poses
         Free object -> (N, 4, 4) pose at the start of the period (world).
+    configuration
+        (N, nq) the simulated configuration at the start of the period (Pinocchio's ``q``):
+        the robot's true state, which the controller saw unless a sensor perturbs or delays
+        it.
     contacts
         ``"shape|object"`` -> ``[first time (s), peak normal force (N)]`` of every contact of
         a robot shape with a fixed object (free objects do not touch the robot) and of a
@@ -78,6 +85,7 @@ class PhysicsLog:
     grasp_force: dict[tuple[str, str], list[np.ndarray]] = field(default_factory=dict)
     object_poses: dict[str, list[np.ndarray]] = field(default_factory=dict)
     contacts: dict[str, list[float]] = field(default_factory=dict)
+    configuration: list[np.ndarray] = field(default_factory=list)
 
     def arrays(self) -> dict[str, object]:
         """The records as arrays."""
@@ -88,6 +96,7 @@ class PhysicsLog:
             "grasp_force": {k: np.array(v) for k, v in self.grasp_force.items()},
             "object_poses": {k: np.array(v) for k, v in self.object_poses.items()},
             "contacts": {k: list(v) for k, v in self.contacts.items()},
+            "configuration": np.array(self.configuration),
         }
 
 
@@ -97,14 +106,19 @@ class MujocoPlant:
     ``plant.step(q, u, dt)`` has the signature of :meth:`Robot.integrate` (``q`` is
     ignored: the state is the simulator's) and returns the simulated configuration; give the
     plant to :class:`~wholebody.control.Controller` (``plant=``). ``grasps``: the
-    ``(object, hand frame)`` pairs that may be welded (:meth:`hold`).
+    ``(object, hand frame)`` pairs that may be welded (:meth:`hold`). ``sensor``: what the
+    returned configuration is (:class:`~wholebody.control.sensor.JointSensor`; default the
+    simulated one, exactly); :attr:`PhysicsLog.configuration` keeps the true one.
     """
 
     def __init__(self, robot: Robot, objects: Iterable[ObjectSpec] = (),
-                 grasps: Iterable[tuple[str, str]] = (),
-                 settings: SimSettings | None = None) -> None:  # fmt: skip
+                 grasps: Iterable[tuple[str, str]] = (), settings: SimSettings | None = None,
+                 sensor: JointSensor | None = None) -> None:  # fmt: skip
         self.robot = robot
         self.settings = settings or SimSettings()
+        self.sensor = sensor or JointSensor()
+        if not isinstance(self.sensor, JointSensor):
+            raise ModelError(f"sensor must be a wholebody.control.JointSensor, got {sensor!r}")
         self.world: World = build_world(robot, objects, grasps, self.settings)
         self.model = self.world.model
         self.data = mujoco.MjData(self.model)
@@ -166,7 +180,8 @@ class MujocoPlant:
     # ------------------------------------------------------------------ running
     def reset(self, q: np.ndarray) -> None:
         """Robot at ``q`` and at rest, objects where the model puts them, grasps off, the
-        servos' anti-windup bound from the inertia at ``q``, the log emptied."""
+        servos' anti-windup bound from the inertia at ``q``, the sensor's history at ``q``
+        (and its noise's generator at its seed), the log emptied."""
         q = self.robot.check_configuration(q)
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = self.qpos(q)
@@ -184,6 +199,8 @@ class MujocoPlant:
         self.stop_reason = None
         self.log = PhysicsLog()
         self.time = 0.0
+        self._readout = self.sensor.start(self.robot, q)
+        self._seen = q.copy()  # what the controller was last given
 
     def hold(self, grasps: Iterable[tuple[str, str]]) -> None:
         """Weld each ``(object, hand frame)`` of ``grasps`` where they are now (a weld on
@@ -231,12 +248,12 @@ class MujocoPlant:
 
     def step(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """Run the physics for ``dt`` (s) under the command ``u`` from ``q``, which must be
-        the simulated configuration (:meth:`reset` a plant to start elsewhere); the
-        configuration reached. If MuJoCo finds the state unusable (a NaN or a huge value:
-        it then resets its data), the run stops there (:attr:`stop_reason`) and the
-        configuration before the step is returned."""
+        the configuration the plant gave last (:meth:`reset` a plant to start elsewhere);
+        the configuration reached, as the sensor reads it. If MuJoCo finds the state
+        unusable (a NaN or a huge value: it then resets its data), the run stops there
+        (:attr:`stop_reason`) and the configuration given before the step is returned."""
         now = self.configuration()
-        if not np.allclose(np.asarray(q, dtype=float), now, atol=1e-6):
+        if not np.allclose(np.asarray(q, dtype=float), self._seen, atol=1e-6):
             raise ModelError("the plant is not at the controller's configuration: call "
                              "plant.reset(q0) before running from q0")  # fmt: skip
         n = round(dt / self.settings.timestep)
@@ -246,6 +263,7 @@ class MujocoPlant:
         v = self._A @ np.asarray(u, dtype=float)
         m, d = self.model, self.data
         self._record_poses()
+        self.log.configuration.append(now)
         peak, demand = np.zeros(self.robot.nv), np.zeros(self.robot.nv)
         wheels = np.zeros(self._wheels.shape[1])
         saturated = np.zeros(self.robot.nv, dtype=bool)
@@ -268,9 +286,10 @@ class MujocoPlant:
             self.stop_reason = (f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
                                 f"found a bad position, velocity or acceleration)")  # fmt: skip
             self.data.qpos[:] = self.qpos(now)
-            return now
+            return self._seen.copy()
         self._check(demand)
-        return self.configuration()
+        self._seen = self._readout.read(self.configuration())
+        return self._seen.copy()
 
     def _warnings(self) -> tuple[int, ...]:
         """MuJoCo's counts of unusable states (bad position, velocity, acceleration)."""

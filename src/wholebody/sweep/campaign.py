@@ -3,6 +3,9 @@
 A campaign is a TOML file, checked like a scenario file (unknown keys are errors naming the
 file and the key)::
 
+    format = 1                       # required, first: the format this file is written for
+                                     # (wholebody.formats)
+
     [campaign]
     name = "carry_gains"
     scenario = "coordinated_carry"   # a scenario file (relative to this file) or a bundled
@@ -53,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from wholebody.errors import ConfigError
+from wholebody.formats import CAMPAIGN, FORMAT_KEY, SCENARIO, check_format
 from wholebody.scenarios.spec import BACKENDS, ScenarioSpec, parse_scenario
 from wholebody.tomlreader import TomlReader, load_toml
 
@@ -137,8 +141,11 @@ class Campaign:
     def fingerprint(self) -> str:
         """A hash of everything that decides the cases' results, not the campaign's name or
         objective (a sweep's directory holds one campaign: resuming it with another is
-        refused; renamed or ranked by another metric, it is the same)."""
+        refused; renamed or ranked by another metric, it is the same), nor the scenario's
+        format number (always the current one: a sweep started before the files carried it
+        resumes once the key is added)."""
         described = {k: v for k, v in self.describe().items() if k not in ("name", "objective")}
+        described["scenario"] = {k: v for k, v in self.scenario.items() if k != FORMAT_KEY}
         text = json.dumps(described, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -222,7 +229,8 @@ def load_campaign(path: str | Path) -> Campaign:
     path = Path(path).resolve()  # cases may run in other processes, elsewhere
     r = TomlReader(path)
     data = load_toml(path, "campaign")
-    r.only(data, "", ("campaign", "axes"))
+    check_format(r, data, CAMPAIGN)
+    r.only(data, "", (FORMAT_KEY, "campaign", "axes"))
     head = r.table(data, "campaign", "", required=True)
     r.only(head, "campaign", ("name", "scenario", "builtin", "robot", "duration", "samples",
                               "seed", "duration_scale", "objective", "sim"))  # fmt: skip
@@ -445,6 +453,7 @@ def random_target_scenario(campaign: Campaign, sample: int) -> dict[str, Any]:
     goal = robot.frame_pose(robot.configuration(joints), arm.tool)
     rotate = pin.log3(goal[:3, :3] @ start[:3, :3].T)
     return {
+        FORMAT_KEY: SCENARIO.current,
         "scenario": {"name": f"random_target_{sample}", "robot": robot_ref, "start": "home"},
         "hands": {arm.name: {"frame": arm.tool.name}},
         "phases": [{"name": "reach", "duration": campaign.builtin_options["duration"],

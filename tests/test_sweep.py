@@ -260,6 +260,51 @@ def test_a_case_over_the_time_limit_is_stopped_and_the_sweep_goes_on(tmp_path, c
     assert "and finite" in capsys.readouterr().err
 
 
+def test_the_time_limit_waits_for_a_kernel_being_loaded():
+    """A limit that expires while numba loads or compiles a kernel does not interrupt it (a
+    half-loaded kernel broke the worker's later cases: "generator raised StopIteration"); it
+    fires once the loading is done."""
+    from wholebody import kernels
+    from wholebody.sweep.case import CaseTimeoutError, _Limit
+
+    if not hasattr(signal, "setitimer"):
+        pytest.skip("no interval timers here")
+    limit = _Limit(0.05)
+    kernels._DEPTH[0] += 1  # "loading a kernel"
+    limit.start()
+    try:
+        time.sleep(0.3)  # the limit passes, nothing is raised
+        assert limit.armed and not limit.expired
+        kernels._DEPTH[0] -= 1
+        with pytest.raises(CaseTimeoutError):
+            time.sleep(0.5)
+        assert limit.expired
+    finally:
+        limit.stop()
+        kernels._DEPTH[0] = 0
+
+
+def test_a_run_that_swallowed_its_time_limit_is_still_a_timeout(tmp_path, monkeypatch):
+    """Code that catches every exception can swallow the limit's; the case ran past its limit
+    all the same and is recorded so, not as ``"ok"``."""
+    import wholebody.scenarios.runner as runner
+
+    if not hasattr(signal, "setitimer"):
+        pytest.skip("no interval timers here")
+
+    def swallowing(*args, **kwargs):
+        try:
+            time.sleep(0.5)
+        except BaseException:  # (what the test is about)
+            time.sleep(0.1)
+        return object()
+
+    monkeypatch.setattr(runner, "run_scenario", swallowing)
+    campaign = load_campaign(_campaign(tmp_path))
+    result = run_case(campaign, campaign.cases()[0], timeout=0.05)
+    assert result["status"] == "timeout" and "0.05 s" in result["error"]
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -33,7 +33,7 @@ def test_a_target_out_of_reach_is_unreachable_not_a_failure(torso, backend, tmp_
     q0 = torso.home()
     stack = Stack(torso, [Level([_hand(torso, q0, 5.0, kp=5.0)], name="hand")],
                   [VelocityLimits(torso)])  # fmt: skip
-    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 4.0)
+    log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 4.0)
     log = RunLog.load(log.save(tmp_path / "run.npz"))
     m = summary(log)
     causes = log.unmet["left_tool"]
@@ -52,7 +52,7 @@ def test_a_rate_the_velocity_limits_cannot_deliver_is_saturated(torso, backend):
     while it converges (saturated, not a failure); it reaches the target in the end."""
     q0 = torso.home()
     stack = Stack(torso, [Level([_hand(torso, q0, 0.2)], name="hand")], [VelocityLimits(torso)])
-    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 3.0)
+    log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 3.0)
     m = summary(log)
     assert m["solver_failures"] == 0
     assert m["unmet_steps"]["saturated"] > 10
@@ -72,7 +72,7 @@ def test_a_joint_asked_past_its_position_limit_is_a_joint_limit(torso, backend):
     posture = PostureTask(torso, target=np.where(np.isfinite(upper), upper + 0.3, 0.0), kp=1.0)
     stack = Stack(torso, [Level([posture], name="posture")],
                   [JointPositionLimits(torso), VelocityLimits(torso)])  # fmt: skip
-    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 4.0)
+    log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 4.0)
     m = summary(log)
     causes = log.unmet["posture"]
     assert m["solver_failures"] == 0
@@ -97,7 +97,7 @@ def test_a_hand_held_off_by_an_inequality_above_it_is_held_by_design(torso, back
     hand.set_target(pose)
     stack = Stack(torso, [Level([table], name="table"), Level([hand], name="hand")],
                   [JointPositionLimits(torso), VelocityLimits(torso)])  # fmt: skip
-    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 3.0)
+    log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 3.0)
     m = summary(log)
     causes = log.unmet["left_tool"]
     assert m["solver_failures"] == 0
@@ -119,7 +119,7 @@ def test_a_posture_under_the_hand_unmet_is_not_a_failure(torso, backend):
     posture = PostureTask(torso, target=torso.joint_positions(q0) + 1.0, kp=50.0)
     stack = Stack(torso, [Level([_hand(torso, q0, 0.0)], name="hand"),
                           Level([posture], name="posture")], [VelocityLimits(torso)])  # fmt: skip
-    log = Controller(torso, stack, backend(), dt=0.01).run(q0, 0.5)
+    log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 0.5)
     m = summary(log)
     assert np.any(log.status == SolverStatus.INFEASIBLE)
     assert m["solver_failures"] == 0 and not log.unmet["left_tool"].any()

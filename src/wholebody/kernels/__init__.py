@@ -46,7 +46,7 @@ from typing import TypeVar
 import numba
 from numba.core import caching, codegen, types
 
-__all__ = ["DISABLED", "as_callees", "cache_directory", "compile_notice", "kernel"]
+__all__ = ["DISABLED", "as_callees", "cache_directory", "compile_notice", "compiling", "kernel"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -225,6 +225,12 @@ def kernel(fn: F) -> F:
 
         dispatcher.compile = compile
     return dispatcher  # type: ignore[return-value]
+
+
+def compiling() -> bool:
+    """Whether numba is loading or compiling a kernel on this process now (a signal handler
+    must not interrupt that: the kernel would be left half loaded)."""
+    return _DEPTH[0] > 0
 
 
 _NOTICE_AFTER = 1.0  # s: a first call that takes longer than this is compiling

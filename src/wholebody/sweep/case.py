@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from wholebody import kernels
 from wholebody.control.log import json_default
 from wholebody.sweep.campaign import Campaign, Case
 
@@ -54,12 +55,16 @@ class CaseTimeoutError(BaseException):
     swallows it)."""
 
 
+_RETRY = 0.02  # s: how soon a time limit that fell inside a kernel's loading tries again
+
+
 class _Limit:
     """A wall-time limit on this thread: :meth:`start` arms a real-time interval timer whose
     signal raises :class:`CaseTimeoutError` (Unix, main thread: a worker's; elsewhere, or with
     ``seconds`` None, nothing is armed); :meth:`stop` disarms it and gives the signal back its
     handler, and may be called again. The handler raises only while armed, so a signal that
-    lands after :meth:`stop` began is ignored."""
+    lands after :meth:`stop` began is ignored, and never while numba loads or compiles a
+    kernel (:func:`wholebody.kernels.compiling`): it tries again every ``_RETRY`` s."""
 
     def __init__(self, seconds: float | None) -> None:
         self.seconds = seconds
@@ -77,10 +82,14 @@ class _Limit:
         signal.setitimer(signal.ITIMER_REAL, self.seconds)
 
     def _expire(self, signum: int, frame: object) -> None:
-        if self.armed:
-            self.armed, self.expired = False, True
-            raise CaseTimeoutError(f"ran longer than the time limit of {self.seconds:g} s "
-                                   "(--timeout)")  # fmt: skip
+        if not self.armed:
+            return
+        if kernels.compiling():  # a kernel half loaded would break the worker's later cases:
+            signal.setitimer(signal.ITIMER_REAL, _RETRY)  # raise once it is loaded
+            return
+        self.armed, self.expired = False, True
+        raise CaseTimeoutError(f"ran longer than the time limit of {self.seconds:g} s "
+                               "(--timeout)")  # fmt: skip
 
     def stop(self) -> None:
         self.armed = False
@@ -108,6 +117,9 @@ def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> di
                            engine=options.get("engine"),
                            duration_scale=campaign.duration_scale)  # fmt: skip
         limit.stop()
+        if limit.expired:  # the timeout, swallowed by code it crossed: the run went on
+            raise CaseTimeoutError(f"ran longer than the time limit of {timeout:g} s "
+                                   "(--timeout)")  # fmt: skip
         metrics = json.loads(json.dumps(run.metrics, default=json_default))
         metrics.update(headline(run))
         stopped = metrics.get("stopped")  # a physics run the plant ended early

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -297,9 +298,10 @@ def test_a_run_that_swallowed_its_time_limit_is_still_a_timeout(tmp_path, monkey
             time.sleep(0.5)
         except BaseException:  # (what the test is about)
             time.sleep(0.1)
-        return object()
+        return SimpleNamespace(metrics={})
 
     monkeypatch.setattr(runner, "run_scenario", swallowing)
+    monkeypatch.setattr("wholebody.sweep.case.headline", lambda run: {})
     campaign = load_campaign(_campaign(tmp_path))
     result = run_case(campaign, campaign.cases()[0], timeout=0.05)
     assert result["status"] == "timeout" and "0.05 s" in result["error"]

@@ -175,6 +175,7 @@ def _carry(robot, solver, acceleration: bool):
     return log, error, left
 
 
+@pytest.mark.slow
 def test_a_closed_chain_holds_under_acceleration_limits(humanoid):
     """The chain's rows are kept while the hands' level is scaled: its error (the drift of a
     velocity-level chain at these speeds, 1.6 mm without acceleration limits) stays below the

@@ -13,7 +13,11 @@
 * limit violations (steps with a joint outside its limits by more than 1e-9 rad) and solver
   failures (steps whose solve failed or left a task of the first level unmet within the
   solver's tolerance: :attr:`RunLog.failed`, the same rule for every backend; in logs without
-  it, steps with status INFEASIBLE or FAILED).
+  it, steps with status INFEASIBLE or FAILED),
+* u reversals: steps where some actuated velocity changed sign against the step before, both
+  above ``REVERSAL_THRESHOLD`` (rad/s, m/s) in magnitude (:func:`u_reversals`). A run that
+  settles has a few (a joint turning back as the motion changes); a limit cycle, the command
+  alternating between two solutions, has one at nearly every step.
 """
 
 from __future__ import annotations
@@ -34,10 +38,12 @@ __all__ = [
     "step_timing",
     "summary",
     "tracking",
+    "u_reversals",
 ]
 
 AXES = ("x", "y", "z")
 ARM_ANGLE_MIN_RHO = 0.005  # m
+REVERSAL_THRESHOLD = 1e-3  # rad/s, m/s: a smaller velocity's sign is not counted
 
 
 @dataclass(frozen=True)
@@ -98,6 +104,17 @@ def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -
     return float(np.max(np.linalg.norm(e, axis=1))) if e.size else 0.0
 
 
+def u_reversals(u: np.ndarray, threshold: float = REVERSAL_THRESHOLD) -> int:
+    """Number of steps k where some actuated velocity reversed: ``u_kj u_(k-1)j < 0`` with
+    ``|u_kj|`` and ``|u_(k-1)j|`` both above ``threshold`` (rad/s, m/s). ``u``: (steps, nu)."""
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 2:
+        raise DataError(f"u must be (steps, nu), got shape {u.shape}")
+    big = np.abs(u) > threshold
+    flips = (u[1:] * u[:-1] < 0) & big[1:] & big[:-1]
+    return int(np.count_nonzero(flips.any(axis=1)))
+
+
 def step_timing(step_time: np.ndarray) -> dict[str, float]:
     """The control step's timing from per-step times (s): ``median_us`` and ``p90_us`` (us)
     and ``median_rate_hz = 1 / median`` (Hz), the rate the median step sustains. The median,
@@ -138,6 +155,7 @@ def summary(log: RunLog) -> dict:
             )
         ),
         "limit_hit_steps": int(np.count_nonzero(log.limit_hit)),
+        "u_reversals": u_reversals(log.u),
         "arm_energy_j": {},
         "arm_angle_rad": {},
     }

@@ -20,6 +20,10 @@
 * the steps with a task unmet, by cause (:func:`unmet_steps`): a task held back by a rate
   limit, at a joint limit, out of reach or yielding to a higher level is unmet but not a
   failure.
+* u reversals: steps where some actuated velocity changed sign against the step before, both
+  above ``REVERSAL_THRESHOLD`` (rad/s, m/s) in magnitude (:func:`u_reversals`). A run that
+  settles has a few (a joint turning back as the motion changes); a limit cycle, the command
+  alternating between two solutions, has one at nearly every step.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ __all__ = [
     "step_timing",
     "summary",
     "tracking",
+    "u_reversals",
     "unmet_steps",
 ]
 
@@ -51,6 +56,7 @@ AXES = ("x", "y", "z")
 ARM_ANGLE_MIN_RHO = 0.005  # m
 GOAL_TOLERANCE_M = 1e-3  # a hand ending farther from its goal has not reached it (m)
 GOAL_TOLERANCE_RAD = 0.01  # ... or turned farther from it (rad)
+REVERSAL_THRESHOLD = 1e-3  # rad/s, m/s: a smaller velocity's sign is not counted
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,17 @@ def closed_chain_error(log: RunLog, task: str, mask: np.ndarray | None = None) -
         e = e[mask]
     e = e[~np.isnan(e).any(axis=1)]
     return float(np.max(np.linalg.norm(e, axis=1))) if e.size else 0.0
+
+
+def u_reversals(u: np.ndarray, threshold: float = REVERSAL_THRESHOLD) -> int:
+    """Number of steps k where some actuated velocity reversed: ``u_kj u_(k-1)j < 0`` with
+    ``|u_kj|`` and ``|u_(k-1)j|`` both above ``threshold`` (rad/s, m/s). ``u``: (steps, nu)."""
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 2:
+        raise DataError(f"u must be (steps, nu), got shape {u.shape}")
+    big = np.abs(u) > threshold
+    flips = (u[1:] * u[:-1] < 0) & big[1:] & big[:-1]
+    return int(np.count_nonzero(flips.any(axis=1)))
 
 
 def step_timing(step_time: np.ndarray) -> dict[str, float]:
@@ -198,6 +215,7 @@ def summary(log: RunLog) -> dict:
         # steps with a task unmet by cause, and per task ("failed" is solver_failures' share)
         **dict(zip(("unmet_steps", "unmet_tasks"), unmet_steps(log), strict=True)),
         "final_error": final_errors(log),
+        "u_reversals": u_reversals(log.u),
         "arm_energy_j": {},
         "arm_angle_rad": {},
     }

@@ -10,7 +10,11 @@ space without a basis: :func:`_diagonal_deferred`);
 where it leaves the bounds, the level's QP, its answer polished and checked against the
 level's optimality conditions, with proximal steps where they fail
 (:mod:`wholebody.kernels.hqp_level`); then the level's rows, and the constraints its optimum
-presses on, are fixed for the levels below, and its inequality rows inherited. At the end the
+presses on, are fixed for the levels below, and its inequality rows inherited. A level below
+the first that its exact answer leaves unmet is solved again with the stall damping
+(:func:`_damping`, :func:`_damped_pass`: rows ``lambda I`` below its least squares in the
+workspace, so that its candidate, QP, polish and optimality conditions are the damped ones;
+its own null space, for the levels below, stays that of its rows). At the end the
 minimum-norm point of the last optimal set (the tie-break) and the clip to the exact box.
 
 The cascade runs as a few kernels that stop where a QP is needed, so that any engine can solve
@@ -46,6 +50,7 @@ from wholebody.kernels.hqp_level import (
 from wholebody.kernels.hqp_state import (
     C_CLIP,
     C_D,
+    C_DAMP,
     C_F,
     C_RES,
     C_SMAX,
@@ -54,11 +59,13 @@ from wholebody.kernels.hqp_state import (
     FAIL_ENGINE,
     FAIL_STEP,
     P_ACT,
+    P_DAMP,
     P_PROX,
     P_RANK,
     P_REG,
     P_RELAX,
     P_TOL,
+    R_DAMPED,
     R_FAIL,
     R_FAILED,
     R_FREE,
@@ -74,6 +81,7 @@ from wholebody.kernels.hqp_state import (
     S_HASBOX,
     S_K,
     S_M,
+    S_MD,
     S_NINH,
     S_NROWS,
     S_NULL,
@@ -110,6 +118,7 @@ from wholebody.kernels.hqp_state import (
     box_row,
     compose_basis,
     coords,
+    damped_rows,
     defer_basis,
     diagonal_step,
     finish,
@@ -298,19 +307,10 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
     xc = combine(x, 1.0, apply_basis(basis, y))
     exact = in_box(xc, box_row(w, 2), box_row(w, 3))
     st[S_RANK], st[S_NULL], st[S_M], st[S_P] = rank, null_cols, m, p
-    met = inside(xc, bounds)  # (the relaxed box contains the exact one)
-    Cx = mv(rows.C, xc) if met and p else np.zeros(0)
-    for j in range(Cx.shape[0]):  # and the level's inequality rows, within the tolerance
-        met = met and Cx[j] >= rows.lo[j] - tol and Cx[j] <= rows.hi[j] + tol
+    if _meets(xc, bounds, rows, tol):
+        return _take_candidate(s, w, par, k, rows, y, xc, exact, null_cols)
     if null_cols == DEFERRED:
-        _close_deferred(w, met)
-    if met:
-        x[:] = xc
-        st[S_EXACT] = exact
-        if null_cols != DEFERRED:
-            _close_rows(w)
-        _close_rest(s, w, par, k, rows, x, bounds)
-        return DONE
+        _close_deferred(w, False)
     st[S_ANYQP] = 1
     if m and rank == 0 and p == 0:
         # rows with nothing left to move (round-off in the free directions, or a task the
@@ -323,6 +323,135 @@ def _level(s: Arena, w: Arena, par: np.ndarray, k: int) -> int:
         smax = pivot_norm(level_lsq(w)[0])
     fvec(w.f, w.h, W_XC)[:] = xc
     fvec(w.f, w.h, W_SCAL)[C_SMAX] = smax
+    qp_setup(s, w, par, k)
+    return NEED_QP
+
+
+@kernel
+def _take_candidate(
+    s: Arena,
+    w: Arena,
+    par: np.ndarray,
+    k: int,
+    rows: LevelRows,
+    y: np.ndarray,
+    xc: np.ndarray,
+    exact: bool,
+    null_cols: int,
+) -> int:
+    """Level k's exact candidate ``xc = x + Z y``, which meets the bounds, taken (DONE); or,
+    where it leaves the level unmet and the stall damping applies, the level's damped pass
+    (DONE, or NEED_QP where the damped candidate leaves the bounds)."""
+    st, x, _, bounds = state(w)
+    lam2 = _damping(s, w, par, rows, y)
+    if null_cols == DEFERRED:
+        _close_deferred(w, lam2 == 0.0)
+    if lam2 > 0.0:
+        code = _damped_pass(s, w, par, k, rows, lam2)
+        if code != NEXT:
+            return code
+    x[:] = xc  # (or the damped pass failed: the exact candidate, its null space made)
+    st[S_EXACT] = exact
+    if null_cols != DEFERRED or lam2 > 0.0:
+        _close_rows(w)
+    _close_rest(s, w, par, k, rows, x, bounds)
+    return DONE
+
+
+@kernel
+def _meets(xc: np.ndarray, bounds: Bounds, rows: LevelRows, tol: float) -> bool:
+    """Whether the candidate ``xc`` meets the bounds (the relaxed box contains the exact one)
+    and the level's inequality rows, within the tolerance."""
+    met = inside(xc, bounds)
+    Cx = mv(rows.C, xc) if met and rows.C.shape[0] else np.zeros(0)
+    for j in range(Cx.shape[0]):
+        met = met and Cx[j] >= rows.lo[j] - tol and Cx[j] <= rows.hi[j] + tol
+    return met
+
+
+@kernel
+def _damping(s: Arena, w: Arena, par: np.ndarray, rows: LevelRows, y: np.ndarray) -> float:
+    """The stall damping ``lambda^2`` of the current level at its exact answer ``x + Z y``
+    (:class:`wholebody.solvers.hqp.HierarchicalQPSolver` documents the rule):
+    ``mu dt ||r|| |R_00|`` where the level is unmet, ``r = M y - c`` its weighted residual
+    beyond ``P_TOL (1 + ||c||)`` and ``|R_00|`` the scale of M's largest singular value;
+    0 for the first level, where the level is met, without equality rows, of rows in joint
+    space (:func:`_joint_space`), with ``mu = 0`` or without a step duration (a problem no
+    stack made)."""
+    st = ivec(w.i, w.h, W_STATE)
+    mu, m = par[P_DAMP], st[S_M]
+    if not mu > 0.0 or m == 0 or st[S_MD] or st[S_K] == 0:
+        return 0.0
+    scalars = fvec(s.f, s.h, lay.F_SCALARS)
+    dt = scalars[0] if scalars.shape[0] else 0.0
+    if not dt > 0.0:
+        return 0.0
+    if _joint_space(rows.A):
+        return 0.0
+    M, c = level_lsq(w)
+    res = residual(M, y, c)
+    rn = math.sqrt(dot(res, res))
+    if not rn > par[P_TOL] * (1.0 + math.sqrt(dot(c, c))):
+        return 0.0
+    return mu * dt * rn * pivot_norm(M)
+
+
+@kernel
+def _joint_space(A: np.ndarray) -> bool:
+    """Whether every row of ``A`` has at most one non-zero entry: rows in joint space (a
+    posture, objectives' descent rows ``s I``), which do not turn with the configuration, so
+    their least squares is exact from one step to the next and never needs damping."""
+    for i in range(A.shape[0]):
+        count = 0
+        for j in range(A.shape[1]):
+            count += A[i, j] != 0.0
+        if count > 1:
+            return False
+    return True
+
+
+@kernel
+def _damped_pass(s: Arena, w: Arena, par: np.ndarray, k: int, rows: LevelRows, lam2: float) -> int:
+    """Level k solved again with the damping ``lam2 ||Z^T (x' - a)||^2`` added to its least
+    squares, ``a`` the anchor (the last step's velocity under acceleration limits, else 0):
+    rows ``lambda I`` below M in the workspace, right-hand side ``lambda Z^T (a - x)``
+    (``S_MD``). Its damped candidate taken where
+    it meets the bounds (DONE: the level closed on its rows' own null space, ``W_NULL``,
+    made by the exact pass), else the damped QP set up (NEED_QP; :func:`_finish_level`
+    closes it). NEXT where the damped candidate failed: the caller keeps the exact answer."""
+    st, x, basis, bounds = state(w)
+    m, r = st[S_M], basis.r
+    lam = math.sqrt(lam2)
+    Mw, cw = fvec(w.f, w.h, W_M), fvec(w.f, w.h, W_CV)
+    to_anchor = coords(basis, combine(fvec(s.f, s.h, lay.F_ANCHOR), -1.0, x))
+    for j in range(r):
+        row = (m + j) * r
+        for a in range(r):
+            Mw[row + a] = 0.0
+        Mw[row + j] = lam
+        cw[m + j] = lam * to_anchor[j]
+    st[S_MD] = r
+    scal = fvec(w.f, w.h, W_SCAL)
+    scal[C_DAMP] = lam2
+    M, c = level_lsq(w)
+    info, _, y, _, _, _ = cod(M, c, np.zeros(r), par[P_RANK], 0.0)
+    if info != 0 or not finite1(y):
+        st[S_MD] = 0
+        return NEXT
+    rep = report_row(w, k)
+    rep[R_DAMPED] = 1
+    xc = combine(x, 1.0, apply_basis(basis, y))
+    fvec(w.f, w.h, W_XC)[:] = xc
+    if _meets(xc, bounds, rows, par[P_TOL]):
+        x[:] = xc
+        st[S_EXACT] = in_box(xc, box_row(w, 2), box_row(w, 3))
+        st[S_MD] = 0
+        _close_rows(w)
+        _close_rest(s, w, par, k, rows, x, bounds)
+        return DONE
+    st[S_ANYQP] = 1
+    rep[R_QP] = 1
+    scal[C_SMAX] = pivot_norm(M[:m])  # (the level's own scale, for the Tikhonov term)
     qp_setup(s, w, par, k)
     return NEED_QP
 
@@ -393,7 +522,7 @@ def after_qp(f, i, h, wf, wi, wh, par, sol, ok) -> int:
         rep[R_FAILED], rep[R_FAIL] = 1, FAIL_ENGINE
         st[S_K] += 1
         return NEXT
-    rows = level_rows(s, k)
+    rows = damped_rows(s, w, k)
     y = sol[: basis.r].copy()
     M, c = level_lsq(w)
     if m == 0:
@@ -445,7 +574,7 @@ def proximal(f, i, h, wf, wi, wh, par, sol, ok) -> int:
     y = yr[0, : basis.r].copy()
     if not ok:
         return _finish_level(s, w, par, y, unknown_multipliers(x.shape[0]))
-    rows = level_rows(s, k)
+    rows = damped_rows(s, w, k)
     M, c = level_lsq(w)
     yn = polish(s, w, par, sol[: basis.r].copy(), p > 0)
     rn = residual(M, yn, c)
@@ -475,10 +604,18 @@ def _finish_level(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray, mult: Mult
     st, x, basis, bounds = state(w)
     k = st[S_K]
     xq = combine(x, 1.0, apply_basis(basis, y))
-    if st[S_M]:
+    if st[S_M] and not st[S_MD]:  # (the exact pass: what the box cost the level)
         bound_limited(s, w, par, k, xq)
+        lam2 = _damping(s, w, par, level_rows(s, k), y)
+        if lam2 > 0.0:
+            code = _damped_pass(s, w, par, k, level_rows(s, k), lam2)
+            if code == NEED_QP:
+                return NEED_QP
+            if code == DONE:
+                st[S_K] += 1
+                return NEXT
+    rows = damped_rows(s, w, k)  # (in the damped pass: with its damping rows)
     x[:] = xq
-    rows = level_rows(s, k)
     # (found in the level's free directions, before _close_rows fixes its rows)
     left = st[S_NULL] > 0 if st[S_RANK] else basis.identity or basis.r > 0
     pins = np.zeros((0, x.shape[0]))
@@ -492,6 +629,7 @@ def _finish_level(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray, mult: Mult
         floor = par[P_RANK] * max_abs(pins)
         compose_basis(w, null_space(restrict(pins, basis), par[P_RANK], floor))
     _close_rest(s, w, par, k, rows, x, bounds)
+    st[S_MD] = 0
     st[S_K] += 1
     return NEXT
 

@@ -16,7 +16,10 @@ face of the constraints active at the answer (with the bounded least squares, BV
 the box bounds the level), :func:`optimal` checks the level's optimality conditions (the
 gradient a combination of the active constraints' normals with multipliers of the right sign)
 and :func:`strongly_active` finds the constraints the level's optimum presses on, fixed for
-the levels below. The maths is in :mod:`wholebody.solvers.hqp`'s module docstring.
+the levels below. In a level's damped pass (the stall damping) its least squares ``(M, c)``
+carries the damping rows ``lambda I`` and its rows (:func:`~wholebody.kernels.hqp_state.
+damped_rows`) the same rows in x, so all of this is the damped problem's. The maths is in
+:mod:`wholebody.solvers.hqp`'s module docstring.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ from wholebody.kernels.hqp_state import (
     Multipliers,
     apply_basis,
     coords,
+    damped_rows,
     inside,
     level_lsq,
     level_objective,
@@ -386,7 +390,7 @@ def polish(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray, with_rows: bool) 
     M, c = level_lsq(w)
     if not with_rows:
         return _polish_box(x, y, basis, M, c, bounds, par)[0]
-    rows = level_rows(s, st[S_K])
+    rows = damped_rows(s, w, st[S_K])
     Cz = restrict(rows.C, basis)
     Cx = mv(rows.C, x)
     M2, c2 = _touching(M, c, Cz, Cx, combine(Cx, 1.0, mv(Cz, y)), rows.lo, rows.hi)

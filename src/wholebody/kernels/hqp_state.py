@@ -57,6 +57,7 @@ __all__ = [
     "box_row",
     "compose_basis",
     "coords",
+    "damped_rows",
     "defer_basis",
     "deferred_basis",
     "diagonal_step",
@@ -83,8 +84,8 @@ __all__ = [
 ]
 
 # the solver's settings (par)
-P_TOL, P_RANK, P_REG, P_RELAX, P_ACT, P_PROX = 0, 1, 2, 3, 4, 5
-PAR_WIDTH = 6
+P_TOL, P_RANK, P_REG, P_RELAX, P_ACT, P_PROX, P_DAMP = 0, 1, 2, 3, 4, 5, 6
+PAR_WIDTH = 7
 
 # workspace regions: floats, then ints
 W_X = 0  # (n,): the current point x (scaled coordinates)
@@ -93,8 +94,8 @@ W_Z = 2  # (n n,): the basis Z of the free directions, (n, r) C-ordered
 W_INH = 3  # (P, n): the inherited inequality rows G
 W_INHB = 4  # (2, P): their bounds glo, ghi
 W_XC = 5  # (n,): the level's unconstrained candidate
-W_CV = 6  # (m_max,): c = b - A x of the level
-W_M = 7  # (m_max n,): M = A Z of the level, (m, r) C-ordered
+W_CV = 6  # (m_max + n,): c = b - A x of the level (then lambda Z^T (a - x): damping rows)
+W_M = 7  # ((m_max + n) n,): M = A Z of the level (then lambda I), (m (+ r), r) C-ordered
 W_NULL = 8  # (n n,): the level's own null space in free coordinates, (r, cols) C-ordered
 W_SCAL = 9  # (8,): scalars (C_*)
 W_H = 10  # (nv_max^2,): the QP's Hessian, nv x nv row-major
@@ -111,10 +112,12 @@ N_WREGIONS = 18
 S_K, S_R, S_ZI, S_ANYQP, S_EXACT, S_NINH, S_NV, S_NROWS, S_HASBOX, S_RANK = range(10)
 S_NULL, S_M, S_P, S_PROX, S_BOXBAD, S_TIEFAIL, S_TIE, S_TIESTATUS = range(10, 18)
 S_DEFER_R, S_DEFER_M = 18, 19  # a deferred basis (defer_basis): Z's columns, the level's rows
-S_WIDTH = 20
-C_SMAX, C_D, C_TOL, C_F, C_CLIP, C_RES = range(6)
+S_MD = 20  # the damping rows below the level's least squares (r in its damped pass, else 0)
+S_WIDTH = 21
+C_SMAX, C_D, C_TOL, C_F, C_CLIP, C_RES, C_DAMP = range(7)  # C_DAMP: the level's lambda^2
 R_FREE, R_RANK, R_QP, R_FAILED, R_ITER, R_RETRIES, R_STATUS, R_FAIL, R_OBJBAD = range(9)
-R_WIDTH = 9
+R_DAMPED = 9  # the level was solved damped (stall damping)
+R_WIDTH = 10
 FAIL_NONFINITE, FAIL_DECOMPOSITION, FAIL_STEP, FAIL_ENGINE = 1, 2, 3, 4
 
 Arena = namedtuple("Arena", ["f", "i", "h"])
@@ -403,10 +406,47 @@ def set_basis(w: Arena, Z: np.ndarray) -> None:
 @kernel
 def level_lsq(w: Arena):
     """The current level's least squares in the free coordinates (views of the workspace):
-    ``(M, c)``, ``M = A Z`` (m x r) and ``c = b - A x``."""
+    ``(M, c)``, ``M = A Z`` (m x r) and ``c = b - A x``; in the level's damped pass
+    (``S_MD = r``) with the damping rows ``lambda I`` and ``lambda Z^T (a - x)`` below
+    (``a`` the anchor), so that ``||M y - c||^2`` is the damped objective
+    ``||A Z y - c||^2 + lambda^2 ||Z^T (x + Z y - a)||^2``."""
     st = ivec(w.i, w.h, W_STATE)
-    m, r = st[S_M], st[S_R]
+    m, r = st[S_M] + st[S_MD], st[S_R]
     return fvec(w.f, w.h, W_M)[: m * r].reshape((m, r)), fvec(w.f, w.h, W_CV)[:m]
+
+
+@kernel
+def damped_rows(s: Arena, w: Arena, k: int) -> LevelRows:
+    """Level k's rows as its optimality conditions and objective take them (x-space): the
+    stack's rows, and in the level's damped pass the damping rows below them,
+    ``lambda Z^T x' = lambda Z^T a`` (``a`` the anchor, ``F_ANCHOR``: the damping term
+    ``lambda^2 ||Z^T (x' - a)||^2``)."""
+    rows = level_rows(s, k)
+    st = ivec(w.i, w.h, W_STATE)
+    md = st[S_MD]
+    if md == 0:
+        return rows
+    lam = math.sqrt(fvec(w.f, w.h, W_SCAL)[C_DAMP])
+    _, _, basis, _ = state(w)
+    anchor = fvec(s.f, s.h, lay.F_ANCHOR)
+    m, n = rows.A.shape
+    # (sliced and reshaped as level_rows' views are: the same array types)
+    A = np.empty((m + md) * n)[: (m + md) * n].reshape((m + md, n))
+    b = np.empty(m + md)[: m + md]
+    A[:m] = rows.A
+    b[:m] = rows.b
+    A[m:] = 0.0
+    for j in range(md):
+        if basis.identity:
+            A[m + j, j] = lam
+            b[m + j] = lam * anchor[j]
+        else:
+            t = 0.0
+            for i in range(n):
+                A[m + j, i] = lam * basis.Z[i, j]
+                t += basis.Z[i, j] * anchor[i]
+            b[m + j] = lam * t
+    return LevelRows(A, b, rows.C, rows.lo, rows.hi)
 
 
 @kernel

@@ -57,8 +57,8 @@ class Workspace:
             hqp_state.W_INH: (P, n),
             hqp_state.W_INHB: (2, P),
             hqp_state.W_XC: (n,),
-            hqp_state.W_CV: (m_max,),
-            hqp_state.W_M: (m_max * n,),
+            hqp_state.W_CV: (m_max + n,),  # (+ n: a damped level's damping rows)
+            hqp_state.W_M: ((m_max + n) * n,),
             hqp_state.W_NULL: (n * n,),
             hqp_state.W_SCAL: (8,),
             hqp_state.W_H: (nv * nv,),
@@ -339,6 +339,7 @@ def reports(arena: Arena, ws: Workspace) -> list[LevelReport]:
                 retries=row[hqp_state.R_RETRIES],
                 limited=_limited_names(arena, ws, k),
                 failed=bool(row[hqp_state.R_FAILED]),
+                damped=bool(row[hqp_state.R_DAMPED]),
             )
         )
     return out

@@ -73,6 +73,40 @@ failure or non-finite rows (the level is skipped, named, and the rest is solved)
 BOUNDS_ACTIVE when some entry of ``u`` sits on the box. The projection backend gives the status
 the same meaning (:class:`~wholebody.solvers.SolverStatus`).
 
+Stalled levels: damped
+----------------------
+A task's rows are its linearisation at the current configuration, so each level's least
+squares is one Gauss-Newton step of the task's error. Where a level below the first cannot
+be met (a hand sent beyond what its joint limits and a closed chain above it allow) its
+exact optimum moves along the directions its rows barely see (small singular values, on the
+face of the bounds), at up to the velocity limits: the linearisation's error over such a
+step (the task's curvature times its remaining error) exceeds the step's own first-order
+effect, so the next step goes back. The undamped cascade then alternates between two
+answers every step, the closed chain above drifting off by the second-order effect of
+those steps (measured: ``benchmarks/limit_cycles.py``, every QP engine). So a level below
+the first that its exact answer leaves unmet, with weighted residual ``r = ||A x - b||``
+beyond ``tolerance (1 + ||c||)`` (``c``: what it asks beyond the levels above), is solved
+again, damped (Levenberg-Marquardt)::
+
+    min ||A x - b||^2 + lambda^2 ||P (x - a)||^2    over F_(k-1)
+    lambda^2 = stall_damping * dt * r * |R_00|
+
+(``P``: the projector onto the directions the levels above leave free; ``a`` the anchor, the
+last step's velocity under acceleration limits, else 0, so that the damping holds back the
+change the level makes, as the projection's saturation scales around it; ``|R_00|``, the
+norm of the level's largest row in the free directions, the scale of its largest singular
+value; ``dt`` the step). The damping is of the order of the term the linearisation drops
+(the residual, as a distance per step, times a curvature taken at the scale of the rows), so
+the stalled level settles: its ``u`` decays, it does not reverse. The levels below keep
+``A x`` at the damped answer's value and move in the null space of ``A`` (the damping rows
+never use up freedom). Not damped: the first level (the stack's requirement, whose residual sets
+the status), a met level (then the cascade is unchanged, bit for bit), a level whose rows
+are in joint space (a posture, objectives: their rows do not turn with the configuration), a
+problem without a step ``dt`` (:meth:`solve_problem`). ``stall_damping = 0`` gives the exact
+lexicographic optimum. The price: an unmet lower level far from its target converges more
+slowly (its weakly seen directions are damped while its residual is large). :attr:`levels`
+says which levels were damped (``LevelReport.damped``).
+
 Objectives: a descent step at their level
 -----------------------------------------
 :meth:`Stack.evaluate` turns a level's objectives ``H = sum_i w_i f_i`` into the rows
@@ -119,7 +153,10 @@ from wholebody.solvers.qp import QPEngine, make_engine
 from wholebody.solvers.result import SolverResult
 from wholebody.solvers.stack import Stack, StackProblem
 
-__all__ = ["HierarchicalQPSolver", "LevelReport"]
+__all__ = ["STALL_DAMPING", "HierarchicalQPSolver", "LevelReport"]
+
+STALL_DAMPING = 0.1
+"""The default ``mu`` of :attr:`HierarchicalQPSolver.stall_damping`."""
 
 
 def _positive(value: float) -> bool:
@@ -149,6 +186,9 @@ class HierarchicalQPSolver(Solver):
     warm_start
         Keep each level's engine workspace and warm-start it at the next control step
         (engines other than daqp).
+    stall_damping
+        ``mu`` (dimensionless, >= 0) of the damping of a level below the first that is left
+        unmet ("Stalled levels: damped" above); 0 solves every level exactly.
     engine_settings
         Passed to the engine (see :func:`wholebody.solvers.qp.make_engine`; daqp: the fields
         of :data:`wholebody.kernels.daqp.SETTING_NAMES`).
@@ -165,6 +205,7 @@ class HierarchicalQPSolver(Solver):
         regularization: float = 1e-9,
         bound_relaxation: float = 1e-9,
         warm_start: bool = True,
+        stall_damping: float = STALL_DAMPING,
         engine_settings: dict[str, Any] | None = None,
     ) -> None:
         self._par = np.zeros(hqp_state.PAR_WIDTH)
@@ -181,6 +222,7 @@ class HierarchicalQPSolver(Solver):
         self.bound_relaxation = bound_relaxation
         self.proximal_steps = 3
         self.active_tolerance = 1e-7
+        self.stall_damping = stall_damping
         self._engines: list[QPEngine] = []
         self.qp_time = 0.0
         """Wall time (s) of the last solve (the stack's evaluation included: one kernel call
@@ -225,6 +267,9 @@ class HierarchicalQPSolver(Solver):
     bound_relaxation = Setting(hqp_state.P_RELAX, valid=_positive, rule="> 0")
     active_tolerance = Setting(hqp_state.P_ACT, valid=_positive, rule="> 0")
     """Distance (scaled units) within which an entry of ``u`` counts as at its bound."""
+    stall_damping = Setting(hqp_state.P_DAMP, valid=lambda v: v >= 0, rule=">= 0")
+    """``mu`` of the damping of an unmet level (dimensionless, 0: off; module docstring,
+    "Stalled levels")."""
     proximal_steps = Setting(hqp_state.P_PROX, int, valid=lambda v: v >= 0, rule=">= 0")
     """Most proximal-point QPs after a level's QP whose answer fails the level's optimality
     conditions."""

@@ -41,6 +41,11 @@ class LevelReport:
         best residual given the higher levels: the box cost this level something.
     failed
         The level was skipped (engine failure or non-finite rows).
+    damped
+        The level was unmet and solved again with the stall damping
+        (:attr:`HierarchicalQPSolver.stall_damping
+        <wholebody.solvers.hqp.HierarchicalQPSolver.stall_damping>`): its answer is the
+        damped least squares', ``residual`` that answer's.
     """
 
     name: str
@@ -53,3 +58,4 @@ class LevelReport:
     retries: int = 0
     limited: list[str] = field(default_factory=list)
     failed: bool = False
+    damped: bool = False

@@ -67,7 +67,7 @@ def stalled_run(
     hand.set_target(goal)
     limits = [wb.JointPositionLimits(robot), wb.VelocityLimits(robot)]
     stack = wb.Stack(robot, [[chain], [hand]], limits)
-    return wb.Controller(robot, stack, solver, dt=dt).run(q0, duration)
+    return wb.Controller(robot, stack, solver, dt=dt, recovery=False).run(q0, duration)
 
 
 def report(log: wb.RunLog, settle: float) -> dict[str, float]:

@@ -49,7 +49,7 @@ def stalled_run(robot, solver, *, rotation, axis=(1.0, 0.0, 0.0), lift=0.05, dur
     stack = wb.Stack(
         robot, [[chain], [hand]], [wb.JointPositionLimits(robot), wb.VelocityLimits(robot)]
     )
-    controller = wb.Controller(robot, stack, solver, dt=DT)
+    controller = wb.Controller(robot, stack, solver, dt=DT, recovery=False)  # (the solver alone)
     return controller.run(q0, duration), controller
 
 
@@ -156,7 +156,7 @@ def test_the_first_level_is_never_damped(humanoid):
         solver = wb.HierarchicalQPSolver(stall_damping=mu)
         stack = wb.Stack(humanoid, [[hand]], [wb.JointPositionLimits(humanoid),
                                               wb.VelocityLimits(humanoid)])  # fmt: skip
-        controller = wb.Controller(humanoid, stack, solver, dt=DT)
+        controller = wb.Controller(humanoid, stack, solver, dt=DT, recovery=False)
         logs[mu] = controller.run(q0, 0.5)
         assert controller.result.infeasible and not solver.levels[0].damped
     np.testing.assert_array_equal(logs[0.0].u, logs[STALL_DAMPING].u)

@@ -228,20 +228,19 @@ def test_a_reference_the_hands_lag_behind_is_not_a_stall(humanoid, backend):
         assert np.linalg.norm(log.frame_positions[hand.name][-1] - end) < 1e-3
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_a_far_reach_at_speed_is_not_a_stall(humanoid, backend):
-    """Target 8 of the benchmark from home under acceleration limits: its error (about 4 m +
-    rad) shrinks slowly compared with its size, as the limits allow, but faster than
-    ``min_rate``: no retreat (a criterion relative to the error alone retreated twice and
-    ended 0.77 m off), the same run step for step as without the recovery."""
-    goal = goal_poses(humanoid, 8)
+def test_a_far_reach_at_speed_is_not_a_stall(humanoid):
+    """Target 1 of the benchmark from home under acceleration limits, the projection: its
+    error shrinks slowly compared with its size, as the limits allow, but faster than
+    ``min_rate``: no retreat (a criterion relative to the error alone retreated once), the
+    same run step for step as without the recovery."""
+    goal = goal_poses(humanoid, 1)
     runs = []
     for recovery in (False, True):
         hands = [FrameTask(humanoid, f, kp=20.0, ki=5.0) for f in HANDS]
         stack = paper_stack(humanoid, hands, acceleration=True)
         for hand, T in zip(hands, goal, strict=True):
             hand.set_target(T)
-        ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, recovery=recovery)
+        ctrl = Controller(humanoid, stack, ProjectionSolver(), dt=DT, recovery=recovery)
         runs.append(ctrl.run(humanoid.home(), 3.0))
     assert runs[1].meta["retreats"] == []
     np.testing.assert_array_equal(runs[0].u, runs[1].u)

@@ -118,7 +118,8 @@ class Controller:
         :class:`FrameTask` of the stack with the recovery's defaults (none if it has none), a
         :class:`StallRecovery` made for ``stack`` is used as it is, False turns it off. It
         acts only when a watched task has been unmet, its target at rest, for 0.15 s while
-        the error stopped shrinking; then it changes nothing else. The run log's
+        the error shrank slower than the recovery's rates (``E / 1 s`` and 0.2 m/s); else it
+        changes nothing. The run log's
         ``meta["retreats"]`` lists the retreats (``[start, end]`` in s; end None if the run
         ended during one).
     plant

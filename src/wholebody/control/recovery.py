@@ -9,9 +9,11 @@ posture, a third of random reachable targets end there, as they do for pink).
 
 :class:`StallRecovery` watches the pose tasks' error ``E = sum_t ||e_t||`` (each ``e_t`` the
 task's 6-D error, metres and radians added, 1 m counting as 1 rad). The reach **stalls** when,
-over the last ``window`` seconds, every step left a watched task unmet (infeasible or scaled)
-and ``E`` shrank by less than ``E window / horizon``: at that rate the error would not shrink
-by a factor e within ``horizon`` seconds. ``E`` below ``min_error`` never stalls. The
+over the last ``window`` seconds, every step left a watched task unmet (infeasible or scaled),
+no watched task's reference moved (a target twist not 0: its error is then a lag) and ``E``
+shrank by less than ``min(E / horizon, min_rate) window``: at that rate the error would not
+shrink by a factor e within ``horizon`` seconds, nor by ``min_rate`` (m/s + rad/s) a second.
+``E`` below ``min_error`` never stalls. The
 controller then **retreats**: it solves a retreat stack (the levels above the watched tasks
 kept, e.g. a closed chain between the hands; then a posture task towards the ready posture;
 the same constraints and metric) until every posture joint is within ``tolerance`` of the ready
@@ -30,7 +32,8 @@ Use it in a loop of your own in place of ``stack.advance``::
         recovery.advance(state, dt, result)               # advances it, watches, switches
         q = robot.integrate(q, result.u, dt)
 
-or give it to :class:`~wholebody.control.Controller` (``recovery=``), which logs the retreats.
+A :class:`~wholebody.control.Controller` makes one by default (``recovery=True``) and
+watches from its kernel's outcome (:meth:`StallRecovery.observe`); it logs the retreats.
 """
 
 from __future__ import annotations

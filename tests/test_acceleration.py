@@ -140,7 +140,7 @@ def test_the_projection_reaches_far_targets_under_acceleration_limits(humanoid, 
     for hand, T in zip(hands, goal, strict=True):
         hand.set_target(T)
     log = Controller(humanoid, stack, ProjectionSolver(), dt=DT, recovery=False).run(
-        humanoid.home(), 4.0
+        humanoid.home(), 6.0
     )
     rate = np.abs(np.diff(np.vstack([np.zeros(humanoid.nu), log.u]), axis=0)) / DT
     assert np.max(rate / humanoid.acceleration_limits) <= 1.0 + 1e-9

@@ -8,8 +8,8 @@ A pass runs the levels in order, each on the free directions the levels above le
 the box it is the answer; otherwise SNS runs from the start for ``d = u - u_c``, ``u_c`` the
 box's point closest to rest. This is done in the box of every limit but the acceleration
 limits; where that solution ``u*`` leaves the acceleration window, a second SNS pass from the
-last velocity asks the levels that box scaled for ``A u*``, then for ``u*`` in what they leave
-free
+last velocity asks each level for its demand at the scale that box gave it, then for ``u*`` in
+what they leave free
 (:mod:`wholebody.solvers.projection`, "Acceleration limits"). Inequality rows of the stack are
 held above every level: the rows the solution violates become equality rows at their bound in
 a first level, and the stack is solved again, until none is violated.
@@ -122,9 +122,10 @@ def _pass(
     """One pass over the held rows' level (if any) and the stack's levels, for ``d = u - u_c``
     (right-hand sides shifted by ``A u_c``): box-free, or with SNS (``sns``; the levels'
     scale factors into ``F_LEVEL_OUT``). With a ``goal`` velocity (else empty), the solution
-    in the other limits' box whose scale factors ``F_LEVEL_OUT`` holds, a level that box
-    scaled asks for the goal's velocities ``A goal`` instead of its own, and a last level for
-    ``goal`` itself takes what the levels leave free. Returns ``d``."""
+    in the other limits' box whose scale factors ``F_LEVEL_OUT`` holds, each level asks for its
+    own demand times its scale factor there (what that box could deliver, in the level's own
+    direction), and a last level for ``goal`` itself takes what the levels leave free.
+    Returns ``d``."""
     levels, lf = imat(i, h, lay.I_LEVEL), fmat(f, h, lay.F_LEVEL)
     A, b = fmat(f, h, lay.F_A), fvec(f, h, lay.F_B)
     lev_out = fmat(f, h, lay.F_LEVEL_OUT)
@@ -144,11 +145,8 @@ def _pass(
             rows = Rows(held.A, combine(held.b, -1.0, mv(held.A, u_c)), 1.0, 0.0)
         else:
             r0, r1 = levels[k, lay.LEVEL_ROW0], levels[k, lay.LEVEL_ROW_END]
-            if goal.shape[0]:  # a level the other limits scaled asks for what they allowed
-                if lev_out[k, 1] < 1.0:
-                    bk = mv(A[r0:r1], to_goal)
-                else:
-                    bk = combine(b[r0:r1], -1.0, mv(A[r0:r1], u_c))
+            if goal.shape[0]:  # its own demand, at the scale the other limits allowed
+                bk = combine(b[r0:r1] * lev_out[k, 1], -1.0, mv(A[r0:r1], u_c))
             else:
                 bk = combine(b[r0:r1], -1.0, mv(A[r0:r1], u_c)) if sns else b[r0:r1]
             rows = Rows(A[r0:r1], bk, lf[k, lay.LEVEL_REFERENCE], lf[k, lay.LEVEL_IDENTITY])
@@ -166,9 +164,9 @@ def _solve(f: np.ndarray, i: np.ndarray, h: np.ndarray, held: Rows, par: np.ndar
     """The stack (with the held rows on top) in the box. First in the box of every limit but
     the acceleration limits (:func:`_solve_in`): ``u*``. Where acceleration limits leave
     ``u*`` out of reach, the levels are solved again from the last velocity, with SNS in the
-    whole box, each level that the first box scaled asking for ``u*``'s velocities ``A u*``
-    (a demand that box could deliver), then ``u*`` in the directions left free
-    (:func:`_pass` with a goal). ``(u, u_free, sns)``."""
+    whole box, each asking for its demand times the scale factor the first box gave it (a
+    demand that box could deliver), then ``u*`` in the directions left free (:func:`_pass`
+    with a goal). ``(u, u_free, sns)``."""
     box = fmat(f, h, lay.F_BOX)
     fmat(f, h, lay.F_LEVEL_OUT)[:, 1] = 1.0
     goal, u_free, sns = _solve_in(f, i, h, held, box[2], box[3], par)

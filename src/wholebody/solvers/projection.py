@@ -72,20 +72,20 @@ that is still outside the box is moved along the segment from the (feasible) sol
 higher levels, so the box always holds and the result is never NaN.
 
 Acceleration limits (:class:`~wholebody.tasks.AccelerationLimits`) make the box a narrow
-window around the last velocity, ``|u - u_prev| <= a dt``. SNS in that window from rest
+window around the last velocity, ``|u - u_prev| <= a dt``. SNS in that window alone
 asks each level for its whole velocity in one step: a far target then scales a level by
 0.001-0.005 and the robot crawls or oscillates. So the stack is first solved, as above, in
 the box of the other limits: ``u*``, the velocity the levels want and the position and
 velocity limits allow. When ``u*`` is outside the window the stack is solved again from the
 last velocity (``d = u - u_c``, ``u_c`` the window's point closest to ``u_prev``), with SNS
-in the window: a level that the first box scaled asks for ``u*``'s own velocities,
-``A_k u*`` (a demand that box could deliver), the others for their own, and a last level of
-rows ``I`` asks for ``u*`` itself in the directions left free. Each level gets as much of
-its change as the window delivers, in priority order (a closed chain on top keeps its rows,
-the hands' level is scaled, the joints it does not need go to ``u*``). A level asking for
-``A_k u*`` where the first box did not scale it (a hand unmet at a joint limit, the arms
-hanging straight) tracked worse: 4.9 mm against 3.0 mm at the start of the carry under
-MuJoCo. Measured in
+in the window: each level asks for its own demand times the scale factor ``s_k`` SNS gave it
+in the first box (``s_k b_k``: what that box could deliver, in the level's own direction),
+and a last level of rows ``I`` asks for ``u*`` itself in the directions left free. Each
+level gets as much of it as the window delivers, in priority order (a closed chain on top
+keeps its rows, the hands' level is scaled, the joints it does not need go to ``u*``).
+Asking for ``u*``'s own velocities ``A_k u*`` instead converged as often but tracked worse
+where a level is unmet for another reason than the box (the arms hanging straight at the
+carry's start: 4.9 mm against 3.0 mm under MuJoCo). Measured in
 ``benchmarks/convergence.py``: with acceleration limits the default controller converges as
 often as without them.
 

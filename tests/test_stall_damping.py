@@ -29,7 +29,7 @@ from wholebody.robot.urdf import example_robot_data_share
 from wholebody.solvers.hqp import STALL_DAMPING
 
 DT = 0.01
-ENGINES = ["daqp", "proxsuite"]
+ENGINES = ["daqp", pytest.param("proxsuite", marks=pytest.mark.slow)]  # (the other: slow)
 
 
 def stalled_run(robot, solver, *, rotation, axis=(1.0, 0.0, 0.0), lift=0.05, duration=4.0):
@@ -113,6 +113,7 @@ def test_a_stalled_lower_level_settles_under_the_closed_chain(humanoid, engine):
     assert hand.residual > 0.1  # and the hand stalled
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(example_robot_data_share() is None, reason="example-robot-data missing")
 @pytest.mark.parametrize("engine", ENGINES)
 def test_tiagos_stalled_hand_settles(engine):

@@ -201,10 +201,7 @@ class StallRecovery:
         self._time += dt
         if self.retreats and self.retreats[-1].end is None:
             self._watch_retreat(q)
-        elif not unmet:
-            if self._history:
-                self._history.clear()
-        elif self._moving():
+        elif not unmet or self._moving():
             self._history.clear()
         else:
             self._watch_reach(dt, error())

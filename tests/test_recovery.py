@@ -10,6 +10,7 @@ import pytest
 from wholebody.control import Controller
 from wholebody.control.recovery import StallRecovery, mid_range_posture
 from wholebody.errors import DimensionError, WholebodyError
+from wholebody.kernels.watch import pose_watch
 from wholebody.planning.trajectory import MinimumJerkTrajectory
 from wholebody.presets import paper_stack
 from wholebody.solvers import Level, ProjectionSolver, Stack
@@ -151,7 +152,7 @@ def test_bad_arguments_are_named(humanoid):
     hands = [FrameTask(humanoid, f) for f in HANDS]
     stack = paper_stack(humanoid, hands)
     for kwargs in ({"horizon": 0.0}, {"window": float("nan")}, {"min_error": -1.0},
-                   {"max_retreats": 1.5}, {"gain": "fast"}):  # fmt: skip
+                   {"max_retreats": 1.5}, {"gain": "fast"}, {"max_lag": float("nan")}):  # fmt: skip
         with pytest.raises(DimensionError):
             StallRecovery(humanoid, stack, **kwargs)
     with pytest.raises(DimensionError):
@@ -245,3 +246,70 @@ def test_a_far_reach_at_speed_is_not_a_stall(humanoid):
     assert runs[1].meta["retreats"] == []
     np.testing.assert_array_equal(runs[0].u, runs[1].u)
     assert worst_error(humanoid, np.asarray(runs[1].meta["final_q"]), goal)[0] < 1e-3
+
+
+def test_a_lag_up_to_max_lag_is_never_a_stall_and_a_larger_one_is_watched(humanoid):
+    """The watch alone, fed by hand: while a reference moves, an unmet reach whose error holds
+    at ``max_lag`` never retreats; one held above it retreats after ``window``, as a reach
+    to a target at rest would."""
+    stack = paper_stack(humanoid, [FrameTask(humanoid, f) for f in HANDS])
+    q = humanoid.neutral()
+    for error, retreats in ((0.5, 0), (0.51, 1)):
+        watch = StallRecovery(humanoid, stack, max_lag=0.5, window=0.15)
+        for _ in range(100):
+            watch.observe(q, DT, True, True, error)
+        assert len(watch.retreats) == retreats
+        if retreats:
+            assert watch.retreats[0].start == pytest.approx(0.16)
+
+
+def test_hands_that_lose_a_moving_reference_retreat_before_it_stops(humanoid):
+    """Target 26 from the neutral posture, a 3 s minimum-jerk reference, acceleration limits,
+    the projection: the hands fall metres behind the reference. With ``max_lag`` the reach
+    retreats while the reference still moves and the hands end on it; watched only once it
+    stops (``max_lag`` infinite) the retreat comes after 3 s, too late for the 6 s run."""
+    goal = goal_poses(humanoid, 26)
+    q0 = humanoid.neutral()
+    outcomes = []
+    for max_lag in (0.5, float("inf")):
+        hands = [FrameTask(humanoid, f) for f in HANDS]
+        stack = paper_stack(humanoid, hands, acceleration=True)
+        refs = {h: MinimumJerkTrajectory(humanoid.frame_pose(q0, h.frame), T, 3.0)
+                for h, T in zip(hands, goal, strict=True)}  # fmt: skip
+        watch = StallRecovery(humanoid, stack, max_lag=max_lag)
+        ctrl = Controller(humanoid, stack, ProjectionSolver(), dt=DT, references=refs,
+                          recovery=watch)  # fmt: skip
+        log = ctrl.run(q0, 6.0)
+        outcomes.append((log.meta["retreats"][0][0], worst_error(humanoid,
+                         np.asarray(log.meta["final_q"]), goal)[0]))  # fmt: skip
+    (early, met), (late, missed) = outcomes
+    assert early < 3.0 < late
+    assert met < 1e-3 < missed
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_kernels_watch_reads_what_the_tasks_hold(humanoid, backend):
+    """:func:`pose_watch` on the controller's arena after each step: unmet as the result's
+    infeasible tasks, moving as the references' twists, ``E`` as the tasks' own errors."""
+    q = humanoid.home()
+    hands = [FrameTask(humanoid, f) for f in HANDS]
+    stack = paper_stack(humanoid, hands)
+    refs = {}
+    for hand in hands:
+        start = humanoid.frame_pose(q, hand.frame)
+        goal = start.copy()
+        goal[2, 3] += 0.5
+        refs[hand] = MinimumJerkTrajectory(start, goal, 0.3)
+    ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, references=refs)
+    seen = set()
+    for _ in range(60):
+        ctrl.step(q)
+        q = ctrl.q_next.copy()
+        unmet, moving, error = pose_watch(*ctrl._watch)
+        names = {task for _, task in ctrl.result.infeasible}
+        assert unmet == bool(names & set(HANDS))
+        assert moving == any(h.target_twist.any() for h in hands)
+        assert error == pytest.approx(sum(np.linalg.norm(h.last_error) for h in hands), 1e-12)
+        seen.add((unmet, moving))
+    assert {(True, True), (False, False)} <= seen  # (both outcomes were read)
+    assert ctrl._main.block_start(PostureTask(humanoid)) == -1

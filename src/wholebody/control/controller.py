@@ -54,6 +54,7 @@ from wholebody.errors import DimensionError, WholebodyError
 from wholebody.kernels import layout as lay
 from wholebody.kernels.control import ADVANCE, INTEGRATE, KINEMATICS, NOT_FINITE, Batch
 from wholebody.kernels.evaluate import REF_WIDTH
+from wholebody.kernels.watch import pose_watch
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot, RobotState
 from wholebody.solvers.base import Solver
@@ -219,8 +220,9 @@ class Controller:
         self._batch: Batch | None = None  # its batch
         self._limits: object | None = None
         self._plan_of_step: Plan | None = None
-        self._watched_rows: list[int] = []  # the recovery's tasks in the plan's task order
-        self._watch_flags = np.zeros(0, np.intp)  # and the plan's flags of tasks unmet
+        # pose_watch's arguments for the stack's plan: the arena's F_PAR, the recovery's
+        # tasks' blocks in it, the plan's flags of tasks unmet and the tasks' rows in them
+        self._watch: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._main: Plan | None = None  # that plan
         self._u = np.zeros(robot.nu)
         self._q_next = np.zeros(robot.nq)
@@ -375,7 +377,7 @@ class Controller:
         if self.references:
             batch.refs[0] = self._refs[j]  # type: ignore[index]
         start = time.perf_counter()
-        fast = self._fast and (rec is None or rec.poses_only)
+        fast = self._fast
         if fast:
             plan.sync(state, self.dt)
             if plan.stale:  # an entry changed shape: lay the stack out anew, then step
@@ -401,16 +403,16 @@ class Controller:
 
     def _observe(self, q: np.ndarray) -> None:
         """After a step of one kernel call (which advanced the stack): the recovery's watch,
-        from the kernel's outcome (the watched tasks unmet) and the errors it kept."""
+        from the kernel's outcome (the watched tasks unmet, their references moving, their
+        errors; :func:`~wholebody.kernels.watch.pose_watch`)."""
         rec = self.recovery
         if rec is None:
             return
-        unmet = False
-        if self._bound is self._main:  # (the retreat's plan: the watched tasks are not in it)
-            flags = self._watch_flags
-            for t in self._watched_rows:
-                unmet = unmet or flags[t] != 0
-        rec.observe(q, self.dt, unmet, rec.last_error)
+        if self._bound is self._main:
+            unmet, moving, error = pose_watch(*self._watch)
+        else:  # the retreat's plan: the watched tasks are not in it
+            unmet, moving, error = False, False, 0.0
+        rec.observe(q, self.dt, unmet, moving, error)
 
     def _general(self, plan: Plan, q: np.ndarray, state: RobotState | None, j: int) -> RobotState:
         """A step with the Python entries' own code around the kernel call, and Pinocchio's
@@ -460,8 +462,11 @@ class Controller:
         self._call = None
         if self.recovery is not None and plan is self.stack.current_plan:
             names = {t.name for t in self.recovery.watched}
-            self._watched_rows = [k for k, n in enumerate(plan.task_names) if n in names]
-            self._watch_flags = plan.view(lay.I_INFEASIBLE)
+            rows = [k for k, n in enumerate(plan.task_names) if n in names]
+            starts = [plan.block_start(t) for t in self.recovery.watched]
+            self._watch = (plan.view(lay.F_PAR), np.array(starts, np.int64),
+                           plan.view(lay.I_INFEASIBLE), np.array(rows, np.int64))  # fmt: skip
+            self._fast = self._fast and min(starts) >= 0
             self._main = plan
 
     def _sample(self, k0: int) -> None:

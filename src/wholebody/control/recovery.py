@@ -9,15 +9,19 @@ posture, a third of random reachable targets end there, as they do for pink).
 
 :class:`StallRecovery` watches the pose tasks' error ``E = sum_t ||e_t||`` (each ``e_t`` the
 task's 6-D error, metres and radians added, 1 m counting as 1 rad). The reach **stalls** when,
-over the last ``window`` seconds, every step left a watched task unmet (infeasible or scaled),
-no watched task's reference moved (a target twist not 0: its error is then a lag) and ``E``
-shrank by less than ``min(E / horizon, min_rate) window``: at that rate the error would not
-shrink by a factor e within ``horizon`` seconds, nor by ``min_rate`` (m/s + rad/s) a second.
-``E`` below ``min_error`` never stalls. The
-controller then **retreats**: it solves a retreat stack (the levels above the watched tasks
-kept, e.g. a closed chain between the hands; then a posture task towards the ready posture;
-the same constraints and metric) until every posture joint is within ``tolerance`` of the ready
-posture (or ``max_retreat`` seconds passed), zeroes the watched tasks' integrals and resumes.
+over the last ``window`` seconds, every step left a watched task unmet (infeasible or scaled)
+and ``E`` shrank by less than ``min(E / horizon, min_rate) window``: at that rate the error
+would not shrink by a factor e within ``horizon`` seconds, nor by ``min_rate`` (m/s + rad/s) a
+second. ``E`` below ``min_error`` never stalls, nor does ``E`` up to ``max_lag`` while a
+watched task's reference moves (a target twist not 0): that error is a lag behind the
+reference. A larger one means the hands lost it: under acceleration limits, from the arms
+hanging straight, they can fall metres behind a minimum-jerk reference and end in a local
+minimum when it stops; watched as for a target at rest, the reach retreats a second or more
+earlier (``benchmarks/convergence.py``). The controller then **retreats**: it solves a
+retreat stack (the levels above the watched tasks kept, e.g. a closed chain between the hands;
+then a posture task towards the ready posture; the same constraints and metric) until every
+posture joint is within ``tolerance`` of the ready posture (or ``max_retreat`` seconds
+passed), zeroes the watched tasks' integrals and resumes.
 At most ``max_retreats`` retreats per run. The ready posture defaults to the middle of every
 limited joint's range, 0 for the others: the posture farthest from the limits that block, and
 the one from which the same targets are reached most often (``benchmarks/README.md``,
@@ -40,7 +44,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +105,10 @@ class StallRecovery:
     min_rate
         Nor does a reach whose ``E`` shrinks faster than this (m/s + rad/s), however large
         ``E``: far from the target the velocity limits, not a local minimum, set the pace.
+    max_lag
+        While a watched reference moves, an ``E`` up to this (m + rad) is a lag behind it,
+        never a stall; beyond it the hands have lost the reference, and the reach is watched
+        as for a target at rest (``inf``: a reach is never watched while a reference moves).
     gain
         The retreat's posture gain (1/s).
     tolerance
@@ -122,6 +130,7 @@ class StallRecovery:
         window: float = 0.15,
         min_error: float = 0.02,
         min_rate: float = 0.2,
+        max_lag: float = 0.5,
         gain: float = 20.0,
         tolerance: float = 0.2,
         max_retreat: float = 2.0,
@@ -137,6 +146,9 @@ class StallRecovery:
                 and min_error >= 0):  # fmt: skip
             raise DimensionError(f"StallRecovery: min_error must be finite and >= 0, got "
                                  f"{min_error!r}")  # fmt: skip
+        if not (isinstance(max_lag, (int, float)) and max_lag > 0):  # (NaN compares false)
+            raise DimensionError(f"StallRecovery: max_lag must be a number > 0 (inf: never "
+                                 f"while a reference moves), got {max_lag!r}")  # fmt: skip
         if not (isinstance(max_retreats, int) and max_retreats >= 0):
             raise DimensionError(f"StallRecovery: max_retreats must be an integer >= 0, got "
                                  f"{max_retreats!r}")  # fmt: skip
@@ -159,7 +171,7 @@ class StallRecovery:
                                            Level([self.posture_task], name="retreat")],
                                    stack.constraints, metric=stack.metric)  # fmt: skip
         self.horizon, self.window, self.min_error = float(horizon), float(window), min_error
-        self.min_rate = float(min_rate)
+        self.min_rate, self.max_lag = float(min_rate), float(max_lag)
         self.tolerance, self.max_retreat, self.max_retreats = tolerance, max_retreat, max_retreats
         self._names = {t.name for t in self.watched}
         self._poses = [t for t in self.watched if isinstance(t, PoseTask)]
@@ -192,30 +204,21 @@ class StallRecovery:
         switch between them (:meth:`observe`)."""
         self.stack.advance(state, dt, result=result)
         unmet = any(task in self._names for _, task in result.infeasible)
-        self.observe(state.q, dt, unmet, lambda: self.error(state))
+        error = self.error(state) if unmet and not self.retreating else 0.0
+        self.observe(state.q, dt, unmet, self._moving(), error)
 
-    def observe(self, q: np.ndarray, dt: float, unmet: bool, error: Callable[[], float]) -> None:
+    def observe(self, q: np.ndarray, dt: float, unmet: bool, moving: bool, error: float) -> None:
         """Watch one step, solved at the configuration ``q``, whose stack has advanced
-        already: ``unmet`` whether it left a watched task unmet, ``error()`` gives ``E`` at
-        ``q`` (called only when needed). Switches between the reach and the retreat."""
+        already: ``unmet`` whether it left a watched task unmet, ``moving`` whether a watched
+        reference moves, ``error`` the watched error ``E`` at ``q`` (read only when
+        ``unmet``). Switches between the reach and the retreat."""
         self._time += dt
         if self.retreats and self.retreats[-1].end is None:
             self._watch_retreat(q)
-        elif not unmet or self._moving():
+        elif not unmet or (moving and error <= self.max_lag):
             self._history.clear()
         else:
-            self._watch_reach(dt, error())
-
-    @property
-    def poses_only(self) -> bool:
-        """Whether every watched task is a pose task, whose error a stack's kernel keeps
-        (:meth:`last_error`): the watch then needs no kinematics of its own."""
-        return len(self._poses) == len(self.watched)
-
-    def last_error(self) -> float:
-        """``E`` from the errors the watched pose tasks' last rows were computed with (m +
-        rad)."""
-        return float(sum(np.linalg.norm(t.last_error) for t in self._poses))
+            self._watch_reach(dt, error)
 
     def _watch_reach(self, dt: float, error: float) -> None:
         if error <= self.min_error:
@@ -232,8 +235,7 @@ class StallRecovery:
             self._history.clear()
 
     def _moving(self) -> bool:
-        """Whether a watched pose task's reference moves (a target twist not 0): its error
-        then measures the lag behind a moving target, which need not shrink."""
+        """Whether a watched pose task's reference moves (a target twist not 0)."""
         return any(t.target_twist.any() for t in self._poses)
 
     def _watch_retreat(self, q: np.ndarray) -> None:

@@ -467,6 +467,14 @@ class Plan(Arena):
                 return True
         return False
 
+    def block_start(self, entry: object) -> int:
+        """Where the parameter block of ``entry``, a compiled entry of the stack, starts in
+        the arena's ``F_PAR`` (-1 if it is not one)."""
+        for e, rec in enumerate(self.records):
+            if rec.entry is entry and rec.packed is not None:
+                return int(self._table[e, lay.E_F0])
+        return -1
+
     # ------------------------------------------------------------------ each step
     def sync(self, state: RobotState | None, dt: float) -> None:
         """Write into the arena what Python owns (see the module docstring); sets

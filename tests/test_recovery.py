@@ -46,6 +46,18 @@ def worst_error(robot, q, goal) -> tuple[float, float]:
     return pos, ang
 
 
+def rising(robot, q, hands) -> dict:
+    """Per hand, a reference 50 cm straight up from its pose at ``q`` in 0.3 s, faster than
+    the arms allow."""
+    refs = {}
+    for hand in hands:
+        start = robot.frame_pose(q, hand.frame)
+        goal = start.copy()
+        goal[2, 3] += 0.5
+        refs[hand] = MinimumJerkTrajectory(start, goal, 0.3)
+    return refs
+
+
 def reach(robot, backend: str, goal, recovery: bool, duration: float = 3.0):
     hands = [FrameTask(robot, f, kp=20.0, ki=5.0) for f in HANDS]
     stack = paper_stack(robot, hands)
@@ -212,12 +224,7 @@ def test_a_reference_the_hands_lag_behind_is_not_a_stall(humanoid, backend):
     q0 = humanoid.home()
     hands = [FrameTask(humanoid, f) for f in HANDS]
     stack = paper_stack(humanoid, hands)
-    refs = {}
-    for hand in hands:
-        start = humanoid.frame_pose(q0, hand.frame)
-        goal = start.copy()
-        goal[2, 3] += 0.5
-        refs[hand] = MinimumJerkTrajectory(start, goal, 0.3)
+    refs = rising(humanoid, q0, hands)
     ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, references=refs)
     log = ctrl.run(q0, 2.0)
     lag = max(np.linalg.norm(log.frame_positions[h.name][25] - refs[h].sample(0.25).position)
@@ -294,12 +301,7 @@ def test_the_kernels_watch_reads_what_the_tasks_hold(humanoid, backend):
     q = humanoid.home()
     hands = [FrameTask(humanoid, f) for f in HANDS]
     stack = paper_stack(humanoid, hands)
-    refs = {}
-    for hand in hands:
-        start = humanoid.frame_pose(q, hand.frame)
-        goal = start.copy()
-        goal[2, 3] += 0.5
-        refs[hand] = MinimumJerkTrajectory(start, goal, 0.3)
+    refs = rising(humanoid, q, hands)
     ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, references=refs)
     seen = set()
     for _ in range(60):

@@ -58,11 +58,11 @@ class PhysicsLog:
     Attributes
     ----------
     torque_peak
-        (N, nv) peak |applied torque| over the period's physics steps (N m, N).
+        (N, nv) peak absolute applied torque over the period's physics steps (N m, N).
     saturated
         (N, nv) whether the joint was at its limit in the period.
     wheel_torque_peak
-        (N, wheels) peak |wheel torque| that gives the planar base's force (N m, ``B^T W``;
+        (N, wheels) peak absolute wheel torque that gives the planar base's force (N m, ``B^T W``;
         empty without wheels). The wheels' own joints only spin in the model.
     grasp_force
         ``(object, hand frame)`` -> (N, 3) force of that grasp on the object at the

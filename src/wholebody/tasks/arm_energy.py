@@ -18,7 +18,7 @@
 Two regularisations make the energy smooth everywhere (documented decisions):
 
 * ``|alpha|_s`` is the Huber-smoothed magnitude: ``alpha^2 / (2 delta) + delta / 2`` for
-  ``|alpha| < delta``, else ``|alpha|`` (``delta`` = ``smoothing``, rad). It equals |alpha|
+  ``|alpha| < delta``, else ``|alpha|`` (``delta`` = ``smoothing``, rad). It equals ``|alpha|``
   away from 0, so the spring is the paper's there, and its gradient does not jump where the
   elbow passes its lowest point.
 * ``w = rho^2 / (rho^2 + eps^2)`` with ``rho^2 = x^2 + y^2 = |d|^2 sin^2(theta_u)``, eps =
@@ -103,7 +103,7 @@ class ArmPotentialEnergy(Objective):
     stiffness
         Constant k (N m/rad) or a :class:`StiffnessModel`.
     smoothing
-        ``delta`` of the smoothed |alpha| (rad).
+        ``delta`` of the smoothed ``|alpha|`` (rad).
     fade
         ``eps`` of the spring's fade-out where alpha is undefined (m).
     reference
@@ -176,7 +176,7 @@ class ArmPotentialEnergy(Objective):
 
     @property
     def smoothing(self) -> float:
-        """``delta`` of the smoothed |alpha| (rad)."""
+        """``delta`` of the smoothed ``|alpha|`` (rad)."""
         return self._settings[0]
 
     @property

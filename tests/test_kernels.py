@@ -4,6 +4,10 @@ frame Jacobians."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -134,3 +138,33 @@ def test_the_cache_falls_back_to_the_user_directory_when_the_package_one_is_not_
     assert where.is_relative_to(user)
     monkeypatch.setattr(kernels, "_cache_bases", lambda py_file: [str(blocked / "sub")])
     assert kernels.cache_directory() is None  # nothing writable: compile in memory, no crash
+
+
+STALE = """
+import os, sys, numba, numpy as np
+from wholebody.kernels import watch
+cache = watch.pose_watch._cache
+index = cache._cache_file._index_path
+stale = index.replace("-" + cache._impl.locator.get_source_stamp()[:12], "")
+assert stale != index
+os.makedirs(os.path.dirname(stale), exist_ok=True)
+with open(stale, "wb") as f:  # numba's index layout: its version, then (stamp, overloads)
+    import pickle
+    pickle.dump(numba.__version__, f)
+    f.write(b"cwholebody.kernels.hqp_state\\nNoSuchType\\n.")  # a type since renamed
+out = watch.pose_watch(np.zeros(60), np.zeros(1, np.int64), np.zeros(1, np.int64),
+                       np.zeros(0, np.int64))
+print(out)
+"""
+
+
+def test_an_index_left_by_other_kernel_sources_is_never_opened(tmp_path):
+    """numba unpickles a cache index before comparing its stamp: an index written for other
+    sources that names a type since renamed raised AttributeError on the first call. The
+    stamp is part of the entry's name, so such a file is never read."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    done = subprocess.run(
+        [sys.executable, "-c", STALE], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "(False, False, 0.0)" in done.stdout

@@ -13,10 +13,10 @@ from wholebody.solvers.stack import LevelProblem, StackProblem
 from wholebody.tasks import (
     ArmPotentialEnergy,
     Bounds,
-    Constraint,
     FrameTask,
     JointLimitAvoidance,
     JointPositionLimits,
+    Limit,
     Manipulability,
     PostureTask,
     VelocityLimits,
@@ -365,7 +365,7 @@ def test_a_posture_level_takes_the_general_routes_step(rng, tight, diagonal):
                                        atol=1e-10 * np.abs(expected).max())  # fmt: skip
 
 
-class _Box(Constraint):
+class _Box(Limit):
     """A fixed velocity box (test helper)."""
 
     name = "box"

@@ -15,9 +15,9 @@ from wholebody.solvers.stack import LevelProblem, StackProblem
 from wholebody.tasks import (
     ArmPotentialEnergy,
     Bounds,
-    Constraint,
     FrameTask,
     JointPositionLimits,
+    Limit,
     PostureTask,
     TaskRows,
     VelocityLimits,
@@ -41,7 +41,7 @@ def holding(robot, state, frame, lift=0.0):
     return task
 
 
-class NaNBox(Constraint):
+class NaNBox(Limit):
     """A user constraint whose box has a NaN bound."""
 
     name = "nan_box"
@@ -180,7 +180,7 @@ def test_a_non_finite_task_leaves_the_other_tasks_residuals_alone(bad):
     assert not np.isfinite(residuals["bad"])
 
 
-class PinnedJoint(Constraint):
+class PinnedJoint(Limit):
     """A joint held at rest (a locked motor): its velocity bounds are both 0."""
 
     name = "pinned_joint"

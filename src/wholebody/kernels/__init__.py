@@ -101,7 +101,8 @@ class _KernelCacheLocator(caching._CacheLocator):
     """Where numba caches a kernel of this package (see the module docstring): the user's
     ``NUMBA_CACHE_DIR``, else the package's ``__pycache__``, else the user-wide cache; the
     freshness stamp is the digest of the kernel's module and of the kernel modules it
-    depends on."""
+    depends on, and is part of the entry's file name, so that an entry written for other
+    sources is never opened."""
 
     def __init__(self, py_func: Callable, py_file: str, path: str) -> None:
         self._lineno = py_func.__code__.co_firstlineno
@@ -116,7 +117,10 @@ class _KernelCacheLocator(caching._CacheLocator):
         return self._stamp
 
     def get_disambiguator(self) -> str:
-        return str(self._lineno)
+        # the stamp in the file name too: numba unpickles an index before it compares its
+        # stamp, and an index written by another version of the kernels may name a type
+        # that no longer exists (AttributeError instead of a recompile)
+        return f"{self._lineno}-{self._stamp[:12]}"
 
     @classmethod
     def from_function(cls, py_func: Callable, py_file: str) -> _KernelCacheLocator | None:

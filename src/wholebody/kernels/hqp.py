@@ -110,7 +110,7 @@ from wholebody.kernels.hqp_state import (
     W_Y,
     Arena,
     Basis,
-    Bounds,
+    Feasible,
     LevelRows,
     Multipliers,
     apply_basis,
@@ -359,7 +359,7 @@ def _take_candidate(
 
 
 @kernel
-def _meets(xc: np.ndarray, bounds: Bounds, rows: LevelRows, tol: float) -> bool:
+def _meets(xc: np.ndarray, bounds: Feasible, rows: LevelRows, tol: float) -> bool:
     """Whether the candidate ``xc`` meets the bounds (the relaxed box contains the exact one)
     and the level's inequality rows, within the tolerance."""
     met = inside(xc, bounds)
@@ -645,7 +645,7 @@ def _close_rows(w: Arena) -> None:
 
 @kernel
 def _close_rest(
-    s: Arena, w: Arena, par: np.ndarray, k: int, rows: LevelRows, x: np.ndarray, bounds: Bounds
+    s: Arena, w: Arena, par: np.ndarray, k: int, rows: LevelRows, x: np.ndarray, bounds: Feasible
 ) -> None:
     """Level k's inequality rows inherited by the levels below, their bounds widened to
     contain ``C x`` (a violated row held where it is) and relaxed by ``P_RELAX``; the relaxed

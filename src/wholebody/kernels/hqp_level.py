@@ -47,7 +47,7 @@ from wholebody.kernels.hqp_state import (
     W_SCAL,
     Arena,
     Basis,
-    Bounds,
+    Feasible,
     LevelRows,
     Multipliers,
     apply_basis,
@@ -82,7 +82,7 @@ _FLAT = 1e-12  # a QP row whose coefficients are at most this (relative) is left
 
 # ---------------------------------------------------------------------- optimality
 @kernel
-def _active_rows(x: np.ndarray, bounds: Bounds, act: float):
+def _active_rows(x: np.ndarray, bounds: Feasible, act: float):
     """The rows (x-space) of the bounds active at ``x`` (within ``act``), signed inwards:
     ``(N, signs)``."""
     n = x.shape[0]
@@ -120,7 +120,7 @@ def unknown_multipliers(n: int) -> Multipliers:
 
 @kernel
 def _active_multipliers(
-    rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Bounds, act: float, rank_tol: float
+    rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Feasible, act: float, rank_tol: float
 ) -> Multipliers:
     """At ``x``: the level's gradient against the bounds active at ``x`` (within ``act``),
     the multipliers by the least squares of the active rows (``has_mu`` False where none is
@@ -183,7 +183,7 @@ def _box_conditions(g: np.ndarray, y: np.ndarray, lb: np.ndarray, ub: np.ndarray
 
 @kernel
 def optimal(
-    rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Bounds, act: float, rank_tol: float
+    rows: LevelRows, x: np.ndarray, basis: Basis, bounds: Feasible, act: float, rank_tol: float
 ) -> tuple[bool, Multipliers]:
     """Whether ``x`` meets the optimality conditions of the least squares of a level without
     inequality rows over the bounds (relative tolerance 1e-4): the gradient a combination of
@@ -209,7 +209,7 @@ def strongly_active(
     rows: LevelRows,
     x: np.ndarray,
     basis: Basis,
-    bounds: Bounds,
+    bounds: Feasible,
     delta: float,
     par: np.ndarray,
     mult: Multipliers,
@@ -267,7 +267,7 @@ def _qp_rows(qp: QP, row: int, N, lo, hi, x: np.ndarray, basis: Basis, widen: bo
 
 
 @kernel
-def _qp_box(qp: QP, x: np.ndarray, basis: Basis, bounds: Bounds) -> int:
+def _qp_box(qp: QP, x: np.ndarray, basis: Basis, bounds: Feasible) -> int:
     """The relaxed box of the QP in ``y``: the QP's own box where Z is the identity, else
     rows ``Z`` (returns the rows used). A joint the free directions move only at rounding
     level (``|Z_q| <= _FLAT``) gets no row bounds: it cannot leave its bound through ``y``,
@@ -403,7 +403,7 @@ def polish(s: Arena, w: Arena, par: np.ndarray, y: np.ndarray, with_rows: bool) 
 
 
 @kernel
-def _face(xq: np.ndarray, basis: Basis, M: np.ndarray, bounds: Bounds, rank_tol: float):
+def _face(xq: np.ndarray, basis: Basis, M: np.ndarray, bounds: Feasible, rank_tol: float):
     """The least squares ``M`` restricted to the face of the bounds active at ``xq`` (within
     ``_ACT``): ``(MW, W, idx, only_box)``. Where only bounds of x are active and Z is the
     identity (``only_box``) the face keeps those entries: ``MW`` the columns ``idx`` of M
@@ -448,7 +448,7 @@ def _face(xq: np.ndarray, basis: Basis, M: np.ndarray, bounds: Bounds, rank_tol:
 
 
 @kernel
-def _polish_box(x, y, basis: Basis, M, c, bounds: Bounds, par: np.ndarray):
+def _polish_box(x, y, basis: Basis, M, c, bounds: Feasible, par: np.ndarray):
     """The polish of ``y`` for ``min ||M y - c||`` on the bounds: ``(y', changed)``. The
     least squares on the face of the bounds active at ``y``, kept if it fits better and
     stays inside; where only the box bounds the level and the result is not its optimum,

@@ -13,7 +13,7 @@ the evaluated stack (:mod:`wholebody.solvers.stack`). The kernels read it as a f
 * :data:`Arena`: a stack's or a workspace's arenas and header;
 * :data:`LevelRows`: a level's equality and inequality rows;
 * :data:`Basis`: the free directions the levels above leave;
-* :data:`Bounds`: the relaxed box and the inherited rows, which every level's answer meets;
+* :data:`Feasible`: the relaxed box and the inherited rows, which every level's answer meets;
 * :data:`Multipliers`: a level's gradient against the active bounds;
 * :data:`QP`: the QP a stage set up for the engine.
 
@@ -49,7 +49,7 @@ __all__ = [
     "QP",
     "Arena",
     "Basis",
-    "Bounds",
+    "Feasible",
     "LevelRows",
     "Multipliers",
     "apply_basis",
@@ -132,7 +132,7 @@ Basis = namedtuple("Basis", ["Z", "r", "identity"])
 """The free directions the levels above leave, ``x + Z y``: the r columns of ``Z`` (n x r,
 orthonormal), or where ``identity`` every direction (``Z`` is then not read, r = n)."""
 
-Bounds = namedtuple("Bounds", ["lo", "hi", "G", "glo", "ghi"])
+Feasible = namedtuple("Feasible", ["lo", "hi", "G", "glo", "ghi"])
 """What every level's answer meets: the relaxed box ``lo <= x <= hi`` and the inequality rows
 inherited from the levels above, ``glo <= G x <= ghi``."""
 
@@ -178,7 +178,7 @@ def slack(Cx: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 @kernel
-def inside(x: np.ndarray, bounds: Bounds) -> bool:
+def inside(x: np.ndarray, bounds: Feasible) -> bool:
     """Whether ``x`` meets the bounds: the relaxed box and the inherited rows."""
     if not in_box(x, bounds.lo, bounds.hi):
         return False
@@ -304,7 +304,7 @@ def state(w: Arena):
     G = fvec(w.f, w.h, W_INH)[: ni * n].reshape((ni, n))
     gb = fvec(w.f, w.h, W_INHB)
     basis = Basis(fvec(w.f, w.h, W_Z)[: n * r].reshape((n, r)), r, st[S_ZI] == 1)
-    return st, x, basis, Bounds(box_row(w, 0), box_row(w, 1), G, gb[:ni], gb[P : P + ni])
+    return st, x, basis, Feasible(box_row(w, 0), box_row(w, 1), G, gb[:ni], gb[P : P + ni])
 
 
 @kernel

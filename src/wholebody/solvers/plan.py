@@ -33,14 +33,14 @@ from wholebody.kernels.objectives import AE_WIDTH, ARM_PARTS
 from wholebody.robot import Frame, RobotState
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
-from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
+from wholebody.tasks.base import InequalityTask, Limit, Objective, ObjectiveValue, Task
 
 if TYPE_CHECKING:
     from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 
 __all__ = ["Arena", "BoundCall", "Plan", "ProblemArena", "is_compiled", "sqrt_weights"]
 
-Entry = Task | InequalityTask | Objective | Constraint
+Entry = Task | InequalityTask | Objective | Limit
 _WARM: dict[str, bool] = {}  # whether a kernel entry point ran in this process
 NO_REFERENCES = np.zeros((0, REF_WIDTH))
 _PARAMS = operator.attrgetter("_params")

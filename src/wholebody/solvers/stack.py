@@ -41,7 +41,7 @@ from wholebody.kernels.evaluate import evaluate
 from wholebody.robot import Robot, RobotState
 from wholebody.solvers.plan import LEVEL_SETTINGS, NO_REFERENCES, Plan, first_call
 from wholebody.solvers.result import SolverResult
-from wholebody.tasks.base import Constraint, InequalityTask, Objective, ObjectiveValue, Task
+from wholebody.tasks.base import InequalityTask, Limit, Objective, ObjectiveValue, Task
 
 __all__ = ["OBJECTIVES", "Level", "LevelProblem", "Stack", "StackProblem"]
 
@@ -253,7 +253,7 @@ class Stack:
         self,
         robot: Robot,
         levels: Iterable[Level | Sequence[Entry]],
-        constraints: Iterable[Constraint] = (),
+        constraints: Iterable[Limit] = (),
         metric: np.ndarray | Sequence[float] | None = None,
     ) -> None:
         self.robot = robot
@@ -322,8 +322,8 @@ class Stack:
                     f"got {level.objective_weight}"
                 )
         for c in self.constraints:
-            if not isinstance(c, Constraint):
-                raise WholebodyError(f"{c!r} is not a Constraint")
+            if not isinstance(c, Limit):
+                raise WholebodyError(f"{c!r} is not a Limit")
 
     def _relayout(self) -> None:
         self._check_entries()

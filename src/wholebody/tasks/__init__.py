@@ -6,7 +6,6 @@ from wholebody.tasks.arm_angle import ArmAngleSpring, HumanArmAngle, HumanArmAng
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
 from wholebody.tasks.base import (
     Bounds,
-    Constraint,
     InequalityRows,
     InequalityTask,
     Limit,
@@ -30,7 +29,6 @@ __all__ = [
     "ArmPotentialEnergy",
     "Bounds",
     "CollisionAvoidance",
-    "Constraint",
     "FrameHalfSpace",
     "FrameTask",
     "HumanArmAngle",

@@ -9,7 +9,7 @@ see :class:`wholebody.Robot`), for one control step of ``dt`` seconds:
 * an :class:`Objective` returns a cost ``f(q)`` and its gradient in actuated coordinates,
   ``g_k = d f / d t`` along ``u = e_k`` (:class:`ObjectiveValue`); a solver descends it;
 * a :class:`Limit` returns a box ``lower <= u <= upper`` (:class:`Bounds`) that every
-  level must respect (pink and mink call these limits; ``Constraint`` is the same class).
+  level must respect (what pink and mink call limits too).
 
 Tasks never call solvers and solvers know tasks only through these contracts.
 
@@ -42,7 +42,6 @@ from wholebody.robot import Frame, RobotState
 
 __all__ = [
     "Bounds",
-    "Constraint",
     "InequalityRows",
     "InequalityTask",
     "Limit",
@@ -312,7 +311,7 @@ class Objective(Compiled, ABC):
 
 class Limit(Compiled, ABC):
     """A hard box on the actuated velocity for one control step (what pink and mink call a
-    limit; ``Constraint`` is another name for it)."""
+    limit too)."""
 
     name: str
 
@@ -326,10 +325,6 @@ class Limit(Compiled, ABC):
 
     def reset(self) -> None:
         """Forget what :meth:`advance` kept (a new run starts at rest)."""
-
-
-Constraint = Limit
-"""Another name of :class:`Limit`."""
 
 
 def check_rows(name: str, J: np.ndarray, v: np.ndarray, shape: tuple[int, ...]) -> None:

@@ -8,12 +8,12 @@ from wholebody.errors import DimensionError
 from wholebody.kernels.layout import KIND_ACCELERATION, KIND_POSITION, KIND_VELOCITY
 from wholebody.kernels.limits import acceleration_box, position_box, velocity_box
 from wholebody.robot import Robot, RobotState
-from wholebody.tasks.base import Bounds, Constraint, Packed, Packer
+from wholebody.tasks.base import Bounds, Limit, Packed, Packer
 
 __all__ = ["AccelerationLimits", "JointPositionLimits", "VelocityLimits"]
 
 
-class JointPositionLimits(Constraint):
+class JointPositionLimits(Limit):
     """Joint position limits as velocity bounds for the next step.
 
     ``gain (q_min + margin - q) / dt <= u <= gain (q_max - margin - q) / dt`` for every joint
@@ -77,7 +77,7 @@ class JointPositionLimits(Constraint):
         return Packed(KIND_POSITION, self._params)
 
 
-class VelocityLimits(Constraint):
+class VelocityLimits(Limit):
     """``|u| <= scale * v_max`` (URDF velocity limits; base limits from robot.toml)."""
 
     def __init__(self, robot: Robot, *, scale: float = 1.0, name: str = "velocity_limits") -> None:
@@ -102,7 +102,7 @@ class VelocityLimits(Constraint):
         return Packed(KIND_VELOCITY, self._params)
 
 
-class AccelerationLimits(Constraint):
+class AccelerationLimits(Limit):
     """``|u - u_prev| <= scale * a_max * dt``: no step changes a velocity by more than the
     robot's acceleration limits allow (``a_max``: :attr:`Robot.acceleration_limits`, rad/s^2
     and m/s^2, from ``[acceleration]`` of robot.toml), so that the command never jumps.

@@ -37,10 +37,10 @@ def tasks():
 @pytest.mark.parametrize("backend", [wb.ProjectionSolver, wb.HierarchicalQPSolver])
 def test_the_readme_tasks_reach_their_goals_on_both_backends(humanoid, tasks, backend, rng):
     q = humanoid.home()
-    com = tasks["CoMTask"](humanoid, np.add(humanoid.update(q).com_position(), (0.03, 0, -0.02)))
+    com = tasks["CoMTask"](np.add(humanoid.update(q).com_position(), (0.03, 0, -0.02)))
     upright = tasks["UprightTask"](humanoid, "right_tool")
     for x in (q, humanoid.random_configuration(rng, margin=0.1)):  # exact Jacobians
-        assert_task_jacobian(com, humanoid, x, lambda s: s.com_position())
+        assert_task_jacobian(com, humanoid, x, com.compute_error)
         assert_task_jacobian(upright, humanoid, x, upright.error)
     stack = wb.Stack(humanoid, [[com, upright], [wb.PostureTask(humanoid)]],
                      [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)])  # fmt: skip
@@ -142,3 +142,46 @@ def test_a_controller_follows_a_reference_with_a_users_task_and_logs_any_objecti
                       references={wb.PostureTask(humanoid): None})  # fmt: skip
     with pytest.raises(WholebodyError, match="monitors are objectives"):
         wb.Controller(humanoid, stack, wb.ProjectionSolver(), dt=DT, monitors=[grip])
+
+
+class Short(wb.Task):
+    """The short way: an error and its Jacobian (the right hand's position, m)."""
+
+    dim = 3
+
+    def __init__(self, robot, target, gain=4.0, shape=None):
+        super().__init__("short", gain=gain)
+        self.frame, self.target, self.shape = robot.frame("right_tool"), target, shape
+
+    def compute_error(self, state):
+        return state.position(self.frame) - self.target
+
+    def compute_jacobian(self, state):
+        J = state.jacobian(self.frame)[:3]
+        return J if self.shape is None else np.zeros(self.shape)
+
+
+def test_the_short_way_asks_for_the_errors_decay_and_checks_its_shapes_once(humanoid):
+    q = humanoid.home()
+    state = humanoid.update(q)
+    target = np.add(state.position(humanoid.frame("right_tool")), (0.05, -0.02, 0.04))
+    task = Short(humanoid, target)
+    rows = task.compute(state)
+    e = task.compute_error(state)
+    np.testing.assert_array_equal(rows.v, -4.0 * e)  # de/dt = -gain e
+    np.testing.assert_array_equal(task.error(state), e)  # what the logs record
+    assert_task_jacobian(task, humanoid, q, task.compute_error)
+    state = humanoid.update(q)  # (the check moved the robot's state)
+    with pytest.raises(DimensionError, match=r"short: compute_jacobian returned shape \(3, 7\)"):
+        Short(humanoid, target, shape=(3, 7)).compute(state)
+    with pytest.raises(DimensionError, match="short: gain must be"):
+        Short(humanoid, target, gain=-1.0)
+    with pytest.raises(NotImplementedError, match="define compute_error"):
+        Bare.__bases__[0].compute(Bare(), state)  # wb.Task's own: neither way defined
+    solver = wb.HierarchicalQPSolver()
+    stack = wb.Stack(humanoid, [[task], [wb.PostureTask(humanoid)]], [wb.VelocityLimits(humanoid)])
+    for _ in range(300):  # 3 s: the error decays by exp(-4 t), ~6e-6 of 7 cm
+        state = humanoid.update(q)
+        result = solver.solve(stack, state, DT)
+        q = humanoid.integrate(q, result.u, DT)
+    assert np.linalg.norm(task.compute_error(humanoid.update(q))) < 1e-5

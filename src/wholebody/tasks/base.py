@@ -184,9 +184,15 @@ def check_weight(weight: object, name: str) -> float | np.ndarray:
 class Task(Compiled, ABC):
     """Equality rows ``J u = v`` at the velocity level.
 
-    Subclasses call ``super().__init__(name, weight)`` (both checked), say their number of
-    rows (:attr:`dim`) and compute their rows (:meth:`compute`); :meth:`error` is what the
-    feedback drives to zero, for logs.
+    The short way to write one (pink's): say the number of rows (:attr:`dim`), the error
+    ``e(q)`` the task drives to zero (:meth:`compute_error`) and its Jacobian ``J = de/du`` in
+    actuated coordinates (:meth:`compute_jacobian`, so that ``de/dt = J u``). The base class
+    then asks for the first-order decay ``de/dt = -gain e``: the rows ``J u = -gain e``
+    (:meth:`compute`), their shapes and values checked on the first call, with an error that
+    names the task and the method. For full control (a feed-forward term, an integral, rows
+    that are not an error's derivative) override :meth:`compute` instead.
+
+    Subclasses call ``super().__init__(name, weight, gain=...)`` (all checked).
 
     Attributes
     ----------
@@ -195,11 +201,27 @@ class Task(Compiled, ABC):
     weight
         Scalar or per-row weight inside its level (relative importance among the tasks of
         one level; priorities between levels are strict): finite, >= 0.
+    gain
+        The decay rate of the error with the short way (1/s): ``de/dt = -gain e``, the error
+        shrinking by a factor e every ``1 / gain`` s while the task is met. Not used by a
+        task that overrides :meth:`compute`.
     """
 
-    def __init__(self, name: str, weight: float | Sequence[float] | np.ndarray = 1.0) -> None:
+    def __init__(
+        self,
+        name: str,
+        weight: float | Sequence[float] | np.ndarray = 1.0,
+        *,
+        gain: float = 10.0,
+    ) -> None:
         self.name = check_name(name, type(self).__name__)
         self.weight = weight
+        if not (isinstance(gain, (int, float)) and math.isfinite(gain) and gain >= 0):
+            raise DimensionError(
+                f"{self.name}: gain must be a finite number >= 0 (1/s), got {gain!r}"
+            )
+        self.gain = float(gain)
+        self._checked = False
 
     @property
     def weight(self) -> float | np.ndarray:
@@ -226,9 +248,44 @@ class Task(Compiled, ABC):
     def dim(self) -> int:
         """Number of rows."""
 
-    @abstractmethod
+    def compute_error(self, state: RobotState) -> np.ndarray:
+        """The error ``e`` (dim,) at ``state`` that the task drives to zero (the short way)."""
+        raise NotImplementedError(
+            f"{type(self).__name__}: define compute_error and compute_jacobian, or compute"
+        )
+
+    def compute_jacobian(self, state: RobotState) -> np.ndarray:
+        """``J = de/du`` (dim x nu) at ``state``, in actuated coordinates (the short way)."""
+        raise NotImplementedError(
+            f"{type(self).__name__}: define compute_error and compute_jacobian, or compute"
+        )
+
     def compute(self, state: RobotState) -> TaskRows:
-        """The rows at ``state``."""
+        """The rows at ``state``: by default ``J u = -gain e`` from :meth:`compute_error` and
+        :meth:`compute_jacobian`."""
+        e = np.asarray(self.compute_error(state), dtype=float)
+        J = np.asarray(self.compute_jacobian(state), dtype=float)
+        if not self._checked:
+            self._check_short(state, e, J)
+        return TaskRows(J, -self.gain * e, self.weights)
+
+    def _check_short(self, state: RobotState, e: np.ndarray, J: np.ndarray) -> None:
+        """The first call's check of the short way's shapes and values."""
+        nu = state.robot.nu
+        if e.shape != (self.dim,):
+            raise DimensionError(
+                f"{self.name}: compute_error returned shape {e.shape}, expected ({self.dim},) (dim)"
+            )
+        if J.shape != (self.dim, nu):
+            raise DimensionError(
+                f"{self.name}: compute_jacobian returned shape {J.shape}, "
+                f"expected ({self.dim}, {nu}) (dim, nu)"
+            )
+        if not (np.isfinite(e).all() and np.isfinite(J).all()):
+            raise DimensionError(
+                f"{self.name}: compute_error or compute_jacobian is not finite at the first state"
+            )
+        self._checked = True
 
     def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
         """Write the rows at ``state`` into ``J`` (dim x nu) and ``v`` (dim,) and return their
@@ -246,8 +303,11 @@ class Task(Compiled, ABC):
         return ()
 
     def error(self, state: RobotState) -> np.ndarray:
-        """The task error at ``state`` (what the feedback drives to zero), for logging. A task
-        that does not define one logs NaN (not a zero that would read as "met")."""
+        """The task error at ``state`` (what the feedback drives to zero), for logging: the
+        short way's :meth:`compute_error`. A task that defines neither logs NaN (not a zero
+        that would read as "met")."""
+        if type(self).compute_error is not Task.compute_error:
+            return np.asarray(self.compute_error(state), dtype=float)
         return np.full(self.dim, np.nan)
 
     def advance(self, state: RobotState, dt: float, saturated: bool = False) -> None:

@@ -131,14 +131,16 @@ def test_every_shipped_file_is_at_the_current_format(path, fmt):
 
 
 def test_the_documentations_files_carry_the_key():
-    """Every whole-file TOML example of the READMEs and the readers' docstrings (its first
-    table ``[scenario]``, ``[campaign]`` or ``[robot]``) starts with the current key."""
+    """Every whole-file TOML example of the READMEs, the guides and the readers' docstrings
+    (its first table ``[scenario]``, ``[campaign]`` or ``[robot]``) starts with the current
+    key."""
     from wholebody.robot import config
     from wholebody.scenarios import spec
     from wholebody.sweep import campaign
 
     formats = {"scenario": SCENARIO, "campaign": CAMPAIGN, "robot": ROBOT}
-    texts = [(ROOT / "README.md").read_text(), (ROOT / "tasks" / "README.md").read_text()]
+    pages = [ROOT / "README.md", ROOT / "tasks" / "README.md", *(ROOT / "docs").rglob("*.md")]
+    texts = [page.read_text() for page in pages]
     blocks = [b for t in texts for b in re.findall(r"```toml\n(.*?)```", t, flags=re.S)]
     blocks += [m.__doc__.split("::", 1)[1] for m in (config, spec, campaign)]
     seen = set()

@@ -1,5 +1,5 @@
-"""The README's Python examples: each runs on its own (a fresh namespace, as a reader would
-paste it) and prints what it shows."""
+"""The Python examples of the README and the guides (``docs/``): each runs on its own (a
+fresh namespace, as a reader would paste it) and prints what it shows."""
 
 from __future__ import annotations
 
@@ -13,8 +13,14 @@ import pytest
 
 from wholebody.arm import arm_angle
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-BLOCKS = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+NAMED = [
+    (f"{page.relative_to(ROOT)} python block {k + 1}", code)
+    for page in PAGES
+    for k, code in enumerate(re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S))
+]
+BLOCKS = [code for _, code in NAMED]
 
 
 def run_block(code: str, name: str) -> tuple[dict, str]:
@@ -28,8 +34,9 @@ def run_block(code: str, name: str) -> tuple[dict, str]:
 @pytest.mark.parametrize("index", range(len(BLOCKS)))
 def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    _, printed = run_block(BLOCKS[index], f"README.md python block {index + 1}")
-    assert printed.strip(), f"block {index + 1} prints nothing"
+    name, code = NAMED[index]
+    _, printed = run_block(code, name)
+    assert printed.strip(), f"{name} prints nothing"
 
 
 @pytest.mark.slow
@@ -37,8 +44,8 @@ def test_the_examples_do_what_they_say(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
     found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False,
              "arm angle": False, "collision": False}  # fmt: skip
-    for i, code in enumerate(BLOCKS):
-        ns, _ = run_block(code, f"README.md python block {i + 1}")
+    for name, code in NAMED:
+        ns, _ = run_block(code, name)
         if "hand.set_target(goal)" in code:  # the quickstart reaches its goal
             q, goal, robot = ns["q"], ns["goal"], ns["robot"]
             assert np.linalg.norm(robot.frame_pose(q, "right_tool")[:3, 3] - goal[:3, 3]) < 1e-3

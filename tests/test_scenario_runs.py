@@ -5,7 +5,7 @@ phase to 1 mm per axis, hold the closed chain to 1 mm while carrying, never leav
 limit, and, against the plain pseudo-inverse on the same scenario, move the waist less and
 end with less arm energy. The plain pseudo-inverse must complete inside the limits; it is
 the baseline, and on the independent dual-arm turn it jams joints against their limits and
-loses the references (see README, "The paper's experiments"), which is the paper's point.
+loses the references (see docs/guides/experiments.md), which is the paper's point.
 """
 
 from __future__ import annotations

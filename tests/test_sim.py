@@ -1,13 +1,13 @@
 """Physics in the loop (wholebody.sim): the MuJoCo model against Pinocchio, the joint servos,
 the grasps, and every scenario under physics against its kinematic run.
 
-The documented tolerances (README, "Physics in the loop") are asserted here: under physics
+The documented tolerances (docs/guides/physics.md) are asserted here: under physics
 each hand is, at every step, within 5 mm of its reference or within the kinematic run's
 error at that step plus 5 mm (measured: at most 4.14 mm more), the closed chain within
 0.5 mm while carrying, and the hands within 5 mm of where the kinematic run put them plus
 30 ms of their motion. The reach under the shelf, whose hand is held off its goal by design
 and then released, is held to the last only, and with the projection backend not at all
-(its hand slides 12 cm along the board at the end: the README says why).
+(its hand slides 12 cm along the board at the end: the guide says why).
 """
 
 from __future__ import annotations

@@ -55,7 +55,21 @@ def _frame_kinds(robot) -> dict[str, list[str]]:
 def _wrapped(label: str, names: list[str]) -> str:
     """``label`` then the comma-separated ``names``, wrapped at 100 columns."""
     return textwrap.fill(", ".join(names), width=100, initial_indent=f"  {label}: ",
-                         subsequent_indent="    ")  # fmt: skip
+                         subsequent_indent="    ", break_on_hyphens=False,
+                         break_long_words=False)  # fmt: skip
+
+
+def info_argument(robot) -> str:
+    """What ``wholebody info`` takes to load ``robot`` again from any directory: a bundled
+    robot's name, else the absolute path of its robot directory (quoted for a shell)."""
+    import shlex
+
+    from wholebody.resources import robots_dir
+
+    path = Path(robot.config.path).resolve()
+    if path == (robots_dir() / robot.name / "robot.toml").resolve():
+        return robot.name
+    return shlex.quote(str(path.parent if path.name == "robot.toml" else path))
 
 
 def frames_text(robot, full: bool = False) -> str:
@@ -68,7 +82,7 @@ def frames_text(robot, full: bool = False) -> str:
     links = kinds["links"]
     shown = links if full or len(links) <= FRAMES_SHOWN else links[:FRAMES_SHOWN]
     more = len(links) - len(shown)
-    tail = [f"... {more} more (wholebody info {robot.name} --frames)"] if more else []
+    tail = [f"... {more} more (wholebody info {info_argument(robot)} --frames)"] if more else []
     lines.append(_wrapped(f"link frames ({len(links)})", shown + tail))
     if kinds["declared"]:
         lines.append(_wrapped(f"declared frames ({len(kinds['declared'])})", kinds["declared"]))
@@ -624,12 +638,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # the reader left (``wholebody info | head -1``)
+        return _reader_gone()
     except WholebodyError as exc:
         print(f"wholebody: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         print(f"wholebody: {_interrupted(exc)}", file=sys.stderr)
         return 130
+
+
+def _reader_gone() -> int:
+    """Standard output's reader has closed the pipe: what is left to print goes nowhere
+    (stdout is pointed at the null device, so the interpreter's last flush does not fail
+    again), and the exit status is a program's stopped by SIGPIPE, 128 + 13."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # no file descriptor (a test's capture)
+        pass
+    return 141
 
 
 def _interrupted(exc: KeyboardInterrupt) -> str:

@@ -652,12 +652,12 @@ def _reader_gone() -> int:
     """Standard output's reader has closed the pipe: what is left to print goes nowhere
     (stdout is pointed at the null device, so the interpreter's last flush does not fail
     again), and the exit status is a program's stopped by SIGPIPE, 128 + 13."""
+    import contextlib
     import os
 
-    try:
+    # without a file descriptor (a test's capture) there is no flush to fail
+    with contextlib.suppress(OSError, ValueError, AttributeError):
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    except (OSError, ValueError, AttributeError):  # no file descriptor (a test's capture)
-        pass
     return 141
 
 

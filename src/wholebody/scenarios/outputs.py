@@ -109,9 +109,9 @@ def _figure_jobs(run: ScenarioRun, out: Path) -> list[tuple[str, Callable[[], Pa
         jobs.append(("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png",
                                            title=title)))  # fmt: skip
     if run.physics is not None:
-        physics_title = f"{title} under physics (MuJoCo)"
-        jobs.append(("physics_figure", partial(plots.physics, log, run.physics,
-                                               out / "physics.png", title=physics_title)))  # fmt: skip
+        figure = partial(plots.physics, log, run.physics, out / "physics.png",
+                         title=f"{title} under physics (MuJoCo)")  # fmt: skip
+        jobs.append(("physics_figure", figure))
     return jobs
 
 

@@ -85,7 +85,9 @@ class Robot(Configurations):
         self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(self.urdf.root)
         """The URDF's root link (the moving base of a mobile robot)."""
-        self._init_actuation(build_actuation(config, self.model, self.urdf, base))
+        self._init_actuation(
+            build_actuation(config, self.model, self.urdf, base, self._built.locked)
+        )
         kept = {g: j for g, j in config.groups.items() if g not in self._built.locked_groups}
         self.groups: dict[str, JointGroup] = Named(
             "joint group", {g: self._group(g, joints) for g, joints in kept.items()}

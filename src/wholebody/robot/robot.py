@@ -36,6 +36,7 @@ from wholebody.robot.com import total_mass
 from wholebody.robot.compiled import RobotKinematics
 from wholebody.robot.config import ACCELERATION_DEFAULTS, RobotConfig
 from wholebody.robot.configurations import Configurations
+from wholebody.robot.overrides import urdf_text
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
 from wholebody.robot.sim import SimSettings
 from wholebody.robot.state import RobotState
@@ -74,9 +75,10 @@ class Robot(Configurations):
         self.config = config
         self.name = config.name
         base = base_model(config.base)
-        self.urdf: UrdfInfo = read_urdf(config.urdf)
+        text = urdf_text(config)  # the URDF with [joints] applied; None: the file as it is
+        self.urdf: UrdfInfo = read_urdf(config.urdf, text)
         """What the URDF says besides the kinematics (link masses, mimic joints)."""
-        self._built = build_model(config, self.urdf, base.mobile)
+        self._built = build_model(config, self.urdf, base.mobile, text)
         self.model: pin.Model = self._built.model
         self.locked: Mapping[str, float] = dict(self._built.locked)
         """The joints ``[locked]`` removed from the model, and their positions (rad, m)."""

@@ -146,11 +146,12 @@ def _missing_file(package: Path, parts: Sequence[str]) -> str:
     return f"{'/'.join(parts)} is not there"
 
 
-def read_urdf(path: Path) -> UrdfInfo:
+def read_urdf(path: Path, text: str | None = None) -> UrdfInfo:
     """Links, root, joint types and moving mimic joints of a URDF, its numbers checked
-    (:class:`ModelError` naming the file and element)."""
+    (:class:`ModelError` naming the file and element); ``text``: the file's content as
+    ``robot.toml`` changed it (:mod:`wholebody.robot.overrides`), read instead of it."""
     try:
-        root = ET.parse(path).getroot()
+        root = ET.fromstring(text) if text is not None else ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ModelError(f"{path}: not well-formed XML: {exc}") from exc
     if root.tag != "robot":

@@ -100,6 +100,12 @@ def _info(args: argparse.Namespace) -> int:
         for name, text, available in robot_catalogue():
             print(f"{name:<18} {text if available else 'unavailable: ' + text}")
         return 0
+    if args.suggest_frames:
+        from wholebody.robot import read_robot_config, robot_toml
+        from wholebody.robot.centres import centres_text
+
+        print(centres_text(read_robot_config(robot_toml(args.robot))), end="")
+        return 0
     robot = load_robot(args.robot)
     print(robot.summary())
     print(frames_text(robot, full=args.frames))
@@ -612,6 +618,10 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     info.add_argument(
         "--frames", action="store_true", help="list every frame a task can name (and joints)"
     )
+    info.add_argument("--suggest-frames", action="store_true",
+                      help="for arms whose shoulder, elbow or wrist frames are not joint "
+                      "centres: [frames] entries placing them there, to paste into "
+                      "robot.toml")  # fmt: skip
     info.set_defaults(func=_info)
     _add_scenario_commands(sub)
     _add_sweep_command(sub)

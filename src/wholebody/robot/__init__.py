@@ -8,11 +8,13 @@
 * :mod:`~wholebody.robot.com` -- the whole-body centre of mass and its Jacobian.
 * :mod:`~wholebody.robot.parts` -- :class:`Frame`, :class:`Body`, :class:`JointGroup`,
   :class:`ArmChain`.
-* :mod:`~wholebody.robot.arms` -- arm chains from ``[arms]``, their geometry checked.
+* :mod:`~wholebody.robot.arms` -- arm chains from ``[arms]``, their geometry checked;
+  :mod:`~wholebody.robot.centres` -- joint centres for arm frames that are not.
 * :mod:`~wholebody.robot.base`, :mod:`~wholebody.robot.wheels` -- mobile bases and their
   wheels.
 * :mod:`~wholebody.robot.config`, :mod:`~wholebody.robot.urdf`,
-  :mod:`~wholebody.robot.building` -- ``robot.toml``, the URDF and the model built from them.
+  :mod:`~wholebody.robot.building` -- ``robot.toml``, the URDF and the model built from them;
+  :mod:`~wholebody.robot.overrides` -- ``[joints]``, the URDF's joint data overridden.
 * :mod:`~wholebody.robot.compiled`, :mod:`~wholebody.robot.hessian` -- what the compiled core
   reads; kinematic Hessians.
 """

@@ -27,7 +27,8 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
                                  # the root (a pelvis, a base's centre) is placed there for
                                  # kinematics, collision, drawing and physics (default 0)
     wheels = [...]               # mecanum: 4 joints FL, FR, RL, RR; differential: left, right
-    wheel_radius = 0.08          # m, mecanum and differential
+    wheel_radius = 0.08          # m, mecanum and differential (checked to 1 % against the
+                                 # wheels' cylinder, sphere or mesh in the URDF)
     wheel_base = 0.50            # m, front-rear axle distance, mecanum
     track = 0.44                 # m, left-right wheel distance, mecanum and differential
     max_linear_velocity = 1.0    # m/s, planar (default 1.0)
@@ -39,7 +40,9 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     [arms.<name>]                # optional, any number
     side = "left" | "right"      # mirrors the arm angle (a single arm: either)
     group = "<group name>"       # optional
-    shoulder = elbow = wrist = tool = "<frame>"
+    shoulder = elbow = wrist = tool = "<frame>"   # the first three at joint centres
+                                 # (checked; `wholebody info DIR --suggest-frames` prints
+                                 # [frames] entries placing them there)
     upper_arm = forearm = "<link>"   # or a list of links: a segment whose mass is split
                                      # over several links (the arm energy adds them all)
 

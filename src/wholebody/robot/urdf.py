@@ -109,8 +109,10 @@ def package_search_path(dirs: Sequence[Path]) -> list[Path]:
 
 def resolve_package(uri: str, dirs: Sequence[Path]) -> Path:
     """The file a ``package://PKG/rest`` path names (searched in :func:`package_search_path`),
-    a plain path unchanged; :class:`FileNotFoundError` naming what was searched, with the
-    install command when the package is ``example-robot-data``."""
+    a plain path unchanged. :class:`FileNotFoundError`: for a package found without the
+    file, the part of the path that is missing and the nearest names there (a typo); for a
+    package not found, what was searched, the nearest package names and, for
+    ``example-robot-data``, the install command."""
     if not uri.startswith(PACKAGE):
         return Path(uri)
     rest = uri[len(PACKAGE) :]

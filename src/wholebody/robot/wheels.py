@@ -27,9 +27,10 @@ __all__ = ["WHEEL_PLACEMENT_TOLERANCE", "WHEEL_RADIUS_TOLERANCE", "check_base_ge
 
 WHEEL_PLACEMENT_TOLERANCE = 1e-3  # m, between robot.toml's base geometry and the URDF
 WHEEL_RADIUS_TOLERANCE = 0.01
-"""Relative difference allowed between ``[base] wheel_radius`` and a wheel's geometry: the
-base's speed is off by as much (1 %: 1 cm per metre driven, no more than the difference
-between a tyre's nominal and loaded rolling radius, so an honest rolling radius passes)."""
+"""Relative difference allowed between ``[base] wheel_radius`` and a wheel's geometry. The
+base's speed and odometry are off by as much: 1 % is 1 cm per metre driven, about what a
+hard (polyurethane, rubber-coated) robot wheel's rolling radius differs from its nominal one
+under load; a typo or a wrong wheel (5 mm on an 8 cm wheel is 6 %) is well beyond it."""
 
 
 def wheel_geometry(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int],

@@ -106,20 +106,25 @@ def suggest_centres(robot: Robot, cfg: ArmConfig) -> tuple[CentreSuggestion, ...
 
 
 def _arm_joints(robot: Robot, cfg: ArmConfig) -> list[int]:
-    """The joints that move the arm's tool from the arm's first one (its group's first, else
-    the first below the root), root side first."""
+    """The joints that move the arm's tool from the arm's first one, root side first: its
+    group's first joint, else the first below the shoulder frame (a torso's joints are no
+    shoulder's)."""
     model = robot.model
     chain = [j for j in model.supports[robot.frame(cfg.tool).joint] if model.joints[j].nv == 1]
-    if cfg.group is not None:
-        ids = {model.getJointId(n) for n in robot.config.groups[cfg.group]
-               if model.existJointName(n)}  # fmt: skip
-        first = next((i for i, j in enumerate(chain) if j in ids), 0)
-        chain = chain[first:]
-    return chain
+    if cfg.group is None:
+        above = set(model.supports[robot.frame(cfg.shoulder).joint])
+        return [j for j in chain if j not in above]
+    ids = {model.getJointId(n) for n in robot.config.groups[cfg.group] if model.existJointName(n)}
+    first = next((i for i, j in enumerate(chain) if j in ids), 0)
+    return chain[first:]
+
+
+_Choice = tuple[tuple[int, int, int], list[np.ndarray], tuple[list[_Axis], ...]]
+"""Link positions of shoulder, elbow and wrist, their points (world, m) and axis sets."""
 
 
 def _candidates(robot: Robot, cfg: ArmConfig, links: list[int], axes: list[_Axis | None],
-                origins: list[np.ndarray]):  # fmt: skip
+                origins: list[np.ndarray]) -> list[_Choice]:  # fmt: skip
     """The possible choices (module docstring) as ``(link positions, points, axis sets)``,
     best first."""
     found = []

@@ -261,7 +261,8 @@ class Robot(Configurations):
         lines = [
             f"robot {self.name}: {self.config.description}".rstrip(": "),
             f"  files: {self.config.path} ({self.config.urdf})",
-            f"  base: {self.base.type}; nq = {self.nq}, nv = {self.nv}, nu = {self.nu} "
+            f"  base: {self.base.type}{_height(self.config.base.height)}; nq = {self.nq}, "
+            f"nv = {self.nv}, nu = {self.nu} "
             f"actuated velocities; mass {self.mass:g} kg",
         ]
         if self.locked:
@@ -284,6 +285,11 @@ class Robot(Configurations):
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, nu={self.nu}, base={self.base.type!r})"
+
+
+def _height(height: float) -> str:
+    """``[base] height`` in the summary: nothing at the default 0."""
+    return f", root link {height:g} m above the floor" if height else ""
 
 
 def _abridged(names: list[str], most: int = 6) -> str:

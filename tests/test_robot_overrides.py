@@ -43,7 +43,8 @@ def test_a_wheel_declared_revolute_without_limits_is_made_continuous(tmp_path):
     d = copy_robot(tmp_path)
     revolute_wheels(d)
     urdf = (d / "robot.urdf").read_text()
-    with pytest.raises(ModelError, match=r"'wheel_front_left' cannot move.*\[joints\]"):
+    hint = r"'wheel_front_left' cannot move.*\[joints.wheel_front_left\].*\"continuous\""
+    with pytest.raises(ModelError, match=hint):  # the message says how to fix it
         wholebody.load_robot(d)
     append(d / "robot.toml", '[joints."wheel_*"]\ntype = "continuous"\n')
     robot, shipped = wholebody.load_robot(d), wholebody.load_robot("mobile_humanoid")

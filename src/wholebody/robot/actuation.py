@@ -223,6 +223,7 @@ def _check_movable(config: RobotConfig, names: Sequence[str], lower: np.ndarray,
         raise ModelError(
             f"{config.urdf}: joint {name!r} cannot move: its limits are "
             f"[{lower[k]:g}, {upper[k]:g}] (a URDF <limit> without lower and upper means "
-            "0 and 0); give it its range in [joints] of robot.toml, lock it, or make it a "
-            "fixed joint"
+            f"0 and 0); in robot.toml, give it its range ([joints.{name}] lower = ..., "
+            f'upper = ...) or, if it turns endlessly like a wheel, type = "continuous"; '
+            "or lock it ([locked]: a fixed joint)"
         )

@@ -223,6 +223,8 @@ def _meshes(path: Path, root: ET.Element,
 
 
 def _mesh_ref(path: Path, link: str, element: ET.Element) -> MeshRef:
+    """The ``<mesh>`` of a ``<collision>`` or ``<visual>`` element, its numbers checked (as
+    urdfdom checks them: three each)."""
     mesh, origin = element.find("geometry/mesh"), element.find("origin")
     assert mesh is not None
     where = f"link {link!r} <mesh"

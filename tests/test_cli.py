@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 
@@ -12,6 +13,7 @@ import pytest
 
 from wholebody.cli import main
 from wholebody.control import RunLog
+from wholebody.resources import robots_dir
 
 SMALL = """
 format = 2
@@ -64,12 +66,42 @@ def test_info_abridges_a_long_frame_list(monkeypatch):
     links = [f"link_{i}" for i in range(cli.FRAMES_SHOWN + 7)]
     kinds = {"links": links, "declared": ["shoulder_centre"], "joints": ["j1"]}
     monkeypatch.setattr(cli, "_frame_kinds", lambda robot: kinds)
-    robot = SimpleNamespace(name="big", arms={})
+    from wholebody.resources import robots_dir
+
+    config = SimpleNamespace(path=robots_dir() / "big" / "robot.toml")  # bundled: its name
+    robot = SimpleNamespace(name="big", arms={}, config=config)
     text, full = cli.frames_text(robot), cli.frames_text(robot, full=True)
     assert "... 7 more (wholebody info big --frames)" in " ".join(text.split())
     assert f"link_{cli.FRAMES_SHOWN} " not in text.replace(",", " ")
     assert "declared frames (1): shoulder_centre" in text
     assert f"link_{cli.FRAMES_SHOWN + 6}" in full and "joint frames (1): j1" in full
+
+
+def test_the_frames_hint_names_the_directory_a_robot_was_loaded_from(tmp_path, monkeypatch,
+                                                                   capsys):  # fmt: skip
+    """A robot loaded from a directory of its own is pointed at by that directory's absolute
+    path in the --frames hint: the hinted command loads it from any directory."""
+    (tmp_path / "mine").mkdir()
+    shutil.copy(robots_dir() / "tiago_dual" / "robot.toml", tmp_path / "mine" / "robot.toml")
+    monkeypatch.chdir(tmp_path)
+    assert main(["info", "mine"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    hint = out.split("more (wholebody info ")[1].split(" --frames)")[0]
+    assert hint == str((tmp_path / "mine").resolve())
+    monkeypatch.chdir(tmp_path.parent)
+    assert main(["info", hint, "--frames"]) == 0
+    assert "joint frames" in capsys.readouterr().out
+
+
+def test_a_reader_that_leaves_early_ends_info_without_a_traceback():
+    """``wholebody info ... | head -1``: the reader closes the pipe before the output is
+    written; the command ends quietly with the status of a program stopped by SIGPIPE."""
+    proc = subprocess.Popen([sys.executable, "-m", "wholebody", "info", "dual_arm_torso"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc.stdout.close()  # before the child has imported anything, so it writes after
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141, err
+    assert "Traceback" not in err and "BrokenPipe" not in err
 
 
 HEAVY = ("numba", "matplotlib", "scipy", "torch", "meshcat", "tqdm", "wholebody.scenarios",

@@ -187,3 +187,19 @@ def test_figures_use_no_layout_engine(tmp_path, monkeypatch):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     for fig in (plots.hand_paths_figure(log), plots.arm_energy_figure(log)):
         assert fig.get_layout_engine() is None
+
+
+def test_a_run_of_a_robot_without_arms_writes_its_figures_but_no_arm_energy(tmp_path):
+    """A robot.toml without [arms] is valid: its run's figures are written, the arm-energy
+    figure left out (it has nothing to draw), and nothing raises."""
+    from types import SimpleNamespace
+
+    from wholebody.scenarios.outputs import write_figures
+
+    log = synthetic_log(DRIVE)
+    log.arms.clear()
+    spec = SimpleNamespace(title="", name="no_arms", objects={})
+    run = SimpleNamespace(spec=spec, log=log, backend="pinv", object_poses={}, physics=None)
+    files = write_figures(run, tmp_path)  # type: ignore[arg-type]
+    assert set(files) == {"hands", "joint_velocities"}
+    assert all(p.read_bytes()[:4] == b"\x89PNG" for p in files.values())

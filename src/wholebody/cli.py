@@ -55,7 +55,21 @@ def _frame_kinds(robot) -> dict[str, list[str]]:
 def _wrapped(label: str, names: list[str]) -> str:
     """``label`` then the comma-separated ``names``, wrapped at 100 columns."""
     return textwrap.fill(", ".join(names), width=100, initial_indent=f"  {label}: ",
-                         subsequent_indent="    ")  # fmt: skip
+                         subsequent_indent="    ", break_on_hyphens=False,
+                         break_long_words=False)  # fmt: skip
+
+
+def info_argument(robot) -> str:
+    """What ``wholebody info`` takes to load ``robot`` again from any directory: a bundled
+    robot's name, else the absolute path of its robot directory (quoted for a shell)."""
+    import shlex
+
+    from wholebody.resources import robots_dir
+
+    path = Path(robot.config.path).resolve()
+    if path == (robots_dir() / robot.name / "robot.toml").resolve():
+        return robot.name
+    return shlex.quote(str(path.parent if path.name == "robot.toml" else path))
 
 
 def frames_text(robot, full: bool = False) -> str:
@@ -68,7 +82,7 @@ def frames_text(robot, full: bool = False) -> str:
     links = kinds["links"]
     shown = links if full or len(links) <= FRAMES_SHOWN else links[:FRAMES_SHOWN]
     more = len(links) - len(shown)
-    tail = [f"... {more} more (wholebody info {robot.name} --frames)"] if more else []
+    tail = [f"... {more} more (wholebody info {info_argument(robot)} --frames)"] if more else []
     lines.append(_wrapped(f"link frames ({len(links)})", shown + tail))
     if kinds["declared"]:
         lines.append(_wrapped(f"declared frames ({len(kinds['declared'])})", kinds["declared"]))
@@ -85,6 +99,12 @@ def _info(args: argparse.Namespace) -> int:
     if args.list:
         for name, text, available in robot_catalogue():
             print(f"{name:<18} {text if available else 'unavailable: ' + text}")
+        return 0
+    if args.suggest_frames:
+        from wholebody.robot import read_robot_config, robot_toml
+        from wholebody.robot.centres import centres_text
+
+        print(centres_text(read_robot_config(robot_toml(args.robot))), end="")
         return 0
     robot = load_robot(args.robot)
     print(robot.summary())
@@ -598,6 +618,10 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     info.add_argument(
         "--frames", action="store_true", help="list every frame a task can name (and joints)"
     )
+    info.add_argument("--suggest-frames", action="store_true",
+                      help="for arms whose shoulder, elbow or wrist frames are not joint "
+                      "centres: [frames] entries placing them there, to paste into "
+                      "robot.toml")  # fmt: skip
     info.set_defaults(func=_info)
     _add_scenario_commands(sub)
     _add_sweep_command(sub)
@@ -624,12 +648,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # the reader left (``wholebody info | head -1``)
+        return _reader_gone()
     except WholebodyError as exc:
         print(f"wholebody: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         print(f"wholebody: {_interrupted(exc)}", file=sys.stderr)
         return 130
+
+
+def _reader_gone() -> int:
+    """Standard output's reader has closed the pipe: what is left to print goes nowhere
+    (stdout is pointed at the null device, so the interpreter's last flush does not fail
+    again), and the exit status is a program's stopped by SIGPIPE, 128 + 13."""
+    import contextlib
+    import os
+
+    # without a file descriptor (a test's capture) there is no flush to fail
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 141
 
 
 def _interrupted(exc: KeyboardInterrupt) -> str:

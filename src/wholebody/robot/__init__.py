@@ -8,11 +8,13 @@
 * :mod:`~wholebody.robot.com` -- the whole-body centre of mass and its Jacobian.
 * :mod:`~wholebody.robot.parts` -- :class:`Frame`, :class:`Body`, :class:`JointGroup`,
   :class:`ArmChain`.
-* :mod:`~wholebody.robot.arms` -- arm chains from ``[arms]``, their geometry checked.
+* :mod:`~wholebody.robot.arms` -- arm chains from ``[arms]``, their geometry checked;
+  :mod:`~wholebody.robot.centres` -- joint centres for arm frames that are not.
 * :mod:`~wholebody.robot.base`, :mod:`~wholebody.robot.wheels` -- mobile bases and their
   wheels.
 * :mod:`~wholebody.robot.config`, :mod:`~wholebody.robot.urdf`,
-  :mod:`~wholebody.robot.building` -- ``robot.toml``, the URDF and the model built from them.
+  :mod:`~wholebody.robot.building` -- ``robot.toml``, the URDF and the model built from them;
+  :mod:`~wholebody.robot.overrides` -- ``[joints]``, the URDF's joint data overridden.
 * :mod:`~wholebody.robot.compiled`, :mod:`~wholebody.robot.hessian` -- what the compiled core
   reads; kinematic Hessians.
 """
@@ -44,6 +46,7 @@ __all__ = [
     "load_robot",
     "read_robot_config",
     "robot_catalogue",
+    "robot_toml",
 ]
 
 
@@ -82,21 +85,27 @@ def load_robot(name_or_path: str | Path) -> Robot:
     ModelError
         A URDF that cannot be loaded.
     """
+    return Robot(read_robot_config(robot_toml(name_or_path)))
+
+
+def robot_toml(name_or_path: str | Path) -> Path:
+    """The ``robot.toml`` that :func:`load_robot` reads for ``name_or_path`` (a
+    :class:`ConfigError` as it raises)."""
     if not isinstance(name_or_path, (str, Path)) or not str(name_or_path):
         raise ConfigError(f"load_robot: expected a bundled robot name "
                           f"({', '.join(available_robots()) or 'none installed'}), a robot "
                           f"directory or a robot.toml path, got {name_or_path!r}")  # fmt: skip
     path = Path(name_or_path)
     if path.suffix == ".toml":
-        return Robot(read_robot_config(path))
+        return path
     toml = path / "robot.toml"
     if toml.is_file():
-        return Robot(read_robot_config(toml))
+        return toml
     bundled = robots_dir() / path.name / "robot.toml"
     if len(path.parts) == 1 and bundled.is_file():  # a name, as a str or a one-part Path
         # (a directory of that name without a robot.toml, e.g. a scenario's output, does not
         # hide the bundled robot)
-        return Robot(read_robot_config(bundled))
+        return bundled
     if path.is_dir():
         raise ConfigError(f"{path}: robot directory has no robot.toml")
     raise ConfigError(

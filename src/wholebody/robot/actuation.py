@@ -79,12 +79,13 @@ class Actuation:
     base: BaseModel
 
 
-def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo,
-                    base: BaseModel) -> Actuation:  # fmt: skip
+def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo, base: BaseModel,
+                    locked: Mapping[str, float] | None = None) -> Actuation:  # fmt: skip
     """The actuated velocity space of ``model`` (loaded from ``config``'s URDF) with ``base``
     at its root: :class:`ModelError` for a joint wholebody cannot actuate (more than one
-    DOF, or a range of zero), a ``config`` error for a wheel that is not a joint."""
-    joint_ids = _joint_ids(config, model, base)
+    DOF, or a range of zero), a ``config`` error for a wheel that is not a joint (or that
+    ``locked``, the joints ``[locked]`` removed, holds)."""
+    joint_ids = _joint_ids(config, model, base, locked or {})
     if base.wheel_joints:
         base = wheel_geometry(model, base, joint_ids, config)
     # a mimic joint (not locked) is no velocity of u: its leader's moves it (below)
@@ -117,10 +118,12 @@ def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo,
         else:
             lower[k] = model.lowerPositionLimit[iq]
             upper[k] = model.upperPositionLimit[iq]
+    own = lower.copy(), upper.copy()
     mimic = _couple_mimics(config, model, joint_ids, followers, names, A, lower, upper, vmax)
     lower[~np.isfinite(lower) | (lower < -1e300)] = -np.inf
     upper[~np.isfinite(upper) | (upper > 1e300)] = np.inf
-    _check_movable(config, names, lower, upper, kinds)
+    _check_movable(config, names, lower, upper, kinds, own, _mimic_ranges(model, joint_ids,
+                                                                          followers))  # fmt: skip
     vmax[vmax <= 0] = np.inf  # URDF velocity 0 means "not given"
     for arr in (A, lower, upper, vmax, kinds, qidx):
         arr.setflags(write=False)
@@ -128,9 +131,10 @@ def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo,
                      mimic, base)  # fmt: skip
 
 
-def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel) -> dict[str, int]:
+def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel,
+               locked: Mapping[str, float]) -> dict[str, int]:  # fmt: skip
     """The model's joints below the root by name, each checked to have one DOF, and the
-    wheels checked to be among them."""
+    wheels checked to be among them (not ``locked``)."""
     first = 2 if base.mobile else 1  # joint 0 = universe, 1 = planar root if mobile
     joint_ids = {model.names[j]: j for j in range(first, model.njoints)}
     for name, j in joint_ids.items():
@@ -141,6 +145,13 @@ def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel) -> dict[s
                 "below the root"
             )
     for w in base.wheel_joints:
+        if w in locked:
+            raise config.error(
+                "base.wheels",
+                f"wheel joint {w!r} is locked ([locked] holds it "
+                f"at {locked[w]:g}): a wheel of the base must turn; take it out "
+                "of [locked] (or out of the pattern or group that matches it)",
+            )
         if w not in joint_ids:
             raise config.error(
                 "base.wheels",
@@ -175,12 +186,44 @@ def _couple_mimics(config: RobotConfig, model: pin.Model, joint_ids: Mapping[str
     return out
 
 
+def _mimic_ranges(model: pin.Model, joint_ids: Mapping[str, int],
+                  followers: Mapping[str, Mimic]) -> dict[str, list[str]]:  # fmt: skip
+    """Per leader, each mimic joint's own limits and what they allow the leader, in words:
+    ``"'f' (q_f = -1 q_l + 0; limits [0, 0.548] in the URDF, so [-0.548, 0] for 'l')"``."""
+    out: dict[str, list[str]] = {}
+    for name, m in followers.items():
+        jf = model.joints[joint_ids[name]]
+        lo, hi = model.lowerPositionLimit[jf.idx_q], model.upperPositionLimit[jf.idx_q]
+        if jf.nq != 1 or not (abs(lo) < 1e300 and abs(hi) < 1e300):
+            continue
+        a, b = sorted(((lo - m.offset) / m.multiplier, (hi - m.offset) / m.multiplier))
+        out.setdefault(m.leader, []).append(
+            f"{name!r} (q = {m.multiplier:g} q_{m.leader} + {m.offset:g}; limits [{lo:g}, "
+            f"{hi:g}], so [{a + 0.0:g}, {b + 0.0:g}] for {m.leader!r})"  # -0 printed as 0
+        )
+    return out
+
+
 def _check_movable(config: RobotConfig, names: Sequence[str], lower: np.ndarray,
-                   upper: np.ndarray, kinds: np.ndarray) -> None:  # fmt: skip
-    """A :class:`ModelError` for a scalar joint whose range is empty or a point."""
+                   upper: np.ndarray, kinds: np.ndarray, own: tuple[np.ndarray, np.ndarray],
+                   mimics: Mapping[str, list[str]]) -> None:  # fmt: skip
+    """A :class:`ModelError` for a scalar joint whose range is empty or a point: its own
+    (``own``: the URDF's), or once its mimic joints narrowed it (``mimics``: their ranges
+    in words, by leader)."""
     for k in np.flatnonzero(~(lower < upper) & (kinds == SCALAR)).tolist():
+        name, lo, hi = names[k], own[0][k], own[1][k]
+        if lo < hi and name in mimics:
+            raise ModelError(
+                f"{config.urdf}: joint {name!r} cannot move: its limits [{lo:g}, {hi:g}] and "
+                f"those of its mimic joints {'; '.join(mimics[name])} leave "
+                f"[{lower[k] + 0.0:g}, {upper[k] + 0.0:g}]; lock {name!r} in [locked] of "
+                "robot.toml (its mimic joints are locked with it), or give the mimic joint "
+                "the limits it has in [joints]"
+            )
         raise ModelError(
-            f"{config.urdf}: joint {names[k]!r} cannot move: its limits are "
+            f"{config.urdf}: joint {name!r} cannot move: its limits are "
             f"[{lower[k]:g}, {upper[k]:g}] (a URDF <limit> without lower and upper means "
-            "0 and 0); give it its range, or make it a fixed joint"
+            f"0 and 0); in robot.toml, give it its range ([joints.{name}] lower = ..., "
+            f'upper = ...) or, if it turns endlessly like a wheel, type = "continuous"; '
+            "or lock it ([locked]: a fixed joint)"
         )

@@ -7,17 +7,21 @@ elbow, wrist -- with a tool below them, the upper arm between shoulder and elbow
 forearm between elbow and wrist. :func:`arm_chain` checks exactly that: the frames lie one
 below the other on one kinematic chain, the segments' links between them, the arm's joint
 group on the chain, and the shoulder-elbow and elbow-wrist distances the same at every
-posture (so that the three frames are joint centres, not points on the links).
+posture (so that the three frames are joint centres, not points on the links); where they
+are not, the error says which frame is off and where a joint centre is
+(:mod:`~wholebody.robot.centres`).
 """
 
 from __future__ import annotations
 
+import shlex
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from wholebody.errors import FrameError
 from wholebody.robot._names import suggest
+from wholebody.robot.centres import suggest_centres
 from wholebody.robot.config import ArmConfig
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
 
@@ -166,6 +170,24 @@ def _arm_lengths(robot: Robot, cfg: ArmConfig, frames: dict[str, Frame]) -> tupl
                 f"{where}.{b}",
                 f"the {a}-{b} distance changes with the posture ({d[:, k].min():.4f} to "
                 f"{d[:, k].max():.4f} m): the shoulder, elbow and wrist frames must be joint "
-                "centres (on the axes of the joints between them)",
+                "centres (on the axes of the joints between them)" + _centres_hint(robot, cfg),
             )
     return float(d[0, 0]), float(d[0, 1])
+
+
+def _centres_hint(robot: Robot, cfg: ArmConfig) -> str:
+    """Which of the arm's frames are off its joint centres, by how much, and where the
+    centres are (:func:`~wholebody.robot.centres.suggest_centres`); the command that prints
+    them as ``[frames]`` entries."""
+    found = suggest_centres(robot, cfg)
+    if found is None:
+        return ("; no points of its links are: the axes of the joints between them do not "
+                "meet where they would have to")  # fmt: skip
+    off = [f"the {s.key} {s.frame!r} is {1e3 * s.offset:.1f} mm from one (on the axes of "
+           f"{', '.join(s.axes) or 'no joint'}: xyz = [{', '.join(map(repr, s.xyz))}] in "
+           f"link {s.link!r})" for s in found if s.moved]  # fmt: skip
+    where = shlex.quote(str(robot.config.path.parent.resolve()))
+    return (
+        f"; {'; '.join(off)}. `wholebody info {where} --suggest-frames` prints these "
+        "as [frames] entries to paste into robot.toml"
+    )

@@ -1,6 +1,8 @@
 """From ``robot.toml`` and its URDF to the Pinocchio model the robot runs on.
 
-1. The URDF is loaded whole by Pinocchio (a planar root joint for a mobile base).
+1. The URDF is loaded whole by Pinocchio (a planar root joint for a mobile base), as
+   ``[joints]`` changed it (:mod:`wholebody.robot.overrides`), its root placed at ``[base]
+   height`` above the floor.
 2. ``[locked]`` joints leave the model: Pinocchio's reduced model
    (``pinocchio.buildReducedModel``) welds each at its position, so casters, fingers,
    suspensions or legs are no velocities of ``u`` and cost nothing in a step (TIAGo++ as
@@ -40,9 +42,13 @@ class Built:
         self.locked_groups, self.reference = locked_groups, reference
 
 
-def build_model(config: RobotConfig, info: UrdfInfo, mobile: bool) -> Built:
-    """The robot's Pinocchio model: the URDF, locked joints removed, declared frames added."""
-    full = _load(config, mobile)
+def build_model(config: RobotConfig, info: UrdfInfo, mobile: bool,
+                text: str | None = None) -> Built:  # fmt: skip
+    """The robot's Pinocchio model: the URDF (``text``: as ``[joints]`` changed it), its root
+    placed at ``[base] height``, locked joints removed, declared frames added."""
+    full = _load(config, mobile, text)
+    if config.base.height:
+        _raise_root(full, config.base.height)
     locked, groups = _resolve_locked(config, info, full, mobile)
     reference = _reference(full, locked)
     ids = [full.getJointId(name) for name in locked]
@@ -113,13 +119,31 @@ def _reduced(full: pin.Model, ids: list[int], reference: np.ndarray,
     return reduced
 
 
-def _load(config: RobotConfig, mobile: bool) -> pin.Model:
+def _load(config: RobotConfig, mobile: bool, text: str | None) -> pin.Model:
+    """The URDF (or ``text``, its content changed) as a Pinocchio model, with a planar root
+    joint for a mobile base."""
+    root = (pin.JointModelPlanar(),) if mobile else ()
     try:
-        if mobile:
-            return pin.buildModelFromUrdf(str(config.urdf), pin.JointModelPlanar())
-        return pin.buildModelFromUrdf(str(config.urdf))
+        if text is not None:
+            return pin.buildModelFromXML(text, *root)
+        return pin.buildModelFromUrdf(str(config.urdf), *root)
     except (RuntimeError, ValueError) as exc:
         raise ModelError(f"{config.urdf}: Pinocchio cannot load this URDF: {exc}") from exc
+
+
+def _raise_root(model: pin.Model, height: float) -> None:
+    """Place the root link ``height`` (m) above the world origin, in place: what hangs from
+    the world (the planar root joint of a mobile base, or a fixed base's first joints, its
+    root link's frames and mass) is moved up by ``height``. The world frame stays where it
+    is: the floor is its plane z = 0."""
+    up = pin.SE3(np.eye(3), np.array([0.0, 0.0, height]))
+    for j in range(1, model.njoints):
+        if model.parents[j] == 0:
+            model.jointPlacements[j] = up * model.jointPlacements[j]
+    for i, frame in enumerate(model.frames):
+        if i > 0 and frame.parentJoint == 0:
+            model.frames[i].placement = up * frame.placement
+    model.inertias[0] = model.inertias[0].se3Action(up)
 
 
 def _resolve_locked(config: RobotConfig, info: UrdfInfo, full: pin.Model,

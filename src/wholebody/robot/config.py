@@ -23,8 +23,12 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
                                  # axis (x forward, z up); a differential base's two
                                  # wheels share one axle, anywhere along x
     type = "fixed" | "mecanum" | "differential" | "planar"
+    height = 0.0                 # m, any type: the root link's origin above the floor (z);
+                                 # the root (a pelvis, a base's centre) is placed there for
+                                 # kinematics, collision, drawing and physics (default 0)
     wheels = [...]               # mecanum: 4 joints FL, FR, RL, RR; differential: left, right
-    wheel_radius = 0.08          # m, mecanum and differential
+    wheel_radius = 0.08          # m, mecanum and differential (checked to 1 % against the
+                                 # wheels' cylinder, sphere or mesh in the URDF)
     wheel_base = 0.50            # m, front-rear axle distance, mecanum
     track = 0.44                 # m, left-right wheel distance, mecanum and differential
     max_linear_velocity = 1.0    # m/s, planar (default 1.0)
@@ -36,7 +40,9 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     [arms.<name>]                # optional, any number
     side = "left" | "right"      # mirrors the arm angle (a single arm: either)
     group = "<group name>"       # optional
-    shoulder = elbow = wrist = tool = "<frame>"
+    shoulder = elbow = wrist = tool = "<frame>"   # the first three at joint centres
+                                 # (checked; `wholebody info DIR --suggest-frames` prints
+                                 # [frames] entries placing them there)
     upper_arm = forearm = "<link>"   # or a list of links: a segment whose mass is split
                                      # over several links (the arm energy adds them all)
 
@@ -46,6 +52,14 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
     "caster_*" = 0.0             # (fnmatch) or a [groups] name (the group goes with it);
     "arm_left_4_joint" = 0.5     # value: the position (rad, m). A mimic joint whose leader
                                  # is locked is locked with it.
+
+    [joints.<name>]              # optional: the URDF's data of a moving joint overridden
+    type = "continuous"          # (a joint name or a glob pattern), so that a URDF fault
+    lower = -1.0                 # needs no edit of the URDF: type "revolute", "continuous"
+    upper = 1.0                  # (no position limits) or "prismatic"; position limits
+    velocity = 2.0               # lower < upper (rad, m), velocity (rad/s, m/s) and effort
+    effort = 30.0                # (N m, N) > 0. E.g. a wheel declared revolute without
+                                 # limits (read as [0, 0]): type = "continuous"
 
     [frames.<name>]              # optional: a frame of your own, usable wherever a frame
     parent = "<link or joint>"   # name is (arm chains, tasks)
@@ -73,7 +87,7 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -84,8 +98,8 @@ from wholebody.robot.urdf import PACKAGE, resolve_package
 from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
 
-__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "FrameConfig", "RobotConfig",
-           "read_robot_config"]  # fmt: skip
+__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "FrameConfig", "JointOverride",
+           "RobotConfig", "read_robot_config"]  # fmt: skip
 
 ACCELERATION_DEFAULTS: Mapping[str, float] = {
     "joints": 20.0,  # rad/s^2 (m/s^2 prismatic): inside the 15-40 of common cobots
@@ -112,6 +126,26 @@ class BaseConfig:
     track: float = 0.0
     max_linear_velocity: float = 1.0
     max_angular_velocity: float = 1.0
+    height: float = 0.0
+    """The root link's origin above the floor (m)."""
+
+
+JOINT_TYPES = ("revolute", "continuous", "prismatic")
+"""The types ``[joints]`` may give a moving joint."""
+
+
+@dataclass(frozen=True)
+class JointOverride:
+    """``[joints.<key>]``: what replaces the URDF's data of the joints ``key`` names (a name
+    or a glob pattern); None where the URDF's stays. SI units: rad or m, rad/s or m/s,
+    N m or N."""
+
+    key: str
+    type: str | None = None
+    lower: float | None = None
+    upper: float | None = None
+    velocity: float | None = None
+    effort: float | None = None
 
 
 @dataclass(frozen=True)
@@ -178,6 +212,8 @@ class RobotConfig:
     """``[collision]``."""
     sim: Mapping[str, float | bool] = field(default_factory=dict)
     """``[sim]`` as written: :class:`~wholebody.robot.sim.SimSettings` by name."""
+    joints: tuple[JointOverride, ...] = ()
+    """``[joints]``, in the file's order (:mod:`wholebody.robot.overrides`)."""
 
     def error(self, key: str, message: str) -> ConfigError:
         """A :class:`ConfigError` naming this file and ``key``."""
@@ -199,7 +235,7 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     check_format(r, data, ROBOT)
 
     r.only(data, "", (FORMAT_KEY, "robot", "base", "groups", "arms", "home", "acceleration",
-                      "locked", "frames", "collision", "sim"))  # fmt: skip
+                      "locked", "frames", "collision", "sim", "joints"))  # fmt: skip
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")
@@ -255,7 +291,10 @@ def read_robot_config(path: str | Path) -> RobotConfig:
               for fname, table in r.table(data, "frames", "", required=False).items()}  # fmt: skip
 
     collision = _read_collision(r, r.table(data, "collision", "", required=False))
+    overrides = r.table(data, "joints", "", required=False)
+    joints = tuple(_joint_override(r, key, table) for key, table in overrides.items())
     return RobotConfig(
+        joints=joints,
         collision=collision,
         sim=_read_sim(r, r.table(data, "sim", "", required=False)),
         path=path,
@@ -338,22 +377,51 @@ def _frame(r: _Reader, name: str, table: Any) -> FrameConfig:
     return FrameConfig(name, r.string(table, "parent", where), xyz, rpy)  # type: ignore[arg-type]
 
 
+def _joint_override(r: _Reader, key: str, table: Any) -> JointOverride:
+    """``[joints.<key>]``, each value checked; ``lower < upper`` when both are given, and no
+    position limit for a continuous joint."""
+    where = f"joints.{key}"
+    if not isinstance(table, dict) or not table:
+        raise r.fail(where, "expected a table of type, lower, upper, velocity, effort, e.g. "
+                     f'[joints.{key}] type = "continuous"')  # fmt: skip
+    r.only(table, where, ("type", "lower", "upper", "velocity", "effort"))
+    kind = r.string(table, "type", where, choices=JOINT_TYPES) if "type" in table else None
+    lower, upper, velocity, effort = (
+        r.number(table, k, where, positive=k in ("velocity", "effort")) if k in table else None
+        for k in ("lower", "upper", "velocity", "effort")
+    )
+    if kind == "continuous" and (lower is not None or upper is not None):
+        raise r.fail(where, "a continuous joint turns without position limits: give lower "
+                     'and upper with type = "revolute"')  # fmt: skip
+    if lower is not None and upper is not None and not lower < upper:
+        raise r.fail(where, f"lower = {lower:g} must be below upper = {upper:g}")
+    return JointOverride(key, kind, lower, upper, velocity, effort)
+
+
 def _read_base(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:
     if not table:
         return BaseConfig()
     kind = r.string(table, "type", "base", choices=BASE_TYPES)
+    height = r.number(table, "height", "base", default=0.0)
+    base = _base_of_type(r, table, kind)
+    return replace(base, height=height) if height else base
+
+
+def _base_of_type(r: _Reader, table: Mapping[str, Any], kind: str) -> BaseConfig:
+    """``[base]``'s keys of a base type (and ``height``, read by :func:`_read_base`)."""
     if kind == "fixed":
-        r.only(table, "base", ("type",))
+        r.only(table, "base", ("type", "height"))
         return BaseConfig()
     if kind == "planar":
-        r.only(table, "base", ("type", "max_linear_velocity", "max_angular_velocity"))
+        r.only(table, "base", ("type", "height", "max_linear_velocity", "max_angular_velocity"))
         return BaseConfig(
             type="planar",
             max_linear_velocity=r.number(table, "max_linear_velocity", "base", 1.0, True),
             max_angular_velocity=r.number(table, "max_angular_velocity", "base", 1.0, True),
         )
     if kind == "mecanum":
-        r.only(table, "base", ("type", "wheels", "wheel_radius", "wheel_base", "track"))
+        r.only(table, "base", ("type", "height", "wheels", "wheel_radius", "wheel_base",
+                               "track"))  # fmt: skip
         return BaseConfig(
             type="mecanum",
             wheels=r.names(table, "wheels", "base", count=4),
@@ -361,7 +429,7 @@ def _read_base(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:
             wheel_base=r.number(table, "wheel_base", "base", positive=True),
             track=r.number(table, "track", "base", positive=True),
         )
-    r.only(table, "base", ("type", "wheels", "wheel_radius", "track"))
+    r.only(table, "base", ("type", "height", "wheels", "wheel_radius", "track"))
     return BaseConfig(
         type="differential",
         wheels=r.names(table, "wheels", "base", count=2),

@@ -36,6 +36,7 @@ from wholebody.robot.com import total_mass
 from wholebody.robot.compiled import RobotKinematics
 from wholebody.robot.config import ACCELERATION_DEFAULTS, RobotConfig
 from wholebody.robot.configurations import Configurations
+from wholebody.robot.overrides import urdf_text
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
 from wholebody.robot.sim import SimSettings
 from wholebody.robot.state import RobotState
@@ -74,9 +75,10 @@ class Robot(Configurations):
         self.config = config
         self.name = config.name
         base = base_model(config.base)
-        self.urdf: UrdfInfo = read_urdf(config.urdf)
+        text = urdf_text(config)  # the URDF with [joints] applied; None: the file as it is
+        self.urdf: UrdfInfo = read_urdf(config.urdf, text)
         """What the URDF says besides the kinematics (link masses, mimic joints)."""
-        self._built = build_model(config, self.urdf, base.mobile)
+        self._built = build_model(config, self.urdf, base.mobile, text)
         self.model: pin.Model = self._built.model
         self.locked: Mapping[str, float] = dict(self._built.locked)
         """The joints ``[locked]`` removed from the model, and their positions (rad, m)."""
@@ -85,7 +87,9 @@ class Robot(Configurations):
         self._layouts: dict[tuple[int, ...], dict[int, int]] = {}  # see RobotState.prefetch
         self.base_frame: Frame = self.frame(self.urdf.root)
         """The URDF's root link (the moving base of a mobile robot)."""
-        self._init_actuation(build_actuation(config, self.model, self.urdf, base))
+        self._init_actuation(
+            build_actuation(config, self.model, self.urdf, base, self._built.locked)
+        )
         kept = {g: j for g, j in config.groups.items() if g not in self._built.locked_groups}
         self.groups: dict[str, JointGroup] = Named(
             "joint group", {g: self._group(g, joints) for g, joints in kept.items()}
@@ -257,7 +261,8 @@ class Robot(Configurations):
         lines = [
             f"robot {self.name}: {self.config.description}".rstrip(": "),
             f"  files: {self.config.path} ({self.config.urdf})",
-            f"  base: {self.base.type}; nq = {self.nq}, nv = {self.nv}, nu = {self.nu} "
+            f"  base: {self.base.type}{_height(self.config.base.height)}; nq = {self.nq}, "
+            f"nv = {self.nv}, nu = {self.nu} "
             f"actuated velocities; mass {self.mass:g} kg",
         ]
         if self.locked:
@@ -280,6 +285,11 @@ class Robot(Configurations):
 
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, nu={self.nu}, base={self.base.type!r})"
+
+
+def _height(height: float) -> str:
+    """``[base] height`` in the summary: nothing at the default 0."""
+    return f", root link {height:g} m above the floor" if height else ""
 
 
 def _abridged(names: list[str], most: int = 6) -> str:

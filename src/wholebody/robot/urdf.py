@@ -15,18 +15,26 @@ a checkout), which holds the package ``example-robot-data``.
 
 from __future__ import annotations
 
+import difflib
 import importlib.metadata
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from wholebody.errors import ModelError
 
-__all__ = ["Mimic", "UrdfInfo", "example_robot_data_share", "read_urdf", "resolve_package"]
+__all__ = [
+    "MeshRef",
+    "Mimic",
+    "UrdfInfo",
+    "example_robot_data_share",
+    "read_urdf",
+    "resolve_package",
+]
 
 PACKAGE = "package://"
 ROBOT_DATA = "example-robot-data"
@@ -57,6 +65,20 @@ class UrdfInfo:
     radii: dict[str, float]
     """Per link with a cylinder or sphere in its collision (else visual) geometry, the
     largest radius (m): what a wheel's radius is checked against."""
+    meshes: dict[str, tuple[MeshRef, ...]] = field(default_factory=dict)
+    """Per link without a cylinder or sphere, the meshes of its collision (else visual)
+    geometry: what a wheel given as a mesh is checked against."""
+
+
+@dataclass(frozen=True)
+class MeshRef:
+    """A ``<mesh>`` of a link: its file as written (a ``package://`` path, or relative to the
+    URDF), its scale, and its placement in the link frame (``<origin>``; m, rad)."""
+
+    filename: str
+    scale: tuple[float, float, float]
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float]
 
 
 def example_robot_data_share() -> Path | None:
@@ -87,8 +109,10 @@ def package_search_path(dirs: Sequence[Path]) -> list[Path]:
 
 def resolve_package(uri: str, dirs: Sequence[Path]) -> Path:
     """The file a ``package://PKG/rest`` path names (searched in :func:`package_search_path`),
-    a plain path unchanged; :class:`FileNotFoundError` naming what was searched, with the
-    install command when the package is ``example-robot-data``."""
+    a plain path unchanged. :class:`FileNotFoundError`: for a package found without the
+    file, the part of the path that is missing and the nearest names there (a typo); for a
+    package not found, what was searched, the nearest package names and, for
+    ``example-robot-data``, the install command."""
     if not uri.startswith(PACKAGE):
         return Path(uri)
     rest = uri[len(PACKAGE) :]
@@ -97,16 +121,39 @@ def resolve_package(uri: str, dirs: Sequence[Path]) -> Path:
     for d in search:
         if (d / rest).exists():
             return d / rest
+    found = [d / package for d in search if (d / package).is_dir()]
+    if found:
+        raise FileNotFoundError(f"{uri}: package {package!r} is at {found[0]}, but "
+                                + _missing_file(found[0], rest.split("/")[1:]))  # fmt: skip
     hint = f"; install it with {ROBOT_DATA_HINT}" if package == ROBOT_DATA else ""
+    known = [p.name for d in search if d.is_dir() for p in d.iterdir() if p.is_dir()]
+    close = difflib.get_close_matches(package, known, n=3, cutoff=0.6)
+    hint += f"; nearest packages there: {', '.join(close)}" if close else ""
     where = ", ".join(str(d) for d in search) or "no package directories"
     raise FileNotFoundError(f"{uri}: package {package!r} not found (searched {where}){hint}")
 
 
-def read_urdf(path: Path) -> UrdfInfo:
+def _missing_file(package: Path, parts: Sequence[str]) -> str:
+    """Which part of a path inside an existing package directory is missing, with the
+    names nearest to it in the directory above it (a typo in a file name)."""
+    here = package
+    for k, part in enumerate(parts):
+        if not (here / part).exists():
+            names = sorted(p.name for p in here.iterdir()) if here.is_dir() else []
+            close = difflib.get_close_matches(part, names, n=3, cutoff=0.5)
+            near = f"; nearest names there: {', '.join(close)}" if close else ""
+            inside = "/".join(parts[:k]) or "its top directory"
+            return f"{inside} has no {part!r}{near}"
+        here = here / part
+    return f"{'/'.join(parts)} is not there"
+
+
+def read_urdf(path: Path, text: str | None = None) -> UrdfInfo:
     """Links, root, joint types and moving mimic joints of a URDF, its numbers checked
-    (:class:`ModelError` naming the file and element)."""
+    (:class:`ModelError` naming the file and element); ``text``: the file's content as
+    ``robot.toml`` changed it (:mod:`wholebody.robot.overrides`), read instead of it."""
     try:
-        root = ET.parse(path).getroot()
+        root = ET.fromstring(text) if text is not None else ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ModelError(f"{path}: not well-formed XML: {exc}") from exc
     if root.tag != "robot":
@@ -138,7 +185,8 @@ def read_urdf(path: Path) -> UrdfInfo:
     roots = [name for name in links if name not in set(child_of.values())]
     if len(roots) != 1:
         raise ModelError(f"{path}: expected one root link, found {roots or 'none'}")
-    return UrdfInfo(links, roots[0], types, mimic, child_of, _radii(root))
+    radii = _radii(root)
+    return UrdfInfo(links, roots[0], types, mimic, child_of, radii, _meshes(path, root, radii))
 
 
 def _radii(root: ET.Element) -> dict[str, float]:
@@ -154,6 +202,39 @@ def _radii(root: ET.Element) -> dict[str, float]:
                 out[str(link.get("name"))] = max(r)
                 break
     return out
+
+
+def _meshes(path: Path, root: ET.Element,
+            radii: dict[str, float]) -> dict[str, tuple[MeshRef, ...]]:  # fmt: skip
+    """The meshes of each link that :func:`_radii` found no radius for: its collision
+    geometry's, else its visual geometry's."""
+    out: dict[str, tuple[MeshRef, ...]] = {}
+    for link in root.findall("link"):
+        name = str(link.get("name"))
+        if name in radii:
+            continue
+        for tag in ("collision", "visual"):
+            refs = tuple(_mesh_ref(path, name, e) for e in link.findall(tag)
+                         if e.find("geometry/mesh") is not None)  # fmt: skip
+            if refs:
+                out[name] = refs
+                break
+    return out
+
+
+def _mesh_ref(path: Path, link: str, element: ET.Element) -> MeshRef:
+    """The ``<mesh>`` of a ``<collision>`` or ``<visual>`` element, its numbers checked (as
+    urdfdom checks them: three each)."""
+    mesh, origin = element.find("geometry/mesh"), element.find("origin")
+    assert mesh is not None
+    where = f"link {link!r} <mesh"
+
+    def numbers(e: ET.Element | None, key: str, default: str) -> tuple[float, float, float]:
+        text = e.get(key, default) if e is not None else default
+        return tuple(float(v) for v in _numbers(path, f"{where} {key}>", text, 3))  # type: ignore[return-value]
+
+    return MeshRef(mesh.get("filename", ""), numbers(mesh, "scale", "1 1 1"),
+                   numbers(origin, "xyz", "0 0 0"), numbers(origin, "rpy", "0 0 0"))  # fmt: skip
 
 
 def _mimic(path: Path, name: str, element: ET.Element) -> Mimic:

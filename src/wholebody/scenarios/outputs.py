@@ -90,33 +90,29 @@ def physics_arrays(run: ScenarioRun) -> dict[str, np.ndarray]:
 
 def write_figures(run: ScenarioRun, out: Path) -> dict[str, Path]:
     """Write the figures of a run into ``out`` (``hands.png``, ``joint_velocities.png``,
-    ``arm_energy.png``)."""
+    ``arm_energy.png`` for a robot with ``[arms]``, ``physics.png`` for a physics run)."""
     return _write_all(_figure_jobs(run, out))
 
 
 def _figure_jobs(run: ScenarioRun, out: Path) -> list[tuple[str, Callable[[], Path]]]:
+    """The figures of :func:`write_figures`: the arm energy's only for a robot with arms (a
+    robot without ``[arms]`` has no arm energy to draw)."""
     spec, log = run.spec, run.log
     title = f"{spec.title or spec.name} [{run.backend}]"
-    return [
-        (
-            "hands",
-            partial(
-                plots.hand_paths,
-                log,
-                out / "hands.png",
-                spec.objects,
-                run.object_poses,
-                title=title,
-            ),
-        ),
-        (
-            "joint_velocities",
-            partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
-        ),
-        ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title)),
-    ] + ([("physics_figure", partial(plots.physics, log, run.physics, out / "physics.png",
-                                     title=f"{title} under physics (MuJoCo)"))]
-         if run.physics is not None else [])  # fmt: skip
+    jobs: list[tuple[str, Callable[[], Path]]] = [
+        ("hands", partial(plots.hand_paths, log, out / "hands.png", spec.objects,
+                          run.object_poses, title=title)),
+        ("joint_velocities",
+         partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title)),
+    ]  # fmt: skip
+    if log.arms:
+        jobs.append(("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png",
+                                           title=title)))  # fmt: skip
+    if run.physics is not None:
+        figure = partial(plots.physics, log, run.physics, out / "physics.png",
+                         title=f"{title} under physics (MuJoCo)")  # fmt: skip
+        jobs.append(("physics_figure", figure))
+    return jobs
 
 
 def comparison(runs: list[ScenarioRun]) -> list[dict]:

@@ -7,12 +7,17 @@ and returns each period's command ``u`` (rad/s, m/s, in ``u``'s order). Its **mo
 mode       when                                                 command
 ========== ==================================================== =============================
 WAITING    a required joint (or the odometry) never arrived     zero
-STALE      the state is older than ``stale_periods`` periods    zero (a stop)
+STALE      the state is older than ``stale_periods`` periods,   zero (a stop)
+           or served that many periods already
 HOLDING    no target has arrived yet                            zero: the robot stays put
 RUNNING    a fresh state and a target                           the stack's, limited
 FAULT      the solver failed or gave a non-finite command       zero (a stop), until a new
                                                                 target
 ========== ==================================================== =============================
+
+A state thus drives at most ``stale_periods`` commands: counting the periods it served, not
+only its age, keeps that true when a period runs late (a late period's state arrived after
+its deadline, so by age alone it would serve one period more).
 
 Inputs that are not finite or out of range are refused (:mod:`~wholebody.ros.safety`,
 :mod:`~wholebody.ros.joint_state`): nothing of them is used, the last good value stays,
@@ -97,7 +102,8 @@ class ControlCore:
     dt
         The control period (s).
     stale_periods
-        How many periods old a state may be before the commands stop.
+        How many periods old a state may be (and how many periods it may serve) before the
+        commands stop.
     base_travel
         For a mobile base, how far (m) beyond the arms' reach a target may be from the
         base, in the plane (further ones are refused as out of range).
@@ -114,6 +120,7 @@ class ControlCore:
                                      recovery=False, threads=1)  # fmt: skip
         self.state = StateAssembler(robot)
         self.limiter = CommandLimiter(robot.velocity_limits, robot.acceleration_limits, dt)
+        self.stale_periods = stale_periods
         self.max_age = stale_periods * self.dt
         self.tasks = node_stack.tasks
         self.reach = {f: frame_reach(robot, f, base_travel) for f in self.tasks}
@@ -129,6 +136,8 @@ class ControlCore:
         self._active = False  # a target arrived: track
         self._restart = True  # the controller starts from rest at the next RUNNING period
         self._q: np.ndarray | None = None  # the last fresh configuration
+        self._arrived = -math.inf  # when the newest state used arrived (s, monotonic)
+        self._uses = 0  # the periods it was used in
 
     # ------------------------------------------------------------------ inputs
     def _refuse(self, what: str, reason: str) -> str:
@@ -180,7 +189,7 @@ class ControlCore:
 
     # ------------------------------------------------------------------ a period
     def _set_mode(self, mode: str, reason: str) -> None:
-        if mode != self.mode or reason.split(":")[0] != self.reason.split(":")[0]:
+        if mode != self.mode:
             self.changed = True
         self.mode, self.reason = mode, reason
 
@@ -191,7 +200,9 @@ class ControlCore:
             self._restart = True
             self._set_mode("WAITING", "no message yet from: " + ", ".join(reading.missing))
             return Tick(self.limiter.stop(), self.mode, 0, -math.inf)
-        if reading.age > self.max_age:
+        self._uses = self._uses + 1 if reading.arrived == self._arrived else 1
+        self._arrived = reading.arrived
+        if reading.age > self.max_age or self._uses > self.stale_periods:
             self._restart = True
             self._set_mode("STALE", f"the newest complete state is {reading.age * 1e3:.1f} "
                            f"ms old (at most {self.max_age * 1e3:.1f} ms)")  # fmt: skip

@@ -65,6 +65,7 @@ class WholebodyNode:
         self._status_due = self._telemetry_due = 0.0
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
+        self._closing = threading.Event()
         self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")
 
     # ------------------------------------------------------------------ topics
@@ -124,13 +125,8 @@ class WholebodyNode:
             self.node.get_logger().warning(why)
 
     def _spin(self) -> None:
-        while rclpy.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.1)
-            except Exception:  # the context shut down while waiting
-                if rclpy.ok():
-                    raise
-                return
+        while not self._closing.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
 
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
@@ -199,6 +195,10 @@ class WholebodyNode:
         self._status_due = now + STATUS_PERIOD
 
     def close(self) -> None:
+        """Stop the executor thread (it ends within its 0.05 s wait), then the node."""
+        self._closing.set()
+        if self._spinner.is_alive():
+            self._spinner.join()
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
 

@@ -51,6 +51,7 @@ class SimNode:
         self.index = [self.robot.index(n) for n in self.names]
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(node)
+        self._closing = threading.Event()
         self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")
 
     def _on_command(self, msg: JointState) -> None:
@@ -66,13 +67,8 @@ class SimNode:
             self.node.get_logger().warning(why)
 
     def _spin(self) -> None:
-        while rclpy.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.1)
-            except Exception:  # the context shut down while waiting
-                if rclpy.ok():
-                    raise
-                return
+        while not self._closing.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
 
     def publish(self) -> None:
         """The state now: joint positions and applied velocities, and the odometry."""
@@ -103,6 +99,10 @@ class SimNode:
         return 0
 
     def close(self) -> None:
+        """Stop the executor thread (it ends within its 0.05 s wait), then the node."""
+        self._closing.set()
+        if self._spinner.is_alive():
+            self._spinner.join()
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
 

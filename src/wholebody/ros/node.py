@@ -25,7 +25,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
@@ -63,7 +63,7 @@ class WholebodyNode:
         self.command_period, self.latency = Window(), Window()
         self._last_publish: float | None = None
         self._status_due = self._telemetry_due = 0.0
-        self.executor = SingleThreadedExecutor()
+        self.executor = EventsExecutor()
         self.executor.add_node(self.node)
         self._closing = threading.Event()
         self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")
@@ -96,6 +96,8 @@ class WholebodyNode:
         self.order = topics.velocity_permutation(robot)
         self.names = list(robot.actuated_joints)
         self.nb = len(robot.base.actuators) if robot.base.mobile else 0
+        self._command = msgs.joint_state(self.names, msgs.time_of(0))
+        self._array = msgs.velocity_array(np.zeros(robot.nu))
 
     def _on_joint_state(self, msg: JointState) -> None:
         now = time.monotonic()
@@ -151,10 +153,14 @@ class WholebodyNode:
                 pub.wait_for_all_acked(rclpy.duration.Duration(seconds=0.5))
 
     def _publish_command(self, u: np.ndarray, stamp: int) -> None:
-        """``u`` on the command topics, stamped ``stamp`` (ns; now when 0)."""
+        """``u`` on the command topics, stamped ``stamp`` (ns; now when 0). The messages
+        are made once and refilled (their names never change)."""
         when = msgs.time_of(stamp) if stamp else self.node.get_clock().now().to_msg()
-        self.pub_command.publish(msgs.joint_state(self.names, when, velocities=u))
-        self.pub_array.publish(msgs.velocity_array(u[self.order]))
+        self._command.header.stamp = when
+        self._command.velocity = u.tolist()
+        self.pub_command.publish(self._command)
+        self._array.data = u[self.order].tolist()
+        self.pub_array.publish(self._array)
         if self.pub_cmd_vel is not None:
             self.pub_cmd_vel.publish(msgs.twist(self.robot.base.matrix @ u[: self.nb]))
 

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import rclpy
 from nav_msgs.msg import Odometry
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -49,7 +49,7 @@ class SimNode:
         model = self.robot.model
         self.names = [n for n in self.robot.actuated_joints if model.existJointName(n)]
         self.index = [self.robot.index(n) for n in self.names]
-        self.executor = SingleThreadedExecutor()
+        self.executor = EventsExecutor()
         self.executor.add_node(node)
         self._closing = threading.Event()
         self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")

@@ -56,7 +56,7 @@ class Case:
 
     def __init__(self, robot: wholebody.Robot, frame: str, rate: float, sim: str) -> None:
         self.robot, self.frame, self.rate, self.sim = robot, frame, rate, sim
-        domain = random.randint(101, 200)
+        domain = random.randint(1, 101)  # 0-101: clear of Linux ephemeral ports
         path = os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])
         env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": path,
                "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # fmt: skip

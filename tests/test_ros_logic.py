@@ -190,6 +190,26 @@ def test_core_waits_holds_reaches_refuses_and_stops(ur5) -> None:
     assert all(not m.u.any() for m in modes[2:]) and core.level() == "STALE"
 
 
+def test_core_runs_a_scenario_stack_with_the_hierarchical_qp(ur5) -> None:
+    from wholebody.resources import tasks_dir
+    from wholebody.ros.stacks import scenario_stack
+
+    dt = 0.01
+    node_stack = scenario_stack(ur5, tasks_dir() / "ur5_reach.toml", make_solver("hqp"), "hqp")
+    assert list(node_stack.tasks) == ["tool0"] and node_stack.posture is None
+    core = ControlCore(ur5, node_stack, dt)
+    q = ur5.home()
+    core.warm_up(q)
+    T = ur5.frame_pose(q, "tool0")
+    goal = T[:3, 3] + (-0.04, 0.05, 0.03)
+    core.on_target("tool0", "odom", goal, pin.Quaternion(T[:3, :3]).coeffs())
+    for k in range(150):
+        _send(core, ur5, q, k * dt)
+        q = ur5.integrate(q, core.tick(k * dt).u, dt)
+    assert core.mode == "RUNNING" and core.report()["solver status"] in ("OK", "BOUNDS_ACTIVE")
+    assert np.linalg.norm(ur5.frame_pose(q, "tool0")[:3, 3] - goal) < 1e-3
+
+
 # ---------------------------------------------------------------------- the rest
 def test_velocity_order_is_robot_toml_order(humanoid) -> None:
     order = velocity_order(humanoid)
@@ -230,3 +250,19 @@ def test_ros_commands_without_the_extra_say_what_to_install(monkeypatch, capsys)
     for command in (["ros", "ur5"], ["ros-sim", "ur5"]):
         assert main(command) == 2
         assert "pip install 'wholebody[ros]'" in capsys.readouterr().err
+
+
+def test_readme_controller_yaml_is_tiago_dual_joint_order() -> None:
+    from pathlib import Path
+
+    from wholebody.robot.urdf import example_robot_data_share
+    from wholebody.ros.interface import controller_yaml
+
+    if example_robot_data_share() is None:
+        pytest.skip("example-robot-data is not installed (pip install '.[robots]')")
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("<!-- ros:tiago_dual controller -->\n```yaml\n", 1)[1].split("```")[0]
+    tiago = wholebody.load_robot("tiago_dual")
+    assert block == controller_yaml(tiago)
+    joints = [line.strip()[2:] for line in block.splitlines() if line.strip().startswith("- ")]
+    assert joints == velocity_order(tiago) and sorted(joints) == sorted(tiago.actuated_joints)

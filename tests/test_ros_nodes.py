@@ -16,9 +16,11 @@ import random
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 import pytest
@@ -42,7 +44,7 @@ pytestmark = pytest.mark.slow
 RATE = 100.0
 DT = 1.0 / RATE
 READY = 240.0  # s: the node's first status (a fresh machine compiles the kernels first)
-DOMAIN = random.randint(1, 100)  # this module's ROS domain: no other run hears it
+DOMAIN = random.randint(1, 101)  # this module's ROS domain (0-101: clear of ephemeral ports)
 SRC = Path(wholebody.__file__).resolve().parents[1]
 
 
@@ -53,6 +55,7 @@ class Robot:
         self.robot = wholebody.load_robot(name)
         self.name, self.frame, self.env = name, frame, env
         self.procs: dict[str, subprocess.Popen] = {}
+        self.logs: dict[str, IO[str]] = {}
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=DOMAIN)
         self.node = rclpy.create_node("wholebody_test", context=self.context)
@@ -77,19 +80,27 @@ class Robot:
     def start(self, command: str, *args: str) -> None:
         cmd = [sys.executable, "-m", "wholebody", command, self.name, "--rate", f"{RATE:g}",
                *args]  # fmt: skip
-        self.procs[command] = subprocess.Popen(cmd, env=self.env, stdout=subprocess.PIPE,
-                                               stderr=subprocess.STDOUT, text=True)  # fmt: skip
+        log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (closed in close)
+        self.logs[command] = log
+        self.procs[command] = subprocess.Popen(cmd, env=self.env, stdout=log,
+                                               stderr=subprocess.STDOUT)  # fmt: skip
 
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
         while not done():
             for name, proc in self.procs.items():
                 if proc.poll() is not None and name != "dead":
-                    out = proc.stdout.read() if proc.stdout else ""
+                    out = self.output(name)
                     pytest.fail(f"{name} exited with {proc.returncode} waiting for {what}:\n{out}")
             if time.monotonic() > end:
                 pytest.fail(f"no {what} within {timeout} s")
             self.executor.spin_once(timeout_sec=0.01)
+
+    def output(self, name: str) -> str:
+        """What a process printed."""
+        log = self.logs[name]
+        log.seek(0)
+        return log.read()
 
     def spin_for(self, seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -137,6 +148,8 @@ class Robot:
             if proc.poll() is None:
                 proc.kill()
             proc.wait(timeout=10)
+        for log in self.logs.values():
+            log.close()
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)

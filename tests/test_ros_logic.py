@@ -266,3 +266,15 @@ def test_readme_controller_yaml_is_tiago_dual_joint_order() -> None:
     assert block == controller_yaml(tiago)
     joints = [line.strip()[2:] for line in block.splitlines() if line.strip().startswith("- ")]
     assert joints == velocity_order(tiago) and sorted(joints) == sorted(tiago.actuated_joints)
+
+
+def test_state_keeps_mimic_joints_with_their_leader() -> None:
+    from wholebody.robot.urdf import example_robot_data_share
+
+    if example_robot_data_share() is None:
+        pytest.skip("example-robot-data is not installed (pip install '.[robots]')")
+    panda = wholebody.load_robot("panda")  # its second finger mimics the first
+    q = panda.random_configuration(np.random.default_rng(3), margin=0.1)
+    asm = StateAssembler(panda)
+    assert asm.update_joints(*_message(panda, q), now=0.0) is None
+    np.testing.assert_allclose(asm.reading(0.0).q, q, atol=1e-12)

@@ -12,7 +12,7 @@ A message is refused whole, and the positions already held kept, when one of its
 joints is not finite or lies more than ``tolerance`` (rad, m) outside the joint's limits:
 a sensor fault makes the whole reading suspect. Positions within the tolerance are clipped
 to the limits (encoders read a little past a hard stop). Joints the robot does not know
-are ignored.
+are ignored. A mimic joint is set from its leader, as ``q`` keeps it.
 """
 
 from __future__ import annotations
@@ -66,6 +66,14 @@ class StateAssembler:
                 continue  # a planar base's virtual actuator: its pose is odometry's
             joint = model.joints[model.getJointId(name)]
             self._index[name] = (joint.idx_q, joint.nq == 2, float(lower[k]), float(upper[k]))
+        self._mimic = [
+            (model.joints[model.getJointId(f)].idx_q,
+             model.joints[model.getJointId(m.leader)].idx_q, m.multiplier, m.offset)
+            for f, m in robot.urdf.mimic.items()
+            if model.existJointName(f) and model.existJointName(m.leader)
+        ]  # fmt: skip
+        """``(q index, leader's q index, multiplier, offset)`` of each mimic joint, which
+        follows its leader (its own reading, if any, is not used)."""
         wheels = set(robot.base.wheel_joints)
         self.required: tuple[str, ...] = tuple(n for n in self._index if n not in wheels)
         """The joints every usable state has (the wheels are optional)."""
@@ -116,6 +124,8 @@ class StateAssembler:
                 q[iq] = value
             if name in self._seen:
                 self._seen[name] = now
+        for i, leader, multiplier, offset in self._mimic:
+            q[i] = multiplier * q[leader] + offset
 
     def update_base(self, x: float, y: float, yaw: float, now: float) -> str | None:
         """Take the base pose (m, m, rad; odometry frame) received at ``now``; None when

@@ -180,13 +180,19 @@ def robot_pair(request, env) -> Iterator[Robot]:
 
 
 def _limits_held(robot: wholebody.Robot, commands: list[JointState]) -> None:
-    """Every command inside the velocity limits, and consecutive ones inside the
-    acceleration limits."""
+    """Every command inside the velocity limits, and each one that is not a stop (all
+    zero: a stale state on a loaded machine, which the node sends at once) inside the
+    acceleration limits of the one before."""
     u = np.array([c.velocity for c in commands])
     assert u.shape[1] == robot.nu
     assert np.all(np.abs(u) <= robot.velocity_limits + 1e-9), np.abs(u).max(axis=0)
-    step = np.abs(np.diff(u, axis=0)).max(axis=0)
+    ramps = np.any(u[1:], axis=1)
+    step = np.abs(np.diff(u, axis=0))[ramps].max(axis=0)
     assert np.all(step <= robot.acceleration_limits * DT + 1e-9), step / DT
+
+
+def _moving(pair: Robot) -> bool:
+    return bool(pair.commands) and bool(np.any(pair.commands[-1].velocity))
 
 
 def _reach(pair: Robot, goal: np.ndarray) -> float:
@@ -219,7 +225,7 @@ def test_node_reaches_refuses_nan_and_stops_on_stale_state(robot_pair: Robot) ->
     pair.spin_until(lambda: "not finite" in pair.last_status()[2]["last refusal"], 5.0,
                     "status reporting the NaN target")  # fmt: skip
     level, _, values = pair.last_status()
-    assert level == 1 and values["refused inputs"] == "1"  # WARN
+    assert level != 0 and values["refused inputs"] == "1"  # WARN (STALE on a loaded machine)
     pair.spin_for(0.2)
     assert np.linalg.norm(pair.pose()[:3, 3] - goal[:3, 3]) < 1e-3
 
@@ -227,17 +233,22 @@ def test_node_reaches_refuses_nan_and_stops_on_stale_state(robot_pair: Robot) ->
     away = start.copy()
     away[:3, 3] -= (0.05, -0.04, 0.03)
     pair.send(away)
-    pair.spin_until(lambda: np.any(pair.commands[-1].velocity), 5.0, "a moving command")
+    pair.spin_until(lambda: _moving(pair), 5.0, "a moving command")
     pair.procs["ros-sim"].kill()
     pair.procs["dead"] = pair.procs.pop("ros-sim")
     pair.spin_until(lambda: pair.last_status()[1].startswith("STALE"), 2.0, "status STALE")
-    last = stamp_ns(pair.states[-1].header.stamp)
-    on_last = [c for c in pair.commands
-               if stamp_ns(c.header.stamp) == last and np.any(c.velocity)]  # fmt: skip
+    # the node's last state (one the sim sent last; the kill may cut its delivery to one of
+    # the two readers): at most 3 commands computed from it, then only zeros
+    pair.spin_until(lambda: not _moving(pair), 1.0, "a zero command")  # topics: any order
+    stamps = [stamp_ns(c.header.stamp) for c in pair.commands]
+    moving = [i for i, c in enumerate(pair.commands) if np.any(c.velocity)]
+    last = stamps[moving[-1]]
+    assert last in {stamp_ns(m.header.stamp) for m in pair.states[-3:]}
+    on_last = [i for i in moving if stamps[i] == last]
     assert 1 <= len(on_last) <= 3, len(on_last)
-    first_zero = next(i for i, c in enumerate(pair.commands) if stamp_ns(c.header.stamp) > last)
-    assert all(not np.any(c.velocity) for c in pair.commands[first_zero:])
-    assert pair.last_status()[0] == 3  # DiagnosticStatus.STALE
+    assert len(pair.commands) > moving[-1] + 1  # zeros followed
+    # a state delivered late may count once more as fresh: then STALE again
+    pair.spin_until(lambda: pair.last_status()[0] == 3, 2.0, "status level STALE")
 
 
 @pytest.mark.parametrize("robot_pair", CASES[:1], ids=["ur5"], indirect=True)
@@ -246,7 +257,7 @@ def test_node_sends_one_zero_command_on_sigterm(robot_pair: Robot) -> None:
     goal = pair.pose()
     goal[:3, 3] += (0.1, 0.1, -0.1)
     pair.send(goal)
-    pair.spin_until(lambda: np.any(pair.commands[-1].velocity), 5.0, "a moving command")
+    pair.spin_until(lambda: _moving(pair), 5.0, "a moving command")
     node = pair.procs.pop("ros")
     node.send_signal(signal.SIGTERM)
     pair.procs["dead"] = node

@@ -252,6 +252,8 @@ def start(robot_name: str, frames: Sequence[str] | None, stack_file: str | None,
         flush=True,
     )
     core.warm_up(robot.home())
+    if collision is not None:  # the markers' distance kernel, loaded before the first period
+        collision.distances(robot.update(robot.home()), 0.1)
     frames_text = ", ".join(core.tasks)
     print(f"wholebody: ready; targets on /wholebody/<FRAME>/target for {frames_text}",
           flush=True)  # fmt: skip

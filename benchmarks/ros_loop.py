@@ -10,7 +10,8 @@ tracks a target (mode RUNNING), this script, a third process, listens for ``--se
 * **latency** p50 / p99 (ms): from the joint state's stamp (the simulated robot's clock
   when it published the state) to this subscriber's receipt of the command computed from
   it: delivery of the state, the wait for the node's next period, the step, delivery of the
-  command. The node runs on its own clock, so about half a period of it is the wait;
+  command. The node locks its periods to start 0.2 period after the states arrive, so
+  about that much of it is the wait;
 * **missed** (%): deadlines the node skipped because a period overran (its status's
   ``missed periods`` over the window) per deadline of the window;
 * **step** p50 / p99 (us): the node's control step (its status).

@@ -278,3 +278,20 @@ def test_state_keeps_mimic_joints_with_their_leader() -> None:
     asm = StateAssembler(panda)
     assert asm.update_joints(*_message(panda, q), now=0.0) is None
     np.testing.assert_allclose(asm.reading(0.0).q, q, atol=1e-12)
+
+
+def test_phase_lock_brings_the_deadlines_just_after_the_states() -> None:
+    from wholebody.ros.timing import phase_error
+
+    T, lead = 0.01, 0.002
+    assert phase_error(0.0305, 0.0300, T, lead) == pytest.approx(0.0025)  # come 2.5 ms later
+    assert phase_error(0.0299, 0.0300, T, lead) == pytest.approx(0.0019)
+    assert phase_error(0.0250, 0.0300, T, lead) == pytest.approx(-0.003)  # 3 ms earlier
+    # states every T at phase 7.3 ms, the loop from phase 0: locked within 30 periods
+    t = [0.0]
+    m = Metronome(T, clock=lambda: t[0], sleep=lambda s: t.__setitem__(0, t[0] + s))
+    for _ in range(40):
+        deadline = m.wait()
+        arrived = math.floor((deadline - 0.0073) / T) * T + 0.0073  # the newest state
+        m.shift(0.2 * phase_error(arrived, deadline, T, lead))
+    assert (deadline - arrived) == pytest.approx(lead, abs=1e-4) and m.missed == 0

@@ -2,9 +2,11 @@
 
 Two threads: an executor thread takes the messages (joint states, odometry, targets,
 twists) into the :class:`~wholebody.ros.core.ControlCore`, and the main thread runs the
-control loop at absolute deadlines (:class:`~wholebody.ros.timing.Metronome`): each period
-one :meth:`~wholebody.ros.core.ControlCore.tick`, then the command on three topics, then,
-when due, the status (2 Hz, and at once when the mode changes or an input is refused), the
+control loop at absolute deadlines (:class:`~wholebody.ros.timing.Metronome`), phase locked
+to the robot's states so that a period starts just after a state arrives
+(:func:`~wholebody.ros.timing.phase_error`). Each period: one
+:meth:`~wholebody.ros.core.ControlCore.tick`, then the command on three topics, then, when
+due, the status (2 Hz, and at once when the mode changes or an input is refused), the
 frames' poses and the markers (10 Hz). A lock keeps the two threads off the core at once.
 
 The kernels are compiled and the stack run a few times before the loop starts, so that the
@@ -15,6 +17,7 @@ for up to 0.5 s), and the process exits.
 
 from __future__ import annotations
 
+import math
 import signal
 import threading
 import time
@@ -36,12 +39,16 @@ from wholebody.collision import CollisionModel
 from wholebody.ros import interface as topics
 from wholebody.ros import messages as msgs
 from wholebody.ros.core import ControlCore
-from wholebody.ros.timing import Metronome, Window
+from wholebody.ros.timing import Metronome, Window, phase_error
 
 __all__ = ["WholebodyNode", "run_node"]
 
 STATUS_PERIOD = 0.5  # s
 TELEMETRY_PERIOD = 0.1  # s
+LEAD = 0.2
+"""Where in the period the node's deadlines lock, after the robot's states (periods)."""
+PHASE_GAIN = 0.2
+"""The fraction of the phase error corrected per period (the lock settles in ~10 periods)."""
 SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
 """Joint states, odometry, twists: best effort matches publishers of either reliability."""
 COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -135,12 +142,17 @@ class WholebodyNode:
         """The control loop until ``stop`` is set, then one zero command."""
         self._spinner.start()
         self._publish_status(time.monotonic())
+        arrived = -math.inf
         while not stop.is_set():
-            self.metronome.wait()
+            deadline = self.metronome.wait()
             with self.lock:
                 tick = self.core.tick(time.monotonic())
             self._publish_command(tick.u, tick.stamp)
             done = time.monotonic()
+            if tick.stamp and tick.arrived > arrived:  # a new state: lock onto its phase
+                arrived = tick.arrived
+                error = phase_error(arrived, deadline, self.period, LEAD * self.period)
+                self.metronome.shift(PHASE_GAIN * error)
             if tick.stamp:
                 self.latency.add(done - tick.arrived)
             if self._last_publish is not None:

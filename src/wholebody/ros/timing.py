@@ -3,8 +3,9 @@
 :class:`Metronome` wakes at absolute deadlines ``t0 + k T`` (monotonic clock), so that
 sleep errors do not accumulate. A period whose work ends after the next deadline **misses**
 the deadlines it overran: they are counted and skipped (the loop goes on at the next
-deadline still ahead), never made up by a burst of late commands. :meth:`Metronome.shift` moves the deadlines a
-little (the node's phase lock onto the robot's states, :func:`phase_error`).
+deadline still ahead), never made up by a burst of late commands. :meth:`Metronome.shift`
+moves the deadlines a little (the node's phase lock onto the robot's states,
+:func:`phase_error`).
 
 :class:`Window` keeps the last ``size`` samples of a quantity (a step time, a latency) for
 its percentiles.

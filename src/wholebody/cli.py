@@ -491,6 +491,72 @@ def _add_sweep_command(sub: argparse._SubParsersAction) -> None:
     sweep.set_defaults(func=_sweep)
 
 
+ROS_BACKENDS = ("projection", "hqp")
+
+
+def _rate(text: str) -> float:
+    """A ``--rate`` in Hz: a finite number > 0."""
+    try:
+        rate = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a rate in Hz, got {text!r}") from None
+    if not 0 < rate < float("inf"):
+        raise argparse.ArgumentTypeError(f"the rate must be > 0 Hz, got {text}")
+    return rate
+
+
+def _add_ros_commands(sub: argparse._SubParsersAction) -> None:
+    """``ros`` (the controller as a ROS 2 node) and ``ros-sim`` (a simulated robot)."""
+    ros = sub.add_parser("ros", help="run the controller as a ROS 2 node (the ros extra): "
+                         "joint states and targets in, velocity commands out")  # fmt: skip
+    ros.add_argument("robot", metavar="ROBOT", help="bundled name, directory or robot.toml")
+    ros.add_argument("--task", action="extend", nargs="+", default=None, metavar="FRAME",
+                     help="the frames to control (default: the arms' tool "
+                     "frames); its target topic is /wholebody/FRAME/target")  # fmt: skip
+    ros.add_argument("--stack", default=None, metavar="FILE",
+                     help="run a scenario file's [stack] and hands instead of the default "
+                     "stack (frame tasks, a posture, the limits)")  # fmt: skip
+    ros.add_argument("--backend", choices=ROS_BACKENDS, default="projection")
+    ros.add_argument("--rate", type=_rate, default=100.0, metavar="HZ",
+                     help="control rate (default 100 Hz)")  # fmt: skip
+    ros.set_defaults(func=_ros)
+    sim = sub.add_parser("ros-sim", help="a simulated robot on ROS 2 (the ros extra): "
+                         "publishes /joint_states (and /odom), integrates the "
+                         "commands")  # fmt: skip
+    sim.add_argument("robot", metavar="ROBOT", help="bundled name, directory or robot.toml")
+    sim.add_argument("--sim", choices=("kinematic", "mujoco"), default="kinematic",
+                     help="kinematic: the commands integrated exactly (default); mujoco: "
+                     "physics with joint servos (the sim extra)")  # fmt: skip
+    sim.add_argument("--rate", type=_rate, default=100.0, metavar="HZ",
+                     help="state rate (default 100 Hz)")  # fmt: skip
+    sim.set_defaults(func=_ros_sim)
+
+
+def _ros_ready() -> None:
+    """ROS discovery on this host unless set otherwise, and rclpy importable (else a
+    ConfigError saying what to install)."""
+    from wholebody.ros.environment import require_rclpy, ros_environment
+
+    ros_environment()
+    require_rclpy()
+
+
+def _ros(args: argparse.Namespace) -> int:
+    if args.stack is not None and args.task:
+        raise ConfigError("--task and --stack: a scenario's stack names its own frames")
+    _ros_ready()
+    from wholebody.ros.node import start
+
+    return start(args.robot, args.task, args.stack, args.backend, args.rate, args.ros_args)
+
+
+def _ros_sim(args: argparse.Namespace) -> int:
+    _ros_ready()
+    from wholebody.ros.sim_node import start
+
+    return start(args.robot, args.sim, args.rate, args.ros_args)
+
+
 def _terminated(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
@@ -628,6 +694,7 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     warm = sub.add_parser("warmup", help="compile the kernels now (once per machine, cached)")
     warm.set_defaults(func=_warmup)
     _add_humanlike_command(sub)
+    _add_ros_commands(sub)
     if stiffness:
         from wholebody.humanlike.cli import add_stiffness_parser
 
@@ -635,6 +702,15 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
     else:
         sub.add_parser("stiffness", help=STIFFNESS_HELP, add_help=False)
     return parser
+
+
+def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    """``argv`` before ``--ros-args``, and ``--ros-args`` with what follows (ROS's own
+    arguments: remappings, parameters, log levels), which go to rclpy as they are."""
+    if "--ros-args" not in argv:
+        return argv, []
+    i = argv.index("--ros-args")
+    return argv[:i], argv[i:]
 
 
 def _command(argv: Sequence[str]) -> str | None:
@@ -645,7 +721,11 @@ def _command(argv: Sequence[str]) -> str | None:
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(stiffness=_command(argv) == "stiffness")
+    argv, ros_args = _split_ros_args(argv)
     args = parser.parse_args(argv)
+    args.ros_args = ros_args
+    if ros_args and args.command not in ("ros", "ros-sim"):
+        parser.error("--ros-args is for the ros and ros-sim commands")
     try:
         return int(args.func(args) or 0)
     except BrokenPipeError:  # the reader left (``wholebody info | head -1``)

@@ -30,7 +30,7 @@ from wholebody.errors import FrameError, WholebodyError
 from wholebody.robot._names import Named, suggest
 from wholebody.robot.actuation import Actuation, build_actuation
 from wholebody.robot.arms import arm_chain
-from wholebody.robot.base import BaseModel, base_model
+from wholebody.robot.base import ANGULAR_ACTUATORS, BaseModel, base_model
 from wholebody.robot.building import build_model, geometry_model
 from wholebody.robot.com import total_mass
 from wholebody.robot.compiled import RobotKinematics
@@ -130,8 +130,8 @@ class Robot(Configurations):
         for k, name in enumerate(self.actuated_joints):
             if name in self.base.wheel_joints:
                 a[k] = wheels
-            elif name not in self._joint_ids:  # a planar base's x, y, yaw
-                a[k] = angular if k == 2 else linear
+            elif name not in self._joint_ids:  # a planar or floating base's virtual actuator
+                a[k] = angular if name in ANGULAR_ACTUATORS else linear
         for name in sorted(given, key=lambda n: n not in self.groups):  # groups, then joints
             if name in self.groups:
                 a[self.groups[name].indices] = given[name]

@@ -63,6 +63,7 @@ def test_talos_loads_standing_on_its_soles(talos):
 
 def test_floating_jacobians_equal_finite_differences_on_the_manifold(talos, rng):
     mask = actuated_support_mask(talos)
+    hand = talos.frame(HANDS[1])
     for _ in range(2):
         q = talos.random_configuration(rng, margin=0.1, base_range=0.5)
         q[3:7] = pin.Quaternion(pin.exp3(rng.uniform(-0.5, 0.5, 3))).coeffs()  # tilted too
@@ -72,9 +73,9 @@ def test_floating_jacobians_equal_finite_differences_on_the_manifold(talos, rng)
         np.testing.assert_allclose(talos.update(q).com_jacobian(),
                                    jacobian_fd(talos, q, lambda s: s.com_position()),
                                    atol=1e-6)  # fmt: skip
-        f = talos.frame(HANDS[1])
-        H = frame_hessian(talos.update(q), f, mask)
-        np.testing.assert_allclose(H, jacobian_fd(talos, q, lambda s: s.jacobian(f)), atol=1e-6)
+        H = frame_hessian(talos.update(q), hand, mask)
+        np.testing.assert_allclose(H, jacobian_fd(talos, q, lambda s: s.jacobian(hand)),
+                                   atol=1e-6)  # fmt: skip
 
 
 def test_the_base_moves_in_its_own_frame_and_reads_back_as_roll_pitch_yaw(talos, rng):

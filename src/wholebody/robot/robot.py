@@ -39,6 +39,7 @@ from wholebody.robot.configurations import Configurations
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
 from wholebody.robot.sim import SimSettings
 from wholebody.robot.state import RobotState
+from wholebody.robot.swerve import SwerveModule, swerve_modules
 from wholebody.robot.urdf import UrdfInfo, read_urdf
 from wholebody.robot.wheels import check_base_geometry
 
@@ -86,6 +87,11 @@ class Robot(Configurations):
         self.base_frame: Frame = self.frame(self.urdf.root)
         """The URDF's root link (the moving base of a mobile robot)."""
         self._init_actuation(build_actuation(config, self.model, self.urdf, base))
+        self.swerve: tuple[SwerveModule, ...] = swerve_modules(
+            self.model, self.base, self._joint_ids, config, self.urdf
+        )
+        """A swerve base's modules (:func:`wholebody.robot.swerve.module_commands` turns
+        the base twist into their commands); empty for another base."""
         kept = {g: j for g, j in config.groups.items() if g not in self._built.locked_groups}
         self.groups: dict[str, JointGroup] = Named(
             "joint group", {g: self._group(g, joints) for g, joints in kept.items()}

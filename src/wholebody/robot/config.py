@@ -68,8 +68,8 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
                                  # wholebody.tasks.AccelerationLimits
     joints = 20.0                # rad/s^2 (m/s^2 prismatic), default 20
     wheels = 40.0                # rad/s^2, the base's wheels, default 40
-    base_linear = 2.0            # m/s^2, planar base, default 2
-    base_angular = 4.0           # rad/s^2, planar base, default 4
+    base_linear = 2.0            # m/s^2, planar, swerve, floating base, default 2
+    base_angular = 4.0           # rad/s^2, planar, swerve, floating base, default 4
     waist = 5.0                  # any group or joint name: its own (a joint's wins)
 """
 

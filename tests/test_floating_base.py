@@ -25,8 +25,7 @@ from wholebody.robot.hessian import actuated_support_mask, frame_hessian
 from wholebody.robot.urdf import example_robot_data_share
 from wholebody.solvers import ProjectionSolver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.tasks import FrameTask, JointPositionLimits, PostureTask, VelocityLimits
-from wholebody.tasks.base import Task, TaskRows
+from wholebody.tasks import ComTask, FrameTask, JointPositionLimits, PostureTask, VelocityLimits
 
 pytestmark = pytest.mark.skipif(
     example_robot_data_share() is None,
@@ -170,24 +169,17 @@ def test_both_backends_reach_with_the_soles_held(talos, solver):
     assert abs(log.q[-1][2] - log.q[0][2]) > 1e-3  # the pelvis moved: the base was solved for
 
 
-class CentreOfMassXY(Task):
-    """The whole-body centre of mass held above a point of the floor: ``J_com[:2] u =
-    kp (c - com_xy)`` (m/s)."""
-
-    def __init__(self, robot: wholebody.Robot, point: np.ndarray, kp: float) -> None:
-        super().__init__("com_xy")
-        self.point, self.kp = np.asarray(point, dtype=float), kp
-
-    @property
-    def dim(self) -> int:
-        return 2
-
-    def compute(self, state) -> TaskRows:
-        error = self.point - state.com_position()[:2]
-        return TaskRows(state.com_jacobian()[:2].copy(), self.kp * error, np.ones(2))
-
-    def error(self, state) -> np.ndarray:
-        return self.point - state.com_position()[:2]
+def test_the_centre_of_mass_task_has_the_jacobian_of_its_error(talos, rng):
+    q = talos.random_configuration(rng, margin=0.1)
+    com = ComTask(talos, "xz", target=[0.1, 0.2, 0.9], kp=2.0)
+    rows = com.compute(talos.update(q))
+    np.testing.assert_allclose(rows.J, -jacobian_fd(talos, q, com.error), atol=1e-6)
+    np.testing.assert_allclose(rows.v, 2.0 * com.error(talos.update(q)))
+    home = ComTask(talos, "xz").target  # the default: the centre of mass at home
+    np.testing.assert_allclose(com.error(talos.update(talos.home())), [0.1 - home[0],
+                                                                      0.9 - home[2]])  # fmt: skip
+    with pytest.raises(DimensionError, match="axes"):
+        ComTask(talos, "xw")
 
 
 @pytest.mark.slow
@@ -204,7 +196,7 @@ def test_talos_stands_in_mujoco_while_its_hands_reach(talos):
     state = talos.update(q0)
     pelvis = FrameTask(talos, talos.base_frame, position=False, kp=5.0)
     pelvis.set_target(state.pose(talos.base_frame).copy())
-    level = [CentreOfMassXY(talos, state.com_position()[:2].copy(), kp=5.0), pelvis]
+    level = [ComTask(talos, "xy", kp=5.0), pelvis]
     stack, references, goals, soles = _stand_and_reach(talos, [level], feet_kp=10.0)
     kinematic = wholebody.Controller(talos, stack, ProjectionSolver(), dt=DT,
                                      references=references).run(q0, 2.5)  # fmt: skip

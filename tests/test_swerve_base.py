@@ -156,3 +156,24 @@ def test_the_swerve_base_drives_a_reach(centauro, solver):
         angles, speeds = module_commands(centauro.swerve, u[:3], angles)
         np.testing.assert_allclose(module_twist(centauro.swerve, angles, speeds), u[:3],
                                    atol=1e-12)  # fmt: skip
+
+
+def test_the_swerve_base_drives_under_physics(centauro):
+    """In MuJoCo the base is the planar servo of a twist-commanded base; the held steering
+    and drive joints, whose URDF gives them no range, are joints without limits there that
+    no command moves."""
+    pytest.importorskip("mujoco")
+    from wholebody.sim import MujocoPlant
+
+    plant = MujocoPlant(centauro, settings=centauro.sim_settings)
+    q = centauro.home()
+    plant.reset(q)
+    u = np.zeros(centauro.nu)
+    u[0] = 0.2  # m/s forward
+    for _ in range(50):
+        q = plant.step(q, u, 0.02)
+    assert plant.stop_reason is None
+    assert q[0] == pytest.approx(0.2 * 1.0, abs=0.01) and abs(q[1]) < 1e-3
+    model = centauro.model
+    steering = [model.joints[model.getJointId(j)].idx_q for j in STEERING]
+    np.testing.assert_allclose(q[steering], 0.0, atol=1e-3)

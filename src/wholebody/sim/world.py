@@ -134,6 +134,10 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
                          "MuJoCo model does not support (revolute, prismatic, continuous, a "
                          "planar or free-flyer root)")  # fmt: skip
     k = joint.idx_q
+    if not lo[k] < hi[k]:  # no range: a joint no velocity of u moves (a swerve module's)
+        body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
+                       damping=settings.damping)  # fmt: skip
+        return (name,)
     body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
                    damping=settings.damping, limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                    range=[float(lo[k]), float(hi[k])])  # fmt: skip

@@ -41,6 +41,7 @@ def centauro() -> wholebody.Robot:
 
 def test_centauro_is_a_swerve_base_commanded_by_its_twist(centauro):
     assert centauro.base.type == "swerve" and len(centauro.swerve) == 4
+    assert "ankle_yaw_1/j_wheel_1 at (0.2500, 0.2224) m" in centauro.summary()
     assert centauro.actuated_joints[:3] == ("base_vx", "base_vy", "base_wz")
     assert centauro.nu == 16 and not set(STEERING + DRIVES) & set(centauro.actuated_joints)
     for m in centauro.swerve:  # the legs straight under the hips, the wheels 0.124 m

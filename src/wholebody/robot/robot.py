@@ -266,6 +266,9 @@ class Robot(Configurations):
             f"  base: {self.base.type}; nq = {self.nq}, nv = {self.nv}, nu = {self.nu} "
             f"actuated velocities; mass {self.mass:g} kg",
         ]
+        if self.swerve:
+            modules = (f"{m.steering}/{m.drive} at ({m.x:.4f}, {m.y:.4f}) m" for m in self.swerve)
+            lines.append("  swerve modules: " + ", ".join(modules))
         if self.locked:
             lines.append(f"  locked: {len(self.locked)} joints ({_abridged(list(self.locked))})")
         if self._followers:

@@ -193,7 +193,7 @@ class CollisionModel:
         self._request.gjk_tolerance = GJK_TOLERANCE
         self._warned_meshes = False
         self.excluded: dict[tuple[str, str], str] = {}
-        base = [robot.model.getJointId(w) for w in robot.config.base.wheels]
+        base = [robot.model.getJointId(w) for w in (*robot.base.wheel_joints, *robot.base.held)]
         self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)

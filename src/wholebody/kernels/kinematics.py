@@ -69,10 +69,43 @@ def frame_kinematics(
             Jf[5, k] += a * wz
 
 
+SCALAR_POSITION, ANGLE_PAIR, ROLL, PITCH, YAW = 0, 1, 2, 3, 4
+"""How :func:`joint_positions` reads a position from ``q``: a scalar, a (cos, sin) pair, or
+the roll, pitch or yaw of a unit quaternion ``(x, y, z, w)`` (a free flyer's orientation)."""
+
+
+@kernel
+def _rpy(q: np.ndarray, i: int, which: int) -> float:
+    """Roll, pitch or yaw (rad; ``R = Rz(yaw) Ry(pitch) Rx(roll)``, pitch in [-pi/2, pi/2])
+    of the unit quaternion ``q[i:i + 4] = (x, y, z, w)``, as Pinocchio's ``rpy.matrixToRpy``
+    of its rotation matrix; at pitch +-pi/2 exactly (roll and yaw then turn about one axis)
+    roll 0 and the whole heading in yaw."""
+    x, y, z, w = q[i], q[i + 1], q[i + 2], q[i + 3]
+    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
+    c2 = r21 * r21 + r22 * r22  # cos(pitch)^2
+    if which == PITCH:
+        return math.atan2(-r20, math.sqrt(c2))
+    if c2 < 1e-24:
+        if which == ROLL:
+            return 0.0
+        return math.atan2(-2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z))
+    if which == ROLL:
+        return math.atan2(r21, r22)
+    return math.atan2(2.0 * (x * y + w * z), 1.0 - 2.0 * (y * y + z * z))
+
+
 @kernel
 def joint_positions(q: np.ndarray, index: np.ndarray, pair: np.ndarray, out: np.ndarray) -> None:
-    """One scalar position per actuated velocity: ``q[index[k]]``, or for an angle stored as
-    a (cos, sin) pair (``pair[k]``) ``atan2(q[index[k] + 1], q[index[k]])`` in (-pi, pi]."""
+    """One scalar position per actuated velocity from ``q[index[k]]``, read as ``pair[k]``
+    says: the scalar itself (:data:`SCALAR_POSITION`), the angle ``atan2(q[i + 1], q[i])`` in
+    (-pi, pi] of a (cos, sin) pair (:data:`ANGLE_PAIR`), or the :data:`ROLL`, :data:`PITCH`
+    or :data:`YAW` (rad) of a free flyer's quaternion ``q[i:i + 4]``."""
     for k in range(out.shape[0]):
         i = index[k]
-        out[k] = math.atan2(q[i + 1], q[i]) if pair[k] else q[i]
+        how = pair[k]
+        if how == ANGLE_PAIR:
+            out[k] = math.atan2(q[i + 1], q[i])
+        elif how >= ROLL:
+            out[k] = _rpy(q, i, how)
+        else:
+            out[k] = q[i]

@@ -6,8 +6,11 @@ rad/s, or the twist of a directly actuated planar base), then one speed per rema
 joint in model order. The model velocity is ``v = A u`` with the constant actuation matrix
 ``A`` (nv x nu):
 
-* the planar root joint's rows are the base model's ``B`` (twist = ``B u_base``,
-  :mod:`wholebody.robot.base`), with the URDF's wheel axes (:mod:`wholebody.robot.wheels`);
+* the root joint's rows (three of a planar root, six of a free flyer) are the base model's
+  ``B`` (twist = ``B u_base``, :mod:`wholebody.robot.base`), with the URDF's wheel axes
+  (:mod:`wholebody.robot.wheels`);
+* a joint the base holds (a swerve module's steering and drive) has a zero row: no entry of
+  ``u`` moves it;
 * every other joint's row is a unit row in its own column;
 * a mimic joint ``q_f = m q_leader + o`` is no entry of ``u``: its row is ``m`` in the
   leader's column, and its position and velocity limits narrow the leader's.
@@ -26,7 +29,7 @@ import pinocchio as pin
 
 from wholebody.errors import ModelError
 from wholebody.robot._names import suggest
-from wholebody.robot.base import BaseModel
+from wholebody.robot.base import ANGULAR_ACTUATORS, BaseModel
 from wholebody.robot.config import RobotConfig
 from wholebody.robot.urdf import Mimic, UrdfInfo
 from wholebody.robot.wheels import wheel_geometry
@@ -35,7 +38,8 @@ __all__ = ["BASE", "CONTINUOUS", "SCALAR", "Actuation", "build_actuation"]
 
 SCALAR, CONTINUOUS, BASE = 0, 1, 2
 """What holds an entry of ``u``'s position in ``q``: one scalar (revolute, prismatic), a
-(cos, sin) pair (a continuous joint, a wheel), or a planar base's pose (a virtual actuator)."""
+(cos, sin) pair (a continuous joint, a wheel), or the root joint's pose (a virtual actuator of
+a planar or floating base)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +94,7 @@ def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo, base:
         base = wheel_geometry(model, base, joint_ids, config)
     # a mimic joint (not locked) is no velocity of u: its leader's moves it (below)
     followers = {f: m for f, m in urdf.mimic.items() if f in joint_ids}
-    moved = set(base.wheel_joints) | set(followers)
+    moved = set(base.wheel_joints) | set(followers) | set(base.held)
     names = list(base.actuators) + [n for n in joint_ids if n not in moved]
     nu = len(names)
     A = np.zeros((model.nv, nu))
@@ -101,12 +105,13 @@ def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo, base:
     qidx = np.zeros(nu, dtype=int)
     nb = len(base.actuators)
     if base.mobile:
-        A[0:3, 0:nb] = base.matrix
+        A[0 : base.root_nv, 0:nb] = base.matrix
     for k, name in enumerate(names):
-        if name not in joint_ids:  # virtual planar actuator
+        if name not in joint_ids:  # virtual base actuator
             kinds[k] = BASE
             qidx[k] = k
-            vmax[k] = config.base.max_linear_velocity if k < 2 else config.base.max_angular_velocity
+            b = config.base
+            vmax[k] = b.max_angular_velocity if name in ANGULAR_ACTUATORS else b.max_linear_velocity
             continue
         j = joint_ids[name]
         iv, iq = model.joints[j].idx_v, model.joints[j].idx_q
@@ -135,7 +140,7 @@ def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel,
                locked: Mapping[str, float]) -> dict[str, int]:  # fmt: skip
     """The model's joints below the root by name, each checked to have one DOF, and the
     wheels checked to be among them (not ``locked``)."""
-    first = 2 if base.mobile else 1  # joint 0 = universe, 1 = planar root if mobile
+    first = 2 if base.mobile else 1  # joint 0 = universe, 1 = the root joint if mobile
     joint_ids = {model.names[j]: j for j in range(first, model.njoints)}
     for name, j in joint_ids.items():
         if model.joints[j].nv != 1:
@@ -157,6 +162,11 @@ def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel,
                 "base.wheels",
                 f"wheel joint {w!r} is not a joint of {config.urdf.name}" + suggest(w, joint_ids),
             )
+    for k, m in enumerate(config.base.modules):
+        for j in (m.steering, m.drive):
+            if j not in joint_ids:
+                raise config.error(f"base.modules[{k}]", f"{j!r} is not a moving joint of "
+                                   f"{config.urdf.name}" + suggest(j, joint_ids))  # fmt: skip
     return joint_ids
 
 

@@ -1,8 +1,8 @@
 """From ``robot.toml`` and its URDF to the Pinocchio model the robot runs on.
 
-1. The URDF is loaded whole by Pinocchio (a planar root joint for a mobile base), as
-   ``[joints]`` changed it (:mod:`wholebody.robot.overrides`), its root placed at ``[base]
-   height`` above the floor.
+1. The URDF is loaded whole by Pinocchio (a planar root joint for a mobile base, a free
+   flyer for a floating one), as ``[joints]`` changed it (:mod:`wholebody.robot.overrides`),
+   its root placed at ``[base] height`` above the floor.
 2. ``[locked]`` joints leave the model: Pinocchio's reduced model
    (``pinocchio.buildReducedModel``) welds each at its position, so casters, fingers,
    suspensions or legs are no velocities of ``u`` and cost nothing in a step (TIAGo++ as
@@ -121,8 +121,11 @@ def _reduced(full: pin.Model, ids: list[int], reference: np.ndarray,
 
 def _load(config: RobotConfig, mobile: bool, text: str | None) -> pin.Model:
     """The URDF (or ``text``, its content changed) as a Pinocchio model, with a planar root
-    joint for a mobile base."""
-    root = (pin.JointModelPlanar(),) if mobile else ()
+    joint for a mobile base (a free flyer for a floating one)."""
+    if config.base.type == "floating":
+        root: tuple[pin.JointModel, ...] = (pin.JointModelFreeFlyer(),)
+    else:
+        root = (pin.JointModelPlanar(),) if mobile else ()
     try:
         if text is not None:
             return pin.buildModelFromXML(text, *root)
@@ -150,7 +153,7 @@ def _resolve_locked(config: RobotConfig, info: UrdfInfo, full: pin.Model,
                     mobile: bool) -> tuple[dict[str, float], tuple[str, ...]]:  # fmt: skip
     """``[locked]`` expanded to joints (names, patterns, groups, in the file's order; a later
     key overrides an earlier one for the same joint), with the followers of locked leaders."""
-    joints = list(full.names)[2 if mobile else 1 :]  # below the universe and a planar root
+    joints = list(full.names)[2 if mobile else 1 :]  # below the universe and a root joint
     locked: dict[str, float] = {}
     groups: list[str] = []
     for key, value in config.locked.items():

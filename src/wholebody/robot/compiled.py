@@ -15,6 +15,7 @@ through the proxies instead: slower, never wrong.
 from __future__ import annotations
 
 import ctypes
+import functools
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -53,9 +54,10 @@ class RobotKinematics:
     act_k, act_j, act_a
         The non-zero entries of the actuation matrix ``A`` (nv x nu): ``A[j, k] = a``.
     position_index, position_pair
-        Per actuated velocity, the index into ``q`` of its scalar position, and whether it is
-        an angle stored as a (cos, sin) pair there (wheels, continuous joints, a planar
-        base's yaw): see :func:`wholebody.kernels.kinematics.joint_positions`.
+        Per actuated velocity, the index into ``q`` of its scalar position, and how it is
+        stored there: a scalar, an angle as a (cos, sin) pair (wheels, continuous joints, a
+        planar base's yaw), or a floating base's roll, pitch or yaw of its quaternion (see
+        :func:`wholebody.kernels.kinematics.joint_positions`; made on first use).
     fast
         Whether :meth:`views` returns views of Pinocchio's memory (False: copies).
     """
@@ -67,22 +69,43 @@ class RobotKinematics:
         self.act_k = k.astype(np.int64)
         self.act_j = j.astype(np.int64)
         self.act_a = np.ascontiguousarray(A.T[k, j])
-        index = np.zeros(robot.nu, dtype=np.int64)
-        pair = np.zeros(robot.nu, dtype=np.bool_)
-        index[robot._scalar] = robot._scalar_q
-        index[robot._cont] = robot._cont_q
-        pair[robot._cont] = True
-        if robot._virtual.size:  # a planar base's (x, y, yaw): q[0], q[1], (q[2], q[3])
-            index[robot._virtual] = (0, 1, 2)
-            pair[robot._virtual[2]] = True
-        self.position_index, self.position_pair = index, pair
-        for arr in (self.act_k, self.act_j, self.act_a, index, pair):
+        for arr in (self.act_k, self.act_j, self.act_a):
             arr.setflags(write=False)
         self._tables: tuple[np.ndarray, np.ndarray] | None = None
         self._data: pin.Data | None = None
         self._J = self._oMf = None
         self.fast = False
         self._make_views(robot.data)
+
+    @functools.cached_property
+    def _positions(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(position_index, position_pair)`` (class docstring)."""
+        from wholebody.kernels import kinematics as kk  # (imports numba: only when asked for)
+
+        robot = self.robot
+        index = np.zeros(robot.nu, dtype=np.int64)
+        how = np.zeros(robot.nu, dtype=np.int64)
+        index[robot._scalar] = robot._scalar_q
+        index[robot._cont] = robot._cont_q
+        how[robot._cont] = kk.ANGLE_PAIR
+        virtual = robot._virtual
+        if robot.base.floating:  # (x, y, z): q[0:3]; roll, pitch, yaw of the quaternion q[3:7]
+            index[virtual] = (0, 1, 2, 3, 3, 3)
+            how[virtual[3:]] = (kk.ROLL, kk.PITCH, kk.YAW)
+        elif virtual.size:  # a planar base's (x, y, yaw): q[0], q[1], (q[2], q[3])
+            index[virtual] = (0, 1, 2)
+            how[virtual[2]] = kk.ANGLE_PAIR
+        for arr in (index, how):
+            arr.setflags(write=False)
+        return index, how
+
+    @property
+    def position_index(self) -> np.ndarray:
+        return self._positions[0]
+
+    @property
+    def position_pair(self) -> np.ndarray:
+        return self._positions[1]
 
     def support(self, frames: list[Frame]) -> np.ndarray:
         """(F, nv) boolean: whether each velocity coordinate moves each frame (the columns

@@ -22,17 +22,21 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
                                  # joints of the root link turning about its +y or -y
                                  # axis (x forward, z up); a differential base's two
                                  # wheels share one axle, anywhere along x
-    type = "fixed" | "mecanum" | "differential" | "planar"
-    height = 0.0                 # m, any type: the root link's origin above the floor (z);
-                                 # the root (a pelvis, a base's centre) is placed there for
-                                 # kinematics, collision, drawing and physics (default 0)
+    type = "fixed" | "mecanum" | "differential" | "planar" | "swerve" | "floating"
+    height = 0.0                 # m, any type but floating: the root link's origin above the
+                                 # floor (z); the root (a pelvis, a base's centre) is placed
+                                 # there for kinematics, collision, drawing and physics
+                                 # (default 0; a floating base stands on its lowest frame)
     wheels = [...]               # mecanum: 4 joints FL, FR, RL, RR; differential: left, right
     wheel_radius = 0.08          # m, mecanum and differential (checked to 1 % against the
                                  # wheels' cylinder, sphere or mesh in the URDF)
     wheel_base = 0.50            # m, front-rear axle distance, mecanum
     track = 0.44                 # m, left-right wheel distance, mecanum and differential
-    max_linear_velocity = 1.0    # m/s, planar (default 1.0)
-    max_angular_velocity = 1.0   # rad/s, planar (default 1.0)
+    max_linear_velocity = 1.0    # m/s, planar, swerve, floating (default 1.0)
+    max_angular_velocity = 1.0   # rad/s, planar, swerve, floating (default 1.0)
+    modules = [                  # swerve: one table per steered wheel (wholebody.robot.swerve)
+      { steering = "<joint>", drive = "<joint>", wheel_radius = 0.124 },
+    ]
 
     [groups]                     # optional; a joint belongs to at most one group
     name = ["joint", ...]
@@ -79,8 +83,8 @@ Schema (every key is checked; unknown keys are errors, to catch typos)::
                                  # wholebody.tasks.AccelerationLimits
     joints = 20.0                # rad/s^2 (m/s^2 prismatic), default 20
     wheels = 40.0                # rad/s^2, the base's wheels, default 40
-    base_linear = 2.0            # m/s^2, planar base, default 2
-    base_angular = 4.0           # rad/s^2, planar base, default 4
+    base_linear = 2.0            # m/s^2, planar, swerve, floating base, default 2
+    base_angular = 4.0           # rad/s^2, planar, swerve, floating base, default 4
     waist = 5.0                  # any group or joint name: its own (a joint's wins)
 """
 
@@ -99,7 +103,7 @@ from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
 
 __all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "FrameConfig", "JointOverride",
-           "RobotConfig", "read_robot_config"]  # fmt: skip
+           "RobotConfig", "SwerveModuleConfig", "read_robot_config"]  # fmt: skip
 
 ACCELERATION_DEFAULTS: Mapping[str, float] = {
     "joints": 20.0,  # rad/s^2 (m/s^2 prismatic): inside the 15-40 of common cobots
@@ -109,8 +113,8 @@ ACCELERATION_DEFAULTS: Mapping[str, float] = {
 }
 """The acceleration limits of the classes of ``u`` that ``[acceleration]`` does not set."""
 
-BaseType = Literal["fixed", "mecanum", "differential", "planar"]
-BASE_TYPES: tuple[str, ...] = ("fixed", "mecanum", "differential", "planar")
+BaseType = Literal["fixed", "mecanum", "differential", "planar", "swerve", "floating"]
+BASE_TYPES: tuple[str, ...] = ("fixed", "mecanum", "differential", "planar", "swerve", "floating")
 ARM_FRAME_KEYS = ("shoulder", "elbow", "wrist", "tool")
 ARM_BODY_KEYS = ("upper_arm", "forearm")
 
@@ -128,6 +132,18 @@ class BaseConfig:
     max_angular_velocity: float = 1.0
     height: float = 0.0
     """The root link's origin above the floor (m)."""
+    modules: tuple[SwerveModuleConfig, ...] = ()
+    """A swerve base's steered wheels."""
+
+
+@dataclass(frozen=True)
+class SwerveModuleConfig:
+    """One steered wheel of a swerve base: its steering joint (about the base's z), its
+    drive joint (the wheel's spin) and the wheel radius (m)."""
+
+    steering: str
+    drive: str
+    wheel_radius: float
 
 
 JOINT_TYPES = ("revolute", "continuous", "prismatic")
@@ -412,13 +428,16 @@ def _base_of_type(r: _Reader, table: Mapping[str, Any], kind: str) -> BaseConfig
     if kind == "fixed":
         r.only(table, "base", ("type", "height"))
         return BaseConfig()
-    if kind == "planar":
-        r.only(table, "base", ("type", "height", "max_linear_velocity", "max_angular_velocity"))
+    if kind in ("planar", "floating"):
+        keys = ("type", "max_linear_velocity", "max_angular_velocity")
+        r.only(table, "base", keys if kind == "floating" else (*keys, "height"))
         return BaseConfig(
-            type="planar",
+            type=kind,  # type: ignore[arg-type]
             max_linear_velocity=r.number(table, "max_linear_velocity", "base", 1.0, True),
             max_angular_velocity=r.number(table, "max_angular_velocity", "base", 1.0, True),
         )
+    if kind == "swerve":
+        return _read_swerve(r, table)
     if kind == "mecanum":
         r.only(table, "base", ("type", "height", "wheels", "wheel_radius", "wheel_base",
                                "track"))  # fmt: skip
@@ -435,4 +454,32 @@ def _base_of_type(r: _Reader, table: Mapping[str, Any], kind: str) -> BaseConfig
         wheels=r.names(table, "wheels", "base", count=2),
         wheel_radius=r.number(table, "wheel_radius", "base", positive=True),
         track=r.number(table, "track", "base", positive=True),
+    )
+
+
+def _read_swerve(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:
+    """``[base] type = "swerve"``: the twist limits and at least two modules."""
+    r.only(table, "base", ("type", "height", "modules", "max_linear_velocity",
+                           "max_angular_velocity"))  # fmt: skip
+    modules = table.get("modules")
+    if not isinstance(modules, list) or len(modules) < 2:
+        raise r.fail("base.modules", "expected a list of at least two tables "
+                     '{ steering = "<joint>", drive = "<joint>", wheel_radius = <m> }')  # fmt: skip
+    out = []
+    for k, m in enumerate(modules):
+        where = f"base.modules[{k}]"
+        if not isinstance(m, dict):
+            raise r.fail(where, f"expected a table, got {type(m).__name__}")
+        r.only(m, where, ("steering", "drive", "wheel_radius"))
+        out.append(SwerveModuleConfig(
+            r.string(m, "steering", where), r.string(m, "drive", where),
+            r.number(m, "wheel_radius", where, positive=True)))  # fmt: skip
+    joints = [j for m in out for j in (m.steering, m.drive)]
+    if len(set(joints)) != len(joints):
+        raise r.fail("base.modules", "a joint appears twice among the modules' joints")
+    return BaseConfig(
+        type="swerve",
+        modules=tuple(out),
+        max_linear_velocity=r.number(table, "max_linear_velocity", "base", 1.0, True),
+        max_angular_velocity=r.number(table, "max_angular_velocity", "base", 1.0, True),
     )

@@ -2,13 +2,20 @@
 reading one position per actuated velocity from them, and moving along ``u``.
 
 ``q`` is Pinocchio's configuration vector (size ``nq``): a mobile base's planar root joint as
-``(x, y, cos yaw, sin yaw)``, a revolute or prismatic joint as its position, a continuous
+``(x, y, cos yaw, sin yaw)``, a floating base's free flyer as ``(x, y, z, qx, qy, qz, qw)`` (a
+unit quaternion), a revolute or prismatic joint as its position, a continuous
 joint (a wheel, an endless joint) as ``(cos, sin)`` of its angle. A mimic joint is always at
 ``multiplier q_leader + offset`` (every configuration made here keeps it there; ``u`` moves it
 with its leader, :mod:`wholebody.robot.actuation`). Locked joints are not in ``q`` at all.
 
 :meth:`~Configurations.joint_positions` reads ``q`` back as one scalar per entry of ``u``
-(rad, m), the coordinates joint limits and posture tasks are written in.
+(rad, m), the coordinates joint limits and posture tasks are written in; a floating base's
+six as ``(x, y, z, roll, pitch, yaw)``.
+
+A floating base **stands**: every configuration made here (neutral, home, by joint name, at
+random) has the base upright (a random or given heading) at the height that puts the model's
+lowest frame on the floor, z = 0 (:meth:`~Configurations.stand`); a humanoid's soles, for
+example.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -27,6 +35,9 @@ from wholebody.robot.actuation import BASE, CONTINUOUS, SCALAR, Actuation
 from wholebody.robot.base import BaseModel
 from wholebody.robot.config import RobotConfig
 from wholebody.robot.urdf import Mimic
+
+if TYPE_CHECKING:
+    from wholebody.robot.compiled import RobotKinematics
 
 __all__ = ["Configurations"]
 
@@ -52,6 +63,7 @@ class Configurations:
     _joint_ids: dict[str, int]
     _followers: dict[str, Mimic]
     _home: np.ndarray
+    kinematics: RobotKinematics
 
     def _init_configurations(self, act: Actuation) -> None:
         """Where each entry of ``u`` has its position in ``q``, and the neutral
@@ -76,12 +88,14 @@ class Configurations:
         self._cont_cos = _as_slice(self._cont_q)
         self._cont_sin = _as_slice(self._cont_q + 1)
         # where q holds (cos, sin) pairs: the planar root's yaw, every continuous joint
-        self._pairs = np.concatenate(([2] if self.base.mobile else [], self._cont_q)).astype(int)
+        planar = self.base.mobile and not self.base.floating
+        self._pairs = np.concatenate(([2] if planar else [], self._cont_q)).astype(int)
         self._pair_list: list[int] = self._pairs.tolist()
+        self._stand_data = self.model.createData()
         # the zero configuration, every joint whose range excludes 0 at its nearer limit
         self._neutral = pin.neutral(self.model)
         self._neutral[self._scalar_q] = np.clip(0.0, lower[self._scalar], upper[self._scalar])
-        self._couple(self._neutral)
+        self.stand(self._couple(self._neutral))
         self._neutral.setflags(write=False)
 
     def _couple(self, q: np.ndarray) -> np.ndarray:
@@ -92,12 +106,14 @@ class Configurations:
 
     # ------------------------------------------------------------------ making them
     def neutral(self) -> np.ndarray:
-        """The zero configuration: base at the world origin facing +x, all joints at 0 (a
-        joint whose range excludes 0 at its nearer limit, so that it is a valid state)."""
+        """The zero configuration: base at the world origin facing +x (a floating base above
+        it, standing), all joints at 0 (a joint whose range excludes 0 at its nearer limit,
+        so that it is a valid state)."""
         return self._neutral.copy()
 
     def home(self) -> np.ndarray:
-        """The home posture of ``robot.toml`` (base at the origin)."""
+        """The home posture of ``robot.toml`` (base at the origin; a floating base above it,
+        standing)."""
         return self._home.copy()
 
     def configuration(
@@ -105,7 +121,8 @@ class Configurations:
         joints: Mapping[str, float] | None = None,
         base_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> np.ndarray:
-        """A configuration from joint values (rad, m) by name and a base pose (x, y, yaw)."""
+        """A configuration from joint values (rad, m) by name and a base pose (x, y, yaw; a
+        floating base upright, standing)."""
         q = self._configuration_from(joints or {}, "joints")
         self._set_base(q, base_pose)
         return q
@@ -128,7 +145,19 @@ class Configurations:
                 q[j.idx_q : j.idx_q + 2] = math.cos(value), math.sin(value)
             else:
                 q[j.idx_q] = value
-        return self._couple(q)
+        return self.stand(self._couple(q))
+
+    def stand(self, q: np.ndarray) -> np.ndarray:
+        """For a floating base, ``q`` (in place) with the base raised or lowered so that the
+        lowest frame of the model (every frame but the world's) is at z = 0: the robot stands
+        on the floor with whatever is lowest. Other bases: ``q`` unchanged."""
+        if not self.base.floating:
+            return q
+        pin.framesForwardKinematics(self.model, self._stand_data, q)
+        low = min(M.translation[2] for M, f in zip(self._stand_data.oMf, self.model.frames,
+                                                   strict=True) if f.parentJoint > 0)  # fmt: skip
+        q[2] -= low
+        return q
 
     def _joint_value_error(self, name: str, value: object) -> tuple[str, int]:
         """``("", k)`` for a valid position of the actuated joint ``k``; else what is wrong,
@@ -157,6 +186,10 @@ class Configurations:
             raise DimensionError(f"base_pose must be three finite numbers (x m, y m, yaw rad), "
                                  f"got {pose!r}")  # fmt: skip
         x, y, yaw = map(float, values)
+        if self.base.floating:  # upright, turned by yaw about z: the height is unchanged
+            q[0:2] = x, y
+            q[3:7] = 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+            return
         q[0:4] = x, y, math.cos(yaw), math.sin(yaw)
 
     def random_configuration(
@@ -165,7 +198,8 @@ class Configurations:
         """A configuration drawn uniformly inside the joint limits shrunk by ``margin``
         (fraction of each range on each side; a joint without a limit on one side within 2 pi
         (rad or m) of the other, without any in [-pi, pi]), wheels at random angles, base
-        uniform in ``[-base_range, base_range]^2`` with any heading."""
+        uniform in ``[-base_range, base_range]^2`` with any heading (a floating base upright,
+        standing)."""
         if not (isinstance(margin, numbers.Real) and 0.0 <= margin < 0.5):
             raise DimensionError("random_configuration: margin is the fraction of each range kept "
                                  f"clear on each side, in [0, 0.5); got {margin!r}")  # fmt: skip
@@ -187,13 +221,20 @@ class Configurations:
         if self.base.mobile:
             x, y = rng.uniform(-base_range, base_range, 2)
             self._set_base(q, (x, y, rng.uniform(-np.pi, np.pi)))
-        return self._couple(q)
+        return self.stand(self._couple(q))
 
     # ------------------------------------------------------------------ reading them
     def joint_positions(self, q: np.ndarray) -> np.ndarray:
         """One scalar position per entry of ``u`` (rad or m): joint angles, wheel angles in
-        (-pi, pi], and for a directly actuated planar base its pose (x, y, yaw)."""
+        (-pi, pi], for a directly actuated planar base its pose (x, y, yaw), for a floating
+        base its (x, y, z, roll, pitch, yaw) (``R = Rz(yaw) Ry(pitch) Rx(roll)``)."""
         out = np.empty(self.nu)
+        if self.base.floating:  # the compiled core's reading (roll, pitch, yaw)
+            from wholebody.kernels.kinematics import joint_positions
+
+            kin = self.kinematics
+            joint_positions(q, kin.position_index, kin.position_pair, out)
+            return out
         out[self._scalar_ix] = q[self._scalar_qix]
         out[self._cont_ix] = np.arctan2(q[self._cont_sin], q[self._cont_cos])
         if self._virtual.size:
@@ -201,9 +242,12 @@ class Configurations:
         return out
 
     def base_pose(self, q: np.ndarray) -> np.ndarray:
-        """Base pose ``(x [m], y [m], yaw [rad])`` in the world (zeros for a fixed base)."""
+        """Base pose ``(x [m], y [m], yaw [rad])`` in the world (zeros for a fixed base; a
+        floating base's heading as in :meth:`joint_positions`)."""
         if not self.base.mobile:
             return np.zeros(3)
+        if self.base.floating:
+            return self.joint_positions(q)[[0, 1, 5]]
         return np.array([q[0], q[1], math.atan2(q[3], q[2])])
 
     # ------------------------------------------------------------------ checking them
@@ -225,6 +269,11 @@ class Configurations:
                 f"{q[i + 1]:g}) is not a (cos, sin) pair: q stores the base's yaw and every "
                 f"continuous joint's angle as cos and sin (nq = {self.nq} for nu = {self.nu}); "
                 "build q with robot.neutral(), robot.home() or robot.configuration()"
+            )
+        if self.base.floating and abs(float(q[3:7].dot(q[3:7])) - 1.0) > 1e-6:
+            raise DimensionError(
+                f"configuration of robot {self.name!r}: q[3:7] = {q[3:7]} is not a unit "
+                "quaternion (x, y, z, w): q stores the floating base's orientation so"
             )
         return q
 
@@ -250,12 +299,16 @@ class Configurations:
             c, s = q.item(i), q.item(i + 1)
             if abs(c * c + s * s - 1.0) > 1e-6:
                 return False
+        if self.base.floating:
+            x, y, z, w = q.item(3), q.item(4), q.item(5), q.item(6)
+            return abs(x * x + y * y + z * z + w * w - 1.0) <= 1e-6
         return True
 
     # ------------------------------------------------------------------ moving
     def integrate(self, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """Configuration reached from ``q`` by applying ``u`` for ``dt`` seconds (exact on
-        the configuration manifold: the planar base follows the SE(2) exponential)."""
+        the configuration manifold: the planar base follows the SE(2) exponential, a floating
+        base SE(3)'s)."""
         q = self._accept(q)
         u = float_array(u, f"actuated velocity of robot {self.name!r}")
         if u.shape != (self.nu,):

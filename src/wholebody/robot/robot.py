@@ -30,7 +30,7 @@ from wholebody.errors import FrameError, WholebodyError
 from wholebody.robot._names import Named, suggest
 from wholebody.robot.actuation import Actuation, build_actuation
 from wholebody.robot.arms import arm_chain
-from wholebody.robot.base import BaseModel, base_model
+from wholebody.robot.base import ANGULAR_ACTUATORS, BaseModel, base_model
 from wholebody.robot.building import build_model, geometry_model
 from wholebody.robot.com import total_mass
 from wholebody.robot.compiled import RobotKinematics
@@ -40,6 +40,7 @@ from wholebody.robot.overrides import urdf_text
 from wholebody.robot.parts import ArmChain, Body, Frame, JointGroup
 from wholebody.robot.sim import SimSettings
 from wholebody.robot.state import RobotState
+from wholebody.robot.swerve import SwerveModule, swerve_modules
 from wholebody.robot.urdf import UrdfInfo, read_urdf
 from wholebody.robot.wheels import check_base_geometry
 
@@ -90,6 +91,11 @@ class Robot(Configurations):
         self._init_actuation(
             build_actuation(config, self.model, self.urdf, base, self._built.locked)
         )
+        self.swerve: tuple[SwerveModule, ...] = swerve_modules(
+            self.model, self.base, self._joint_ids, config, self.urdf
+        )
+        """A swerve base's modules (:func:`wholebody.robot.swerve.module_commands` turns
+        the base twist into their commands); empty for another base."""
         kept = {g: j for g, j in config.groups.items() if g not in self._built.locked_groups}
         self.groups: dict[str, JointGroup] = Named(
             "joint group", {g: self._group(g, joints) for g, joints in kept.items()}
@@ -134,8 +140,8 @@ class Robot(Configurations):
         for k, name in enumerate(self.actuated_joints):
             if name in self.base.wheel_joints:
                 a[k] = wheels
-            elif name not in self._joint_ids:  # a planar base's x, y, yaw
-                a[k] = angular if k == 2 else linear
+            elif name not in self._joint_ids:  # a planar or floating base's virtual actuator
+                a[k] = angular if name in ANGULAR_ACTUATORS else linear
         for name in sorted(given, key=lambda n: n not in self.groups):  # groups, then joints
             if name in self.groups:
                 a[self.groups[name].indices] = given[name]
@@ -265,6 +271,9 @@ class Robot(Configurations):
             f"nv = {self.nv}, nu = {self.nu} "
             f"actuated velocities; mass {self.mass:g} kg",
         ]
+        if self.swerve:
+            modules = (f"{m.steering}/{m.drive} at ({m.x:.4f}, {m.y:.4f}) m" for m in self.swerve)
+            lines.append("  swerve modules: " + ", ".join(modules))
         if self.locked:
             lines.append(f"  locked: {len(self.locked)} joints ({_abridged(list(self.locked))})")
         if self._followers:

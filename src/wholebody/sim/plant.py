@@ -2,7 +2,8 @@
 
 Each control period the controller commands actuated velocities ``u``; the plant turns them
 into model velocities ``v = A u`` (a planar base's twist rotated into the world by the
-simulated yaw at every physics step) and runs ``dt / timestep`` physics steps in which every
+simulated yaw at every physics step; a floating base's six are not driven, the contacts and
+the joints carry it) and runs ``dt / timestep`` physics steps in which every
 degree of freedom of the robot follows its velocity through a **PI velocity servo with the
 robot's inertia** (an inverse-dynamics joint servo, as a torque-controlled robot runs it)::
 
@@ -14,8 +15,12 @@ on the joint's own inertia alone went unstable where two axes align and the iner
 sees collapses). Each torque is clamped at the joint's limit, a wheeled base's force so that
 no wheel exceeds its own (``s`` stops growing while clamped and never asks more than the
 limit at the start posture's inertia); ``b`` is the robot's gravity and Coriolis torque from
-the model when ``gravity_compensation``. ``M`` and ``b`` are the robot's own: a carried
-object's weight and the grasp's forces are not in them, the servo's lag holds them. Velocity
+the model when ``gravity_compensation``, less, under a floating base, the generalised force
+of the contacts at the last physics step (``J_c^T f_c``: the floor carries the robot through
+its legs, as the ankles' force sensors tell a torque-controlled humanoid). A floating base's
+own six have no servo and no torque: its acceleration in ``M(q) acc`` is taken as 0. ``M``
+and ``b`` are the robot's own: a carried object's weight and the grasp's forces are not in
+them, the servo's lag holds them. Velocity
 commands are ramped over the period from the last one (first-order hold), as a drive
 interpolates its setpoints. The controller then reads the simulated configuration, not its
 own integration: as it is, or through a ``sensor``
@@ -53,7 +58,7 @@ __all__ = ["MujocoPlant", "PhysicsLog"]
 @dataclass
 class PhysicsLog:
     """Per control period (rows), in the robot's velocity order (Pinocchio ``nv``; a planar
-    root's three are world x, y, yaw).
+    root's three are world x, y, yaw; a free flyer's six have no torque, always 0).
 
     Attributes
     ----------
@@ -131,11 +136,13 @@ class MujocoPlant:
     def _maps(self) -> None:
         """Index arrays between Pinocchio's ``q`` and MuJoCo's ``qpos``."""
         model, m = self.robot.model, self.model
-        scalar, cont, planar = [], [], []
+        scalar, cont, planar, free = [], [], [], []
         for i, names in self.world.joints.items():
             j = model.joints[i]
             adr = [int(m.jnt_qposadr[m.joint(n).id]) for n in names]
-            if len(names) == 3:
+            if j.nq == 7:  # a free flyer: (x, y, z, qx, qy, qz, qw), MuJoCo's (.., qw, ..)
+                free.append((j.idx_q, adr[0]))
+            elif len(names) == 3:
                 planar.append((j.idx_q, *adr))
             elif j.nq == 2:
                 cont.append((j.idx_q, adr[0]))
@@ -144,12 +151,15 @@ class MujocoPlant:
         self._scalar = np.array(scalar, dtype=int).reshape(-1, 2)
         self._cont = np.array(cont, dtype=int).reshape(-1, 2)
         self._planar = planar[0] if planar else None
+        self._free = free[0] if free else None
         self.planar = bool(planar)
         """Whether the robot's root is a planar base (its first three velocities: world x,
         y, yaw)."""
         self._dofs = self.world.dofs
+        # the velocities with a motor: all but a free flyer's six
+        self._driven = np.arange(6 if free else 0, self.robot.nv)
         self._actuators = np.array([m.actuator(m.joint(m.dof_jntid[d]).name).id
-                                    for d in self._dofs])  # fmt: skip
+                                    for d in self._dofs[self._driven]], dtype=int)  # fmt: skip
         self._A = np.asarray(self.robot.actuation)
         base = self.robot.base
         self._wheels = base.matrix if (planar and base.wheel_joints) else np.zeros((3, 0))
@@ -164,6 +174,10 @@ class MujocoPlant:
             iq, ax, ay, ayaw = self._planar
             qpos[[ax, ay]] = q[iq : iq + 2]
             qpos[ayaw] = np.arctan2(q[iq + 3], q[iq + 2])
+        if self._free is not None:
+            iq, a = self._free
+            qpos[a : a + 3] = q[iq : iq + 3]
+            qpos[a + 3 : a + 7] = q[iq + 6], q[iq + 3], q[iq + 4], q[iq + 5]
         return qpos
 
     def configuration(self) -> np.ndarray:
@@ -175,6 +189,10 @@ class MujocoPlant:
         if self._planar is not None:
             iq, ax, ay, ayaw = self._planar
             q[iq : iq + 4] = qpos[ax], qpos[ay], np.cos(qpos[ayaw]), np.sin(qpos[ayaw])
+        if self._free is not None:
+            iq, a = self._free
+            w, x, y, z = qpos[a + 3 : a + 7] / np.linalg.norm(qpos[a + 3 : a + 7])
+            q[iq : iq + 7] = *qpos[a : a + 3], x, y, z, w
         return q
 
     # ------------------------------------------------------------------ running
@@ -273,7 +291,7 @@ class MujocoPlant:
             mujoco.mj_step1(m, d)
             tau, asked, at_limit, wheel = self._servo(previous + (v - previous) * ((i + 1) / n))
             np.maximum(wheels, np.abs(wheel), out=wheels)
-            d.ctrl[self._actuators] = tau
+            d.ctrl[self._actuators] = tau[self._driven]
             np.maximum(peak, np.abs(tau), out=peak)
             np.maximum(demand, np.abs(asked), out=demand)
             saturated |= at_limit
@@ -327,11 +345,17 @@ class MujocoPlant:
             c, s = np.cos(yaw), np.sin(yaw)
             target[0], target[1] = c * v[0] - s * v[1], s * v[0] + c * v[1]
         error = target - d.qvel[self._dofs]
+        if self._free is not None:  # no servo on a floating base: its acceleration taken 0
+            error[:6] = 0.0
         self._acc[self._dofs] = self.kv * error + self.kp * self.lag
         mujoco.mj_mulM(self.model, d, self._force, self._acc)  # M(q) acc, sparse
         asked = self._force[self._dofs]
         if self.settings.gravity_compensation:
             asked += d.qfrc_bias[self._dofs]
+            if self._free is not None:  # what the floor carries, the joints need not
+                asked -= d.qfrc_constraint[self._dofs]
+        if self._free is not None:
+            asked[:6] = 0.0
         limit = self.world.effort
         tau = np.clip(asked, -limit, limit)
         at_limit = np.abs(asked) > limit

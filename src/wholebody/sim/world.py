@@ -12,6 +12,9 @@ is added here, from :class:`SimSettings`:
   about the world's z): **a planar base driven by velocity servos**, whose force limit is
   what the wheels' torque limits give through the base matrix; wheels spin on their own
   joints but do not touch the ground (no rolling contact, no slip);
+* a free-flyer root (a floating base) becomes MuJoCo's free joint, **not driven**: the robot
+  stands on its collision shapes, which then touch the floor (a humanoid's soles), and falls
+  if its joints do not hold it there;
 * every joint gets a torque motor (limit: the URDF's effort limit times
   ``effort_scale``), rotor inertia (``armature``) and viscous friction (``damping``);
 * the collision shapes of the URDF (meshes as their convex hulls) touch the scenario's
@@ -23,8 +26,8 @@ is added here, from :class:`SimSettings`:
   phase carries the object.
 
 Contact bits (``contype``/``conaffinity``): robot 1/0, fixed objects and the floor 2/3 and
-2/2, free objects 2/2: the robot touches fixed objects, free objects touch fixed objects and
-the floor.
+2/2 (the floor 2/3 under a floating base), free objects 2/2: the robot touches fixed objects
+(and the floor if its base floats), free objects touch fixed objects and the floor.
 """
 
 from __future__ import annotations
@@ -62,13 +65,15 @@ class World:
     model
         The ``mujoco.MjModel``.
     joints
-        Per Pinocchio joint (index from 1): its MuJoCo joint names (three for a planar root).
+        Per Pinocchio joint (index from 1): its MuJoCo joint names (three for a planar root,
+        one free joint of six dofs for a free-flyer root).
     effort
         Torque (N m) or force (N) limit per MuJoCo degree of freedom of the robot, in
         :attr:`dofs` order.
     dofs
         MuJoCo dof index of each Pinocchio velocity (``nv``): the planar root's three are the
-        world x, y and yaw slides.
+        world x, y and yaw slides, a free flyer's six its free joint's (MuJoCo's linear
+        velocity is in the world, Pinocchio's in the base frame; no servo drives them).
     objects
         Name of each free object -> its MuJoCo body id.
     welds
@@ -112,6 +117,9 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
                            axis=axis, damping=settings.damping,
                            armature=settings.armature)  # fmt: skip
         return names
+    if kind == "FreeFlyer":
+        body.add_freejoint(name=name)
+        return (name,)
     if kind in _SCALAR or kind == "RevoluteUnaligned":
         axis, jtype = _SCALAR.get(kind) or tuple(joint.extract().axis), mujoco.mjtJoint.mjJNT_HINGE
     elif kind in _SLIDE or kind == "PrismaticUnaligned":
@@ -124,8 +132,12 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
     else:
         raise ModelError(f"joint {name!r} of robot {robot.name!r} is a {kind} joint, which the "
                          "MuJoCo model does not support (revolute, prismatic, continuous, a "
-                         "planar root)")  # fmt: skip
+                         "planar or free-flyer root)")  # fmt: skip
     k = joint.idx_q
+    if not lo[k] < hi[k]:  # no range: a joint no velocity of u moves (a swerve module's)
+        body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
+                       damping=settings.damping)  # fmt: skip
+        return (name,)
     body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
                    damping=settings.damping, limited=mujoco.mjtLimited.mjLIMITED_TRUE,
                    range=[float(lo[k]), float(hi[k])])  # fmt: skip
@@ -220,7 +232,7 @@ def build_world(
     effort = _effort(robot, settings)
     joints = _add_robot(spec, robot, settings, effort)
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
-                            contype=2, conaffinity=2)  # fmt: skip
+                            contype=2, conaffinity=3 if robot.base.floating else 2)  # fmt: skip
     free = [obj.name for obj in objects if _add_object(spec, obj)]
     welds = list(dict.fromkeys(grasps))
     for name, frame in welds:
@@ -234,8 +246,11 @@ def build_world(
     model = spec.compile()
     dofs = np.empty(robot.nv, dtype=int)
     for i, names in joints.items():
-        for k, n in enumerate(names):
-            dofs[robot.model.joints[i].idx_v + k] = model.jnt_dofadr[model.joint(n).id]
+        jm = robot.model.joints[i]
+        adr = [model.jnt_dofadr[model.joint(n).id] for n in names]
+        if jm.nv == 6 and len(names) == 1:  # the free joint: its six dofs in a row
+            adr = list(range(adr[0], adr[0] + 6))
+        dofs[jm.idx_v : jm.idx_v + jm.nv] = adr
     wheels = _wheel_dofs(robot)
     return World(
         model, robot, joints, effort, dofs,
@@ -260,6 +275,8 @@ def _add_robot(spec: mujoco.MjSpec, robot: Robot, settings: SimSettings,
         _set_inertia(body, model.inertias[i])
         joints[i] = _add_joint(body, robot, i, settings)
         bodies[i] = body
+        if _kind(model.joints[i]) == "FreeFlyer":
+            continue  # a floating base: nothing drives it
         for k, name in enumerate(joints[i]):
             limit = float(effort[model.joints[i].idx_v + k])
             spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
@@ -294,10 +311,13 @@ def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
     """The limit of each Pinocchio velocity (N m, N): the URDF's effort times
     ``effort_scale``; a planar root's from its wheels through the base matrix (``tau = B^T
     W``, so ``|W_i| <= tau_max / max_j |B_ij|``) or, without wheels, ``base_force`` and
-    ``base_torque``."""
+    ``base_torque``; a free flyer's infinite (it has no motor: nothing is applied there)."""
     raw = np.array(robot.model.effortLimit, dtype=float)
     limit = np.where(np.isfinite(raw) & (raw < 1e30), raw, np.nan) * settings.effort_scale
     root = robot.model.joints[1] if robot.model.njoints > 1 else None
+    free = np.zeros(limit.size, dtype=bool)
+    if root is not None and _kind(root) == "FreeFlyer":
+        free[:6] = True
     if root is not None and _kind(root) == "Planar":
         base = robot.base
         wheels = _wheel_dofs(robot)
@@ -308,10 +328,11 @@ def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
                                  fallback)  # fmt: skip
         else:
             limit[:3] = [settings.base_force, settings.base_force, settings.base_torque]
-    bad = ~np.isfinite(limit) | (limit <= 0)
+    bad = (~np.isfinite(limit) | (limit <= 0)) & ~free
     if bad.any():
         names = [robot.model.names[j] for j in range(1, robot.model.njoints)
                  if bad[robot.model.joints[j].idx_v]]  # fmt: skip
         raise ModelError(f"robot {robot.name!r}: joints without an effort limit in the URDF "
                          f"({', '.join(names)}); a physics run needs one per joint")  # fmt: skip
+    limit[free] = np.inf
     return limit

@@ -15,6 +15,7 @@ from wholebody.tasks.base import (
     TaskRows,
 )
 from wholebody.tasks.collision import CollisionAvoidance
+from wholebody.tasks.com import ComTask
 from wholebody.tasks.frame import FrameTask
 from wholebody.tasks.inequality import FrameHalfSpace
 from wholebody.tasks.limits import AccelerationLimits, JointPositionLimits, VelocityLimits
@@ -29,6 +30,7 @@ __all__ = [
     "ArmPotentialEnergy",
     "Bounds",
     "CollisionAvoidance",
+    "ComTask",
     "FrameHalfSpace",
     "FrameTask",
     "HumanArmAngle",

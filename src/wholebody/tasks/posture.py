@@ -30,7 +30,8 @@ class PostureTask(Task):
     robot
         The robot.
     joints
-        A group name, a list of joint names, or None for every actuated velocity.
+        A group name, a list of joint names, or None for every actuated velocity (but a
+        floating base's six: the base is left free, as the contacts held by tasks decide it).
     target
         Reference positions (rad, m), one per joint; defaults to the home posture.
     kp
@@ -54,7 +55,7 @@ class PostureTask(Task):
     ) -> None:
         self.robot = robot
         if joints is None:
-            idx = np.arange(robot.nu)
+            idx = np.arange(len(robot.base.actuators) if robot.base.floating else 0, robot.nu)
             label = "posture"
         elif isinstance(joints, str):
             idx = robot.group(joints).indices
@@ -65,9 +66,10 @@ class PostureTask(Task):
         self.indices = np.array(idx, dtype=np.int64)
         self.indices.setflags(write=False)
         super().__init__(name or label, weight)
-        base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, planar actuators
+        base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, virtual actuators
         self.tracked = (~base)[idx]
-        """Per joint, whether it has a position error (False: wheels, a planar base)."""
+        """Per joint, whether it has a position error (False: wheels, a base's virtual
+        actuators)."""
         self.wrapped = ~robot.positional[idx] & ~base[idx]
         """Per joint, whether its error wraps into [-pi, pi) (endless joints)."""
         for a in (self.tracked, self.wrapped):

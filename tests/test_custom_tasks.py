@@ -15,17 +15,17 @@ from wholebody.errors import DimensionError, WholebodyError
 from wholebody.planning import MinimumJerkTrajectory
 from wholebody.testing import assert_objective_gradient, assert_task_jacobian
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guides" / "tasks.md"
 DT = 0.01
 
 
 def readme_tasks() -> dict:
-    """The README's CoMTask and UprightTask classes, as written there."""
-    code = next(b for b in re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+    """The guide's CoMTask and UprightTask classes (``docs/guides/tasks.md``), as written there."""
+    code = next(b for b in re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.S)
                 if "class CoMTask" in b)  # fmt: skip
     code = code[: code.index("robot = wb.load_robot")]
     namespace: dict = {"__name__": "readme_tasks"}
-    exec(compile(code, "README.md", "exec"), namespace)
+    exec(compile(code, str(GUIDE), "exec"), namespace)
     return namespace
 
 

@@ -31,7 +31,16 @@ def run_block(code: str, name: str) -> tuple[dict, str]:
     return namespace, out.getvalue()
 
 
-@pytest.mark.parametrize("index", range(len(BLOCKS)))
+SLOW_PAGES = ("docs/guides/physics.md",)  # (a MuJoCo run: in the full suite only)
+
+
+@pytest.mark.parametrize(
+    "index",
+    [
+        pytest.param(k, marks=pytest.mark.slow) if name.startswith(SLOW_PAGES) else k
+        for k, (name, _) in enumerate(NAMED)
+    ],
+)
 def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
     name, code = NAMED[index]

@@ -36,20 +36,28 @@ moved[:3, :3] = pin.exp3(np.array([0.0, 0.0, 0.3]))  # turned 0.3 rad about the 
 moved[:3, 3] = panel[:3, 3] + (0.0, 0.0, 0.15)  # and lifted 15 cm
 goal = moved @ np.linalg.inv(panel) @ left  # where the left hand carries it
 reference = wb.MinimumJerkTrajectory(left, goal, 3.0)
-controller = wb.Controller(robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference})
+controller = wb.Controller(
+    robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference}
+)
 log = controller.run(q0, 4.0)
 
 chain_error = np.linalg.norm(log.task_errors["chain"][:, :3], axis=1).max()  # m
 q = np.asarray(log.meta["final_q"])
 miss = np.linalg.norm(robot.frame_pose(q, "left_tool")[:3, 3] - goal[:3, 3])
-print(f"the closed chain's largest error {chain_error * 1e3:.4f} mm; "
-      f"the left hand ends {miss * 1e3:.4f} mm from its goal")
-assert chain_error < 1e-4, f"the chain should hold within 0.1 mm, it erred {chain_error * 1e3:.3f} mm"
+print(
+    f"the closed chain's largest error {chain_error * 1e3:.4f} mm; "
+    f"the left hand ends {miss * 1e3:.4f} mm from its goal"
+)
+assert chain_error < 1e-4, (
+    f"the chain should hold within 0.1 mm, it erred {chain_error * 1e3:.3f} mm"
+)
 assert miss < 1e-3, f"the panel should reach its goal, the hand is {miss * 1e3:.2f} mm off"
 
 if args.viz:
     from wholebody.viz import replay
 
-    panels = np.array([robot.frame_pose(x, "left_tool") @ np.linalg.inv(left) @ panel for x in log.q])
+    panels = np.array(
+        [robot.frame_pose(x, "left_tool") @ np.linalg.inv(left) @ panel for x in log.q]
+    )
     draw = lambda scene: scene.box("panel", (0.3, 0.5, 0.02), panel)  # noqa: E731
     replay(robot, log.t, log.q, draw=draw, extra={"scene/props/panel": panels})

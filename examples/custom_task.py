@@ -39,7 +39,7 @@ class CoMTask(wb.Task):
 
 robot = wb.load_robot("mobile_humanoid")
 q0 = robot.home()
-com = CoMTask(robot, robot.update(q0).com_position() + (0.03, 0.0, -0.02))
+com = CoMTask(robot, robot.update(q0).com_position() + np.array([0.03, 0.0, -0.02]))
 assert_task_jacobian(com, robot, q0, lambda s: s.com_position())  # raises if J is wrong
 print("the CoM task's Jacobian matches finite differences")
 for solver in (wb.ProjectionSolver(), wb.HierarchicalQPSolver()):

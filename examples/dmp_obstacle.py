@@ -30,9 +30,11 @@ path = path.positions
 inside = cylinder_distance(free, centre, radius, height).min()
 clearance = cylinder_distance(path, centre, radius, height).min()
 miss = np.linalg.norm(path[-1] - goal)
-print(f"without the potential the path enters the cylinder (distance {inside * 1e3:.1f} mm); "
-      f"with it the path keeps {clearance * 1e3:.1f} mm off it and ends {miss * 1e3:.3f} mm "
-      "from the goal")
+print(
+    f"without the potential the path enters the cylinder (distance {inside * 1e3:.1f} mm); "
+    f"with it the path keeps {clearance * 1e3:.1f} mm off it and ends {miss * 1e3:.3f} mm "
+    "from the goal"
+)
 assert inside == 0.0, "the cylinder should stand in the free path's way"
 assert clearance > 0.0, f"the path should keep off the cylinder, it came {clearance:.4f} m close"
 assert miss < 1e-3, f"the path should end at the goal, it ends {miss * 1e3:.2f} mm off"
@@ -41,13 +43,14 @@ if args.viz:
     import wholebody as wb
     from wholebody.viz import replay
 
+    SHIFT = np.array([0.5, 0.0, 0.6])  # m: shown in front of the robot
     pose = np.eye(4)
-    pose[:3, 3] = centre + (0.5, 0.0, 0.6)  # shown in front of the robot
+    pose[:3, 3] = centre + SHIFT  # shown in front of the robot
     robot = wb.load_robot("mobile_humanoid")
 
     def draw(scene):  # the paths and the cylinder beside the robot at home
-        scene.path("free", free + (0.5, 0.0, 0.6), color="#999999")
-        scene.path("dmp", path + (0.5, 0.0, 0.6))
+        scene.path("free", free + SHIFT, color="#999999")
+        scene.path("dmp", path + SHIFT)
         scene.cylinder("cylinder", radius, height, pose)
 
     replay(robot, np.zeros(1), robot.home()[None], draw=draw)

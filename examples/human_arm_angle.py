@@ -26,17 +26,23 @@ goal = start.copy()
 goal[:3, 3] += (0.25, 0.0, 0.2)  # 25 cm forward, 20 cm up (m, world)
 people = wb.HumanArmAngleTask(robot, "right", default_arm_angle_model())  # a yardstick only
 gaps = {}
-for name, weights in [("spring", wb.PaperWeights()),
-                      ("human arm angle", wb.PaperWeights(spring="none", human_arm_angle_kp=10.0))]:
+for name, weights in [
+    ("spring", wb.PaperWeights()),
+    ("human arm angle", wb.PaperWeights(spring="none", human_arm_angle_kp=10.0)),
+]:
     hand = wb.FrameTask(robot, "right_tool", kp=20.0, ki=5.0)
     stack = wb.paper_stack(robot, [hand], weights=weights)  # hands, (arm angles,) H, limits
     reference = wb.MinimumJerkTrajectory(start, goal, 2.0)
-    log = wb.Controller(robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference}).run(q0, 2.5)
+    log = wb.Controller(
+        robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference}
+    ).run(q0, 2.5)
     state = robot.update(log.meta["final_q"])
     gaps[name] = abs(people.error(state)[0])  # |alpha - alpha_h| (rad)
     miss = np.linalg.norm(state.position(hand.frame) - goal[:3, 3])
-    print(f"{name}: the arm angle ends {np.degrees(gaps[name]):.1f} deg from people's; "
-          f"the hand {miss * 1e3:.3f} mm from its goal")
+    print(
+        f"{name}: the arm angle ends {np.degrees(gaps[name]):.1f} deg from people's; "
+        f"the hand {miss * 1e3:.3f} mm from its goal"
+    )
     assert miss < 1e-3, f"{name}: the hand should reach its goal, {miss * 1e3:.2f} mm off"
 
 assert gaps["human arm angle"] < gaps["spring"], "the task should bring the arm closer to people's"

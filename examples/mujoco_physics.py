@@ -39,8 +39,10 @@ controller = wb.Controller(
 log = controller.run(q0, 3.0)
 
 lag = np.linalg.norm(log.frame_positions[hand.name] - log.reference_positions[hand.name], axis=1)
-print(f"under physics the hand stays within {lag.max() * 1e3:.2f} mm of its reference "
-      f"({lag[-1] * 1e3:.3f} mm at the end); peak torques: {np.max(plant.log.torque_peak):.1f} N m")
+print(
+    f"under physics the hand stays within {lag.max() * 1e3:.2f} mm of its reference "
+    f"({lag[-1] * 1e3:.3f} mm at the end); peak torques: {np.max(plant.log.torque_peak):.1f} N m"
+)
 assert log.meta.get("stopped") is None, f"the simulation stopped: {log.meta.get('stopped')}"
 assert lag.max() < 5e-3, f"the hand should track within 5 mm, it lagged {lag.max() * 1e3:.2f} mm"
 

@@ -35,14 +35,19 @@ stack = wb.Stack(
     [wb.JointPositionLimits(robot), wb.VelocityLimits(robot)],
 )
 reference = wb.MinimumJerkTrajectory(start, goal, 2.0)
-controller = wb.Controller(robot, stack, wb.HierarchicalQPSolver(), dt=0.01, references={hand: reference})
+controller = wb.Controller(
+    robot, stack, wb.HierarchicalQPSolver(), dt=0.01, references={hand: reference}
+)
 log = controller.run(q0, 3.0)
 
-closest = min(min((p.distance for p in model.distances(robot.update(q), 0.05)), default=0.05)
-              for q in log.q)
+closest = min(
+    min((p.distance for p in model.distances(robot.update(q), 0.05)), default=0.05) for q in log.q
+)
 TOLERANCE = 5e-4  # m: the damper is first order in the step (the README measures 1 um)
 miss = np.linalg.norm(log.frame_positions[hand.name][-1] - goal[:3, 3])
-print(f"closest approach to the box {closest * 1e3:.2f} mm (safety {collision.safety * 1e3:.0f} mm)")
+print(
+    f"closest approach to the box {closest * 1e3:.2f} mm (safety {collision.safety * 1e3:.0f} mm)"
+)
 print(f"the hand ends {miss * 1e3:.2f} mm from its goal")
 assert closest >= collision.safety - TOLERANCE, f"came {closest * 1e3:.2f} mm close to the box"
 assert closest < collision.safety + 5e-3, "the box should be in the way (the rows should act)"

@@ -33,8 +33,10 @@ for hand, shift in zip(hands, [(0.02, 0.01, 0.01), (0.01, -0.02, 0.02)], strict=
 solvers = (wb.ProjectionSolver(), wb.HierarchicalQPSolver())
 results = [s.solve(stack, robot.update(q0), dt=0.01) for s in solvers]
 gap = np.abs(results[0].u - results[1].u).max()
-print(f"one step from home: the two u differ by {gap:.1e} (rad/s, m/s); "
-      f"statuses {[r.status.name for r in results]}")
+print(
+    f"one step from home: the two u differ by {gap:.1e} (rad/s, m/s); "
+    f"statuses {[r.status.name for r in results]}"
+)
 assert all(r.status == wb.SolverStatus.OK for r in results), "no bound should be active"
 assert gap < 1e-9, f"without active bounds the backends should agree, they differ by {gap:.1e}"
 

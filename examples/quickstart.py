@@ -42,5 +42,9 @@ assert miss < 1e-4, f"the hand should end within 0.1 mm of its goal, it is {miss
 if args.viz:
     from wholebody.viz import replay
 
-    replay(robot, np.arange(len(qs)) * 0.01, np.array(qs),
-           draw=lambda scene: scene.marker("goal", goal[:3, 3]))
+    replay(
+        robot,
+        np.arange(len(qs)) * 0.01,
+        np.array(qs),
+        draw=lambda scene: scene.marker("goal", goal[:3, 3]),
+    )

@@ -33,7 +33,9 @@ start = robot.frame_pose(q0, hand.frame)
 goal = start.copy()
 goal[:3, 3] += (1.2, 0.0, 0.0)  # m, world: beyond the arm's reach from where the base stands
 reference = wb.MinimumJerkTrajectory(start, goal, 4.0)
-controller = wb.Controller(robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference})
+controller = wb.Controller(
+    robot, stack, wb.ProjectionSolver(), dt=0.01, references={hand: reference}
+)
 log = controller.run(q0, 5.0)
 
 q = np.asarray(log.meta["final_q"])

@@ -22,7 +22,7 @@ args = parser.parse_args()
 robot = wb.load_robot("ur5")
 elbow = robot.actuated_joints.index("elbow_joint")
 lower, upper = robot.position_limits
-reach = wb.PostureTask(robot, "elbow_joint", name="elbow", target=[3.5], kp=2.0)  # rad
+reach = wb.PostureTask(robot, ["elbow_joint"], name="elbow", target=[3.5], kp=2.0)  # rad
 stack = wb.Stack(
     robot,
     [[reach], [wb.PostureTask(robot)]],
@@ -41,8 +41,10 @@ for _ in range(300):  # 3 s at 100 Hz
 result = controller.result
 print(result.report())
 cause = UnmetCause(result.causes()["elbow"])
-print(f"elbow at {robot.joint_positions(q)[elbow]:.6f} rad (limit {upper[elbow]:.6f}); "
-      f"the elbow task is unmet: {cause.name}")
+print(
+    f"elbow at {robot.joint_positions(q)[elbow]:.6f} rad (limit {upper[elbow]:.6f}); "
+    f"the elbow task is unmet: {cause.name}"
+)
 assert abs(robot.joint_positions(q)[elbow] - upper[elbow]) < 1e-6, "the elbow should rest at pi"
 assert cause == UnmetCause.JOINT_LIMIT, f"the cause should be the joint limit, got {cause.name}"
 assert "elbow_joint" in result.report(), "the report should name the joint at its limit"

@@ -1,0 +1,82 @@
+"""``SolverResult.report()``: the solve in words, checked on real solves."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import wholebody as wb
+from wholebody.solvers.unmet import UnmetCause
+
+ROBOT = wb.load_robot("mobile_humanoid")
+LIMITS = (wb.JointPositionLimits, wb.VelocityLimits)
+
+
+def _limits() -> list:
+    return [c(ROBOT) for c in LIMITS]
+
+
+@pytest.mark.parametrize("solver", [wb.ProjectionSolver(), wb.HierarchicalQPSolver()])
+def test_a_met_solve_reads_met_with_its_errors_and_no_active_limit(solver):
+    hand = wb.FrameTask(ROBOT, "right_tool", kp=1.0)
+    stack = wb.Stack(ROBOT, [[hand], [wb.PostureTask(ROBOT)]], _limits())
+    q = ROBOT.home()
+    goal = ROBOT.frame_pose(q, "right_tool")
+    goal[:3, 3] += (0.01, 0.0, 0.0)
+    hand.set_target(goal)
+    result = solver.solve(stack, ROBOT.update(q), 0.01)
+    text = result.report()
+    assert str(result) == text
+    line = next(x for x in text.splitlines() if x.strip().startswith("right_tool:"))
+    assert "met" in line and "UNMET" not in line and "10.000 mm" in line, text
+    assert "active limits: none" in text
+    assert result.causes()["right_tool"] == UnmetCause.MET
+
+
+@pytest.mark.parametrize("solver", [wb.ProjectionSolver(), wb.HierarchicalQPSolver()])
+def test_a_joint_at_its_limit_is_named_with_its_bound_and_the_cause(solver):
+    joint = "right_elbow_flexion"
+    j = ROBOT.actuated_joints.index(joint)
+    upper = ROBOT.position_limits[1][j]
+    elbow = wb.PostureTask(ROBOT, [joint], name="elbow", target=[upper + 0.3], kp=2.0)
+    stack = wb.Stack(ROBOT, [[elbow], [wb.PostureTask(ROBOT)]], _limits())
+    controller = wb.Controller(ROBOT, stack, solver, dt=0.01)
+    q = ROBOT.home()
+    for _ in range(150):
+        controller.step(q)
+        q = controller.q_next.copy()
+    assert abs(ROBOT.joint_positions(q)[j] - upper) < 1e-6
+    result = controller.result
+    text = result.report()
+    line = next(x for x in text.splitlines() if x.strip().startswith("elbow:"))
+    assert "UNMET: at a joint position limit" in line, text
+    assert f"{joint}: at its upper bound (joint_position_limits)" in text, text
+    assert result.causes()["elbow"] == UnmetCause.JOINT_LIMIT
+    controller.step(q)  # solved again: the old result keeps only its own fields
+    assert "details gone" in result.report()
+    with pytest.raises(ValueError, match="solved again"):
+        result.causes()
+
+
+@pytest.mark.parametrize("solver", [wb.ProjectionSolver(), wb.HierarchicalQPSolver()])
+def test_a_hand_held_by_a_collision_pair_names_the_pair(solver):
+    q = ROBOT.home()
+    start = ROBOT.frame_pose(q, "right_tool")
+    ball = np.eye(4)
+    ball[:3, 3] = start[:3, 3] + (0.0, 0.2, 0.0)  # around the hand's goal
+    collision = wb.CollisionAvoidance(
+        ROBOT, obstacles=[wb.Obstacle("ball", "sphere", (0.05,), ball)]
+    )
+    hand = wb.FrameTask(ROBOT, "right_tool", kp=5.0, orientation=False)
+    stack = wb.Stack(ROBOT, [[collision], [hand]], _limits())
+    hand.set_target(ball)  # inside the ball: the pair holds the hand 1 cm off it
+    controller = wb.Controller(ROBOT, stack, solver, dt=0.01)
+    for _ in range(200):
+        controller.step(q)
+        q = controller.q_next.copy()
+    result = controller.result
+    text = result.report()
+    line = next(x for x in text.splitlines() if x.strip().startswith("right_tool:"))
+    assert result.causes()["right_tool"] == UnmetCause.INEQUALITY, text
+    assert "held back by an inequality task" in line and "|ball at 10.0" in line, text
+    assert "inequality rows at their bound: collision[0]" in text, text

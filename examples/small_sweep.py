@@ -43,9 +43,10 @@ if __name__ == "__main__":  # the workers are spawned processes: they import thi
     path.write_text(CAMPAIGN)
     result = run_sweep(load_campaign(path), out / "results", workers=2, progress=False)
     for row in result.rows:
+        step = row["step_time_us/median"]
         print(
             f"case {row['index']}: energy {row['stack.energy']}, kp {row['hands.right.kp']:.1f}: "
-            f"{row['status']}, {row['steps']} steps, median step {row['step_time_us/median']:.0f} us"  # noqa: E501
+            f"{row['status']}, {row['steps']} steps, median step {step:.0f} us"
         )
     print(f"{result.cases} cases in {result.wall_time:.1f} s; table: {result.files['table']}")
     assert result.cases == 4 and result.ran == 4, f"4 cases should run, {result.ran} did"

@@ -24,19 +24,19 @@ SIM = pytest.mark.skipif(
     importlib.util.find_spec("mujoco") is None,
     reason="needs the sim extra (MuJoCo): pip install '.[sim]'",
 )
-SLOW = pytest.mark.slow
+SLOW = pytest.mark.slow  # each example is a new process: 2-5 s; three stay in the fast subset
 CASES = {
     "quickstart": [],
     "custom_task": [],
-    "projection_vs_hqp": [],
+    "projection_vs_hqp": [SLOW],
     "closed_chain": [SLOW],
     "dmp_obstacle": [],
     "human_arm_angle": [SLOW],
     "reachability_map": [SLOW],
     "small_sweep": [SLOW],
     "tiago_base_reach": [ROBOTS, SLOW],
-    "panda_box": [ROBOTS],
-    "ur5_joint_limit": [ROBOTS],
+    "panda_box": [ROBOTS, SLOW],
+    "ur5_joint_limit": [ROBOTS, SLOW],
     "mujoco_physics": [SIM, SLOW],
 }
 

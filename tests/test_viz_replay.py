@@ -21,8 +21,10 @@ def test_replay_saves_a_standalone_page_and_closes_its_server(tmp_path, capsys, 
         original(scene)
 
     monkeypatch.setattr(wb.viz.Scene, "close", close)
-    page = replay(robot, np.array([0.0, 1.0]), qs, page=tmp_path / "r.html", hold=False,
-                  draw=lambda scene: scene.marker("goal", (0.5, 0.0, 1.0)))  # fmt: skip
+    marker = lambda scene: scene.marker("goal", (0.5, 0.0, 1.0))  # noqa: E731
+    page = replay(
+        robot, np.array([0.0, 1.0]), qs, page=tmp_path / "r.html", hold=False, draw=marker
+    )
     text = page.read_text()
     assert page == tmp_path / "r.html" and "<html" in text.lower()
     assert len(text) > 10_000, "the page should hold the robot's meshes and the replay"

@@ -58,8 +58,8 @@ def causes(result: SolverResult) -> dict[str, UnmetCause]:
 def status_report(result: SolverResult) -> str:
     """``result`` as text (module docstring)."""
     head = (
-        f"{result.status.name}: u max |{np.abs(result.u).max(initial=0.0):.3g}| "
-        f"(rad/s, m/s), solved in {result.solve_time * 1e6:.0f} us"
+        f"{result.status.name}: max |u| {np.abs(result.u).max(initial=0.0):.3g} (rad/s, m/s), "
+        f"solved in {result.solve_time * 1e6:.0f} us"
     )
     lines = [head]
     arena = fresh_source(result)

@@ -59,5 +59,5 @@ if args.viz:
     panels = np.array(
         [robot.frame_pose(x, "left_tool") @ np.linalg.inv(left) @ panel for x in log.q]
     )
-    draw = lambda scene: scene.box("panel", (0.3, 0.5, 0.02), panel)  # noqa: E731
+    draw = lambda scene: scene.box("panel", (0.3, 1.0, 0.02), panel)  # noqa: E731
     replay(robot, log.t, log.q, draw=draw, extra={"scene/props/panel": panels})

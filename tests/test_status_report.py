@@ -80,3 +80,5 @@ def test_a_hand_held_by_a_collision_pair_names_the_pair(solver):
     assert result.causes()["right_tool"] == UnmetCause.INEQUALITY, text
     assert "held back by an inequality task" in line and "|ball at 10.0" in line, text
     assert "inequality rows at their bound: collision[0]" in text, text
+    line = next(x for x in text.splitlines() if x.strip().startswith("collision:"))
+    assert "rows in use" in line and "0 at their bound" not in line, text

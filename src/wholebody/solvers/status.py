@@ -88,27 +88,57 @@ def _plain(result: SolverResult) -> list[str]:
 
 
 def _levels(result: SolverResult, arena: Arena) -> list[str]:
-    """Per level, its residual, then per task its weight, error, and met or not (and why)."""
+    """Per level, its residual (and scale), then its tasks, inequality tasks and objectives."""
     found, _ = classify(arena)
+    out = []
+    for k, level in enumerate(arena.level_names):
+        title = f"level {k}" + ("" if level == f"level {k}" else f" {level!r}")
+        scale = result.scale[k] if k < result.scale.size else 1.0
+        scaled = f", its motion scaled by {scale:.3g}" if scale < 1.0 else ""
+        out.append(f"{title}: residual {result.level_residuals[k]:.3g}{scaled}")
+        out += _task_lines(arena, k, found)
+        out += _other_lines(arena, k)
+    return out
+
+
+def _task_lines(arena: Arena, k: int, found: np.ndarray) -> list[str]:
+    """The equality tasks of level ``k``: weight, error, met or not and why."""
     tasks = arena.view(lay.I_TASK)
     entries = _entries(arena)
     unmet = arena.view(lay.I_INFEASIBLE)
     out = []
-    for k, level in enumerate(arena.level_names):
-        out.append(f"level {k} {level!r}: residual {result.level_residuals[k]:.3g}")
-        for t in np.flatnonzero(tasks[:, 0] == k):
-            name = arena.task_names[t]
-            task = entries.get(name)
-            weight = _weight(task)
-            error = _error(task, arena, int(t))
-            if unmet[t]:
-                cause = UnmetCause(int(found[t]))
-                verdict = f"UNMET: {CAUSE_WORDS.get(cause, cause.name)}"
-                if cause == UnmetCause.INEQUALITY:
-                    verdict += f" ({', '.join(_active_rows(arena, k)) or 'rows not named'})"
-            else:
-                verdict = "met"
-            out.append(f"  {name}: weight {weight}, {error}; {verdict}")
+    for t in np.flatnonzero(tasks[:, 0] == k).tolist():
+        name = arena.task_names[t]
+        task = entries.get(name)
+        verdict = "met"
+        if unmet[t]:
+            cause = UnmetCause(int(found[t]))
+            verdict = f"UNMET: {CAUSE_WORDS.get(cause, cause.name)}"
+            if cause == UnmetCause.INEQUALITY:
+                verdict += f" ({', '.join(_active_rows(arena, k)) or 'rows not named'})"
+        out.append(f"  {name}: weight {_weight(task)}, {_error(task, arena, t)}; {verdict}")
+    return out
+
+
+def _other_lines(arena: Arena, k: int) -> list[str]:
+    """The inequality tasks (rows at their bound) and objectives (weight) of level ``k``."""
+    stack = getattr(arena, "stack", None)
+    entries = {} if stack is None else {t.name: t for t in stack.levels[k].inequalities}
+    out = []
+    for level, first, last, name in arena.inequality_rows:
+        if level == k:
+            at = [r for r in _active_rows(arena, k, only=k) if r.startswith(f"{name}[")]
+            used = len(getattr(entries.get(name), "pairs", range(last - first)))
+            out.append(
+                f"  {name}: inequality, {used} of {last - first} rows in use, "
+                f"{len(at)} at their bound"
+            )
+    if stack is not None:
+        gain = stack.levels[k].gain  # 1/s: the descent's step, u = -gain W^-1 grad H
+        out += [
+            f"  {o.name}: objective, weight {o.weight:g}, level gain {gain:g}"
+            for o in stack.levels[k].objectives
+        ]
     return out
 
 
@@ -119,6 +149,7 @@ def _entries(arena: Arena) -> dict[str, object]:
 
 
 def _weight(task: object) -> str:
+    """A task's weight as text (a number, or one per row; "?" without the task)."""
     w = getattr(task, "weight", None)
     if w is None:
         return "?"
@@ -176,9 +207,10 @@ def _limits(result: SolverResult, arena: Arena) -> list[str]:
     return out
 
 
-def _active_rows(arena: Arena, k: int) -> list[str]:
-    """The inequality rows of level ``k`` and above at their bound at the solution: their
-    names, with the pair and its distance for a collision task."""
+def _active_rows(arena: Arena, k: int, only: int | None = None) -> list[str]:
+    """The inequality rows of level ``k`` and above (``only``: of that level alone) at their
+    bound at the solution: their names, with the pair and its distance for a collision
+    task."""
     C, CB = arena.view(lay.F_C), arena.view(lay.F_CB)
     x = arena.view(lay.F_U)[0]
     entries = {}
@@ -187,7 +219,7 @@ def _active_rows(arena: Arena, k: int) -> list[str]:
         entries = {t.name: t for lv in stack.levels for t in lv.inequalities}
     out = []
     for level, first, last, name in arena.inequality_rows:
-        if level > k:
+        if level > k or (only is not None and level != only):
             continue
         pairs = getattr(entries.get(name), "pairs", [])
         for r in range(first, last):

@@ -82,3 +82,25 @@ def test_a_hand_held_by_a_collision_pair_names_the_pair(solver):
     assert "inequality rows at their bound: collision[0]" in text, text
     line = next(x for x in text.splitlines() if x.strip().startswith("collision:"))
     assert "rows in use" in line and "0 at their bound" not in line, text
+
+
+def test_a_result_without_its_solve_reports_its_own_fields():
+    result = wb.SolverResult(
+        u=np.array([0.5, -1.0]),
+        status=wb.SolverStatus.INFEASIBLE,
+        level_residuals=np.array([0.2]),
+        task_residuals={"hand": 0.2, "posture": 0.0},
+        active_bounds=np.array([1]),
+        infeasible=[("level 0", "hand")],
+    )
+    text = str(result)
+    assert text.splitlines()[0].startswith("INFEASIBLE: max |u| 1 ")
+    assert "hand: residual 0.2, UNMET" in text and "posture: residual 0, met" in text
+    assert "active bounds on u[1]" in text
+
+
+def test_a_problem_solved_without_a_stack_is_reported_from_its_rows():
+    stack = wb.Stack(ROBOT, [[wb.FrameTask(ROBOT, "right_tool")]], _limits())
+    problem = stack.evaluate(ROBOT.update(ROBOT.home()), 0.01)
+    text = wb.HierarchicalQPSolver().solve_problem(problem).report()
+    assert "right_tool: weight ?, demand" in text and "; met" in text, text

@@ -1,4 +1,4 @@
-"""The quickstart's reach under MuJoCo physics: inertia, torque limits and joint servos.
+"""A reach under MuJoCo physics: the robot's inertia, its torque limits and joint servos.
 
 The same controller drives a MuJoCo model built from the robot's own Pinocchio model
 (`wholebody.sim.MujocoPlant`) and reads the simulated configuration back every 10 ms. The

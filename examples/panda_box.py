@@ -2,8 +2,9 @@
 
 `CollisionAvoidance` is a level above the hand: for every pair of the robot's links and the
 box closer than 5 cm, a velocity-damper row keeps it at least 1 cm apart (the links drawn as
-capsules, so the compiled kernel measures them). The hand takes the way over the box. Needs
-the `robots` extra (example-robot-data's Panda URDF): `pip install ".[robots]"`.
+capsules, so the compiled kernel measures them). The straight way would take the hand closer;
+the rows hold it at 1 cm as it passes. Needs the `robots` extra (example-robot-data's Panda
+URDF): `pip install ".[robots]"`.
 
     python examples/panda_box.py [--viz]
 """

@@ -40,7 +40,7 @@ for _ in range(300):  # 3 s at 100 Hz
 
 result = controller.result
 print(result.report())
-cause = UnmetCause(result.causes()["elbow"])
+cause = result.causes()["elbow"]  # why the elbow task is unmet (an UnmetCause)
 print(
     f"elbow at {robot.joint_positions(q)[elbow]:.6f} rad (limit {upper[elbow]:.6f}); "
     f"the elbow task is unmet: {cause.name}"

@@ -41,6 +41,28 @@ CASES = {
 }
 
 
+def _run(name: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """``python examples/NAME.py ARGS`` in ``cwd`` with this checkout's ``src`` first (and its
+    temporary files, such as a replay page, in ``cwd``)."""
+    env = {
+        **os.environ,
+        "TMPDIR": str(cwd),
+        "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
+    }
+    return subprocess.run(
+        [sys.executable, str(EXAMPLES / f"{name}.py"), *args],
+        cwd=cwd,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+ARGS = {"small_sweep": ["--out", "sweep"]}  # (relative to the test's own directory)
+
+
 def test_every_example_is_listed_short_and_documented():
     found = {p.stem for p in EXAMPLES.glob("*.py")}
     assert found == set(CASES), f"examples not tested: {found - set(CASES)}"
@@ -56,18 +78,17 @@ def test_every_example_is_listed_short_and_documented():
     "name", [pytest.param(name, marks=marks, id=name) for name, marks in CASES.items()]
 )
 def test_example_runs_and_its_claims_hold(name, tmp_path):
-    env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
-    }
-    out = subprocess.run(
-        [sys.executable, str(EXAMPLES / f"{name}.py")],
-        cwd=tmp_path,
-        env=env,
-        stdin=subprocess.DEVNULL,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    out = _run(name, ARGS.get(name, []), tmp_path)
     assert out.returncode == 0, f"{name} failed:\n{out.stdout}\n{out.stderr}"
     assert out.stdout.strip(), f"{name} printed no result"
+
+
+@pytest.mark.slow
+def test_viz_saves_the_replay_page_without_a_terminal(tmp_path):
+    """``--viz`` with no terminal on standard input: the page is written and the script ends
+    (the viewer waits for Enter only on a terminal)."""
+    out = _run("closed_chain", ["--viz"], tmp_path)
+    assert out.returncode == 0, out.stderr
+    page = next(line for line in out.stdout.splitlines() if line.startswith("replay: "))
+    path = Path(page.split()[1])
+    assert path.is_file() and path.stat().st_size > 10_000 and tmp_path in path.parents

@@ -2,8 +2,9 @@
 
 `Controller.step_many` runs many independent states of one stack in one kernel call per
 core: here every state starts at home and reaches for its own target of a 20 x 20 grid in a
-vertical plane in front of the torso, 3 s at 100 Hz each. A target is reachable when the hand
-ends within 1 mm of it. Near targets are, far ones are not.
+vertical plane through the hand, 3 s at 100 Hz each. A target counts as reachable when the
+hand ends within 1 mm of it: kinematically, collisions unchecked, and a target that a local
+minimum keeps the reach from counts as unreachable. Near targets are, far ones are not.
 
     python examples/reachability_map.py [--viz]
 """

@@ -221,14 +221,15 @@ def _active_rows(arena: Arena, k: int, only: int | None = None) -> list[str]:
     for level, first, last, name in arena.inequality_rows:
         if level > k or (only is not None and level != only):
             continue
-        pairs = getattr(entries.get(name), "pairs", [])
-        for r in range(first, last):
+        pairs = getattr(entries.get(name), "pairs", None)  # a collision task's rows' pairs
+        used = last if pairs is None else min(last, first + len(pairs))
+        for r in range(first, used):
             value = float(C[r] @ x)
             lo, hi = CB[0, r], CB[1, r]
             if min(abs(value - lo), abs(value - hi)) > _ROW * (1.0 + abs(value)):
                 continue
             label = f"{name}[{r - first}]"
-            if r - first < len(pairs):
+            if pairs is not None:
                 p = pairs[r - first]
                 label += f" {p.name} at {p.distance * 1e3:.2f} mm"
             out.append(label)

@@ -1,8 +1,9 @@
 """A task of your own: the whole-body centre of mass moved 3 cm forward and 2 cm down.
 
-The README's "Write your own task": a task says how many rows it has and computes them,
-`J u = v` in actuated coordinates. `wholebody.testing` checks its Jacobian against finite
-differences of its error before the task is used with both solvers.
+The README's "Write your own task", the short way: the task gives its error `e(q)` and its
+Jacobian `J = de/du` in actuated coordinates; the base class asks for `de/dt = -gain e`.
+`wholebody.testing` checks the Jacobian against finite differences of the error before the
+task is used with both solvers. (`wb.ComTask` is the built-in, compiled one.)
 
     python examples/custom_task.py [--viz]
 """
@@ -20,27 +21,25 @@ args = parser.parse_args()
 
 
 class CoMTask(wb.Task):
-    """The centre of mass to a point: rows J_com u = kp (c_d - c) (m/s)."""
+    """The centre of mass to a point: e = c - c_d (m, world), de/du = J_com (3 x nu)."""
 
-    def __init__(self, robot: wb.Robot, target: np.ndarray, kp: float = 5.0) -> None:
-        super().__init__("com", 1.0)
-        self.target, self.kp = np.asarray(target, dtype=float), kp
+    dim = 3
 
-    @property
-    def dim(self) -> int:
-        return 3
+    def __init__(self, target: np.ndarray, gain: float = 5.0) -> None:
+        super().__init__("com", 1.0, gain=gain)  # gain in 1/s
+        self.target = np.asarray(target, dtype=float)
 
-    def error(self, state: wb.RobotState) -> np.ndarray:  # m, world
-        return self.target - state.com_position()
+    def compute_error(self, state: wb.RobotState) -> np.ndarray:
+        return state.com_position() - self.target
 
-    def compute(self, state: wb.RobotState) -> wb.TaskRows:
-        return wb.TaskRows(state.com_jacobian(), self.kp * self.error(state), self.weights)
+    def compute_jacobian(self, state: wb.RobotState) -> np.ndarray:
+        return state.com_jacobian()
 
 
 robot = wb.load_robot("mobile_humanoid")
 q0 = robot.home()
-com = CoMTask(robot, robot.update(q0).com_position() + np.array([0.03, 0.0, -0.02]))
-assert_task_jacobian(com, robot, q0, lambda s: s.com_position())  # raises if J is wrong
+com = CoMTask(robot.update(q0).com_position() + np.array([0.03, 0.0, -0.02]))
+assert_task_jacobian(com, robot, q0, com.compute_error)  # J = de/du, or it raises
 print("the CoM task's Jacobian matches finite differences")
 for solver in (wb.ProjectionSolver(), wb.HierarchicalQPSolver()):
     stack = wb.Stack(

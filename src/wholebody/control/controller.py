@@ -285,7 +285,9 @@ class Controller:
 
     @property
     def result(self) -> SolverResult:
-        """The last step's solve as a :class:`SolverResult` (made when asked for)."""
+        """The last step's solve as a :class:`SolverResult` (made when asked for);
+        ``print(controller.result)`` tells it in words until the next step
+        (:meth:`SolverResult.report`)."""
         plan = self._plan
         if plan is None:
             raise WholebodyError("Controller.result: no step was taken yet")

@@ -154,6 +154,7 @@ class Arena:
             infeasible=[(level, name) for t, name, level in reported if flags[t]],
             solve_time=solve_time,
             message=message,
+            source=self,
         )
 
     def write_result(self, result: SolverResult) -> None:

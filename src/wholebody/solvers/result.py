@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -63,6 +64,9 @@ class SolverResult:
         Wall time of the solve, seconds.
     message
         Free text (engine status, fallback taken).
+    source
+        The arena (a stack's plan) of the solve, for :meth:`report` and :meth:`causes`
+        while the stack has not been solved again; None for a result made by hand.
     """
 
     u: np.ndarray
@@ -74,6 +78,27 @@ class SolverResult:
     infeasible: list[tuple[str, str]] = field(default_factory=list)
     solve_time: float = 0.0
     message: str = ""
+    source: Any = field(default=None, repr=False, compare=False)
+
+    def report(self) -> str:
+        """The solve in words, per level and task: its error with its units, its weight,
+        met or not and why (:func:`wholebody.solvers.unmet.classify`), then the active limits
+        (joint, which bound, which limit) and the inequality rows at their bound (a collision
+        pair and its distance). Complete until the stack is solved again; after that, only
+        what the result holds (:mod:`wholebody.solvers.status`)."""
+        from wholebody.solvers.status import status_report
+
+        return status_report(self)
+
+    def causes(self) -> dict[str, Any]:
+        """Per equality task, its :class:`~wholebody.solvers.unmet.UnmetCause` in this solve
+        (MET when met); ValueError once the stack was solved again."""
+        from wholebody.solvers.status import causes
+
+        return causes(self)
+
+    def __str__(self) -> str:
+        return self.report()
 
     @property
     def limit_hit(self) -> bool:

@@ -40,8 +40,12 @@ from wholebody.scenarios import load_scenario, run_scenario
 from wholebody.scenarios.runner import scenario_robot
 from wholebody.tasks import ArmPotentialEnergy
 
-SCENARIOS = ("reach_generalisation", "obstacle_avoidance", "independent_dual_arm",
-             "coordinated_carry")  # fmt: skip
+SCENARIOS = (
+    "reach_generalisation",
+    "obstacle_avoidance",
+    "independent_dual_arm",
+    "coordinated_carry",
+)
 HUMAN_RANGE = (0.0, 0.8)  # rad: where most frames of people's arm angles lie
 
 
@@ -71,8 +75,9 @@ def final_energies(run) -> dict[str, float]:
     robot = scenario_robot(run.spec)
     state = robot.update(run.log.q[-1])
     learned = default_stiffness(robot)
-    return {arm: ArmPotentialEnergy(robot, arm, learned).evaluate(state).value
-            for arm in robot.arms}  # fmt: skip
+    return {
+        arm: ArmPotentialEnergy(robot, arm, learned).evaluate(state).value for arm in robot.arms
+    }
 
 
 def row(run) -> list[str]:
@@ -103,8 +108,18 @@ def main() -> None:
     )
     args = parser.parse_args()
     args.k = mean_label() if args.k is None else args.k
-    head = ["case", "MAE mm", "waist rad", "E left J", "alpha left deg", "left in range",
-            "E right J", "alpha right deg", "right in range", "failures"]  # fmt: skip
+    head = [
+        "case",
+        "MAE mm",
+        "waist rad",
+        "E left J",
+        "alpha left deg",
+        "left in range",
+        "E right J",
+        "alpha right deg",
+        "right in range",
+        "failures",
+    ]
     for name in args.scenarios.split(","):
         spec = load_scenario(tasks_dir() / f"{name}.toml")
         print(f"\n{name} (projection backend)")

@@ -33,8 +33,11 @@ from wholebody.collision import CollisionModel
 from wholebody.kernels.collision import RESULT_WIDTH, collision_rows
 
 SAFETY, DETECTION, DT = 0.01, 0.05, 0.01
-MJ_TYPE = {"Box": mujoco.mjtGeom.mjGEOM_BOX, "Cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
-           "Sphere": mujoco.mjtGeom.mjGEOM_SPHERE}  # fmt: skip
+MJ_TYPE = {
+    "Box": mujoco.mjtGeom.mjGEOM_BOX,
+    "Cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+    "Sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+}
 
 
 def load_mujoco(urdf: Path) -> mujoco.MjModel:
@@ -58,8 +61,10 @@ def geom_map(model: CollisionModel, mj: mujoco.MjModel) -> list[int]:
         geoms = np.flatnonzero(mj.geom_bodyid == body) if body >= 0 else []
         kind = type(obj.geometry).__name__
         if k >= len(geoms) or mj.geom_type[geoms[k]] != MJ_TYPE.get(kind):
-            raise SystemExit(f"shape {obj.name} ({kind}) has no matching MuJoCo geom on body "
-                             f"{link!r}: geometry differs, no comparison possible")  # fmt: skip
+            raise SystemExit(
+                f"shape {obj.name} ({kind}) has no matching MuJoCo geom on body "
+                f"{link!r}: geometry differs, no comparison possible"
+            )
         out.append(int(geoms[k]))
     mj.geom_contype[:] = 1  # mink keeps a pair only if contype & conaffinity
     mj.geom_conaffinity[:] = 1
@@ -91,8 +96,14 @@ def postures(robot: wb.Robot, n: int) -> list[np.ndarray]:
     return out
 
 
-def distance_gap(model: CollisionModel, mj: mujoco.MjModel, data: mujoco.MjData,
-                 gmap: list[int], state: wb.RobotState, found: set) -> float:  # fmt: skip
+def distance_gap(
+    model: CollisionModel,
+    mj: mujoco.MjModel,
+    data: mujoco.MjData,
+    gmap: list[int],
+    state: wb.RobotState,
+    found: set,
+) -> float:
     """Largest |d_wholebody - d_mujoco| (m) over the pairs both find within DETECTION."""
     fromto, gap = np.empty(6), 0.0
     for p in model.distances(state, DETECTION):
@@ -110,13 +121,19 @@ def run(n: int) -> None:
     task = wb.CollisionAvoidance(robot, model, safety=SAFETY, influence=DETECTION)
     mj = load_mujoco(Path(robot.config.urdf))
     gmap = geom_map(model, mj)
-    limit = CollisionAvoidanceLimit(mj, [([gmap[i]], [gmap[k]]) for i, k in model.pairs],
-                                    minimum_distance_from_collisions=SAFETY,
-                                    collision_detection_distance=DETECTION)  # fmt: skip
+    limit = CollisionAvoidanceLimit(
+        mj,
+        [([gmap[i]], [gmap[k]]) for i, k in model.pairs],
+        minimum_distance_from_collisions=SAFETY,
+        collision_detection_distance=DETECTION,
+    )
     config = Configuration(mj)
     kept = set(limit.geom_id_pairs)
-    dropped = [model.pair_name(i, k) for i, k in model.pairs
-               if tuple(sorted((gmap[i], gmap[k]))) not in kept]  # fmt: skip
+    dropped = [
+        model.pair_name(i, k)
+        for i, k in model.pairs
+        if tuple(sorted((gmap[i], gmap[k]))) not in kept
+    ]
     qs = postures(robot, n)
     keys = ("wb", "kernel", "mink", "n_wb", "n_mink", "gap")
     stats: dict[str, list[float]] = {k: [] for k in keys}
@@ -156,8 +173,9 @@ def run(n: int) -> None:
     report(stats, len(model.pairs), len(limit.geom_id_pairs), dropped, n)
 
 
-def report(stats: dict[str, list[float]], n_wb: int, n_mink: int, dropped: list[str],
-           n: int) -> None:  # fmt: skip
+def report(
+    stats: dict[str, list[float]], n_wb: int, n_mink: int, dropped: list[str], n: int
+) -> None:
     print(f"{n} postures; pairs checked: wholebody {n_wb}, mink {n_mink}")
     if dropped:
         print(f"pairs mink drops (welded / parent-child bodies): {', '.join(dropped)}")

@@ -99,10 +99,12 @@ def collision(backend: str) -> Factory:
     self-collision, 5 cm influence)."""
 
     def factory(robot, hands):
-        stack = paper_stack(robot, hands, weights=PAPER, stiffness=0.1,
-                            collision=CollisionAvoidance(robot))  # fmt: skip
-        return stack, (ProjectionSolver() if backend == "projection"
-                       else HierarchicalQPSolver(backend))  # fmt: skip
+        stack = paper_stack(
+            robot, hands, weights=PAPER, stiffness=0.1, collision=CollisionAvoidance(robot)
+        )
+        return stack, (
+            ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
+        )
 
     return factory
 
@@ -113,8 +115,9 @@ def closed_chain(robot, hands):
     first level agree exactly."""
     chain = RelativeFrameTask(robot, hands[0].frame, hands[1].frame, kp=20.0, name="closed_chain")
     q0 = robot.home()
-    chain.set_target(np.linalg.solve(robot.frame_pose(q0, hands[0].frame),
-                                     robot.frame_pose(q0, hands[1].frame)))  # fmt: skip
+    chain.set_target(
+        np.linalg.solve(robot.frame_pose(q0, hands[0].frame), robot.frame_pose(q0, hands[1].frame))
+    )
     return chain
 
 
@@ -131,12 +134,15 @@ def three_levels(robot, hands):
         [
             Level((*hands, closed_chain(robot, hands)), name="hands"),
             Level(energy, gain=1.0, name="energy"),
-            Level((PostureTask(robot, kp=1.0), JointLimitAvoidance(robot, weight=0.05)),
-                  gain=1.0, name="posture"),
+            Level(
+                (PostureTask(robot, kp=1.0), JointLimitAvoidance(robot, weight=0.05)),
+                gain=1.0,
+                name="posture",
+            ),
         ],
         [JointPositionLimits(robot), VelocityLimits(robot)],
         metric=paper_metric(robot),
-    )  # fmt: skip
+    )
 
 
 def hqp_three_levels(engine):
@@ -152,8 +158,9 @@ def hierarchy(backend: str, scale: float) -> Factory:
 
     def factory(robot, hands):
         limits = [JointPositionLimits(robot), VelocityLimits(robot, scale=scale)]
-        stack = Stack(robot, [Level(hands, name="hands"), Level([PostureTask(robot, kp=1.0)])],
-                      limits)  # fmt: skip
+        stack = Stack(
+            robot, [Level(hands, name="hands"), Level([PostureTask(robot, kp=1.0)])], limits
+        )
         solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
         return stack, solver
 
@@ -210,15 +217,30 @@ def run(steps: int, repeat: int) -> None:
         hands = [FrameTask(robot, "left_tool", kp=20.0), FrameTask(robot, "right_tool", kp=20.0)]
         stack, solver = factory(robot, hands)
         controller = Controller(robot, stack, solver, dt=DT)
-        runs.append({"name": name, "stack": stack, "controller": controller, "hands": hands,
-                     "cold": [], "warm": []})  # fmt: skip
+        runs.append(
+            {
+                "name": name,
+                "stack": stack,
+                "controller": controller,
+                "hands": hands,
+                "cold": [],
+                "warm": [],
+            }
+        )
     samples = [forth_and_back(refs, k * DT) for k in range(steps)]
 
     placo = placo_case()
     if placo is not None:
         case, targets = placo
-        runs.append({"name": "placo (peers.py hierarchy)", "peer": case, "targets": targets,
-                     "cold": [], "warm": []})  # fmt: skip
+        runs.append(
+            {
+                "name": "placo (peers.py hierarchy)",
+                "peer": case,
+                "targets": targets,
+                "cold": [],
+                "warm": [],
+            }
+        )
 
     def steps_of(r: dict, ks: range, out: list[float]) -> None:
         """Steps ``ks`` of case ``r`` from its current state (``r["q"]``)."""
@@ -253,15 +275,18 @@ def run(steps: int, repeat: int) -> None:
     print(f"{'':42s} {'step-interleaved (cold)':^36s}  {'block-interleaved (warm)':^36s}".rstrip())
     print(f"{'case':42s} {cols}  {cols}")
     base = {sch: float(np.median(runs[0][sch])) * 1e6 for sch in ("cold", "warm")}
-    ref = {sch: float(np.median(runs[-1][sch])) * 1e6 if placo else np.nan
-           for sch in ("cold", "warm")}  # fmt: skip
+    ref = {
+        sch: float(np.median(runs[-1][sch])) * 1e6 if placo else np.nan for sch in ("cold", "warm")
+    }
     for r in runs:
         line = f"{r['name']:42s}"
         for sch in ("cold", "warm"):
             t = np.asarray(r[sch]) * 1e6
             med = float(np.median(t))
-            line += (f" {med:10.1f} {np.percentile(t, 90):9.1f} {med / base[sch]:7.2f} "
-                     f"{1e6 / med:7.0f} {med / ref[sch]:8.2f} ")  # fmt: skip
+            line += (
+                f" {med:10.1f} {np.percentile(t, 90):9.1f} {med / base[sch]:7.2f} "
+                f"{1e6 / med:7.0f} {med / ref[sch]:8.2f} "
+            )
         if "bounds" in r:
             line += f" bounds on {100 * r['bounds'] / (2 * steps * repeat):.0f} % of steps"
         print(line.rstrip())
@@ -270,9 +295,13 @@ def run(steps: int, repeat: int) -> None:
     print("paper (Table 2 / Sec. 5.2): pseudo-inverse 343.46 Hz, paper's method 40.55 Hz")
 
 
-def interleave(runs: list[dict], steps: int, repeat: int,
-               steps_of: Callable[[dict, range, list[float]], None],
-               reset: Callable[[dict], None]) -> None:  # fmt: skip
+def interleave(
+    runs: list[dict],
+    steps: int,
+    repeat: int,
+    steps_of: Callable[[dict, range, list[float]], None],
+    reset: Callable[[dict], None],
+) -> None:
     """Time ``steps`` steps of every case in ``runs``, ``repeat`` times in both schedules:
     taking turns step by step (step times appended to ``r["cold"]``), then every ``BLOCK``
     steps (``r["warm"]``); each case is ``reset`` before each schedule, so that drifts of the
@@ -319,8 +348,10 @@ def robot_rows(names: list[str], steps: int, repeat: int, check_steps: int) -> N
 
     why = peers.peer_available("pink")
     if why is not None:
-        print(f"\nskipped the real robots ({', '.join(names)}): pink is not installed ({why}); "
-              "pip install '.[bench]'")  # fmt: skip
+        print(
+            f"\nskipped the real robots ({', '.join(names)}): pink is not installed ({why}); "
+            "pip install '.[bench]'"
+        )
         return
     setups = []
     for name in names:
@@ -336,8 +367,9 @@ def robot_rows(names: list[str], steps: int, repeat: int, check_steps: int) -> N
         cases = peers.build_robot_cases(setup)
         checks[setup.name] = robot_check(setup, cases, check_steps)
         targets = [setup.targets(k) for k in range(2 * peers.PERIOD)]
-        runs.extend({"setup": setup, "peer": c, "targets": targets, "cold": [], "warm": []}
-                    for c in cases)  # fmt: skip
+        runs.extend(
+            {"setup": setup, "peer": c, "targets": targets, "cold": [], "warm": []} for c in cases
+        )
 
     def steps_of(r: dict, ks: range, out: list[float]) -> None:
         peer_steps(r["peer"], r["targets"], ks, out)
@@ -355,8 +387,10 @@ def robot_check(setup, cases: list, steps: int) -> tuple[dict, dict]:
     import peers
 
     check = peers.run_check(setup, cases, steps)
-    use = {p: peers.limit_use(setup, peers.reference_case(cases, p), steps)
-           for p in (peers.SINGLE, peers.HIERARCHY)}  # fmt: skip
+    use = {
+        p: peers.limit_use(setup, peers.reference_case(cases, p), steps)
+        for p in (peers.SINGLE, peers.HIERARCHY)
+    }
     return check, use
 
 
@@ -371,53 +405,79 @@ def print_robot_table(setups: list, runs: list[dict], steps: int, repeat: int) -
     to pink's on the same robot, problem and schedule (``wb/pink``) and back (``pink/wb``)."""
     import peers
 
-    print(f"\nreal robots against pink, dt = {DT} s, {steps} steps x {repeat}, the {len(runs)} "
-          "cases interleaved (robots/NAME/robot.toml, URDFs from example-robot-data)")  # fmt: skip
-    print(f"problem (peers.py's): 2 hand tasks (6-D, w = {peers.W_HAND:g}, dead-beat) + posture "
-          f"(w = {peers.W_POSTURE:g}) + joint position/velocity limits\n  single: one weighted "
-          "QP; hierarchy: hands strictly above posture; pink on wholebody's Pinocchio model "
-          "(robot.model)\nbase per robot:")  # fmt: skip
+    print(
+        f"\nreal robots against pink, dt = {DT} s, {steps} steps x {repeat}, the {len(runs)} "
+        "cases interleaved (robots/NAME/robot.toml, URDFs from example-robot-data)"
+    )
+    print(
+        f"problem (peers.py's): 2 hand tasks (6-D, w = {peers.W_HAND:g}, dead-beat) + posture "
+        f"(w = {peers.W_POSTURE:g}) + joint position/velocity limits\n  single: one weighted "
+        "QP; hierarchy: hands strictly above posture; pink on wholebody's Pinocchio model "
+        "(robot.model)\nbase per robot:"
+    )
     for setup in setups:
         note = f"u = {setup.robot.nu}, {setup.base}"
-        print(textwrap.fill(note, 100, initial_indent=f"  {setup.name:17s}",
-                            subsequent_indent=" " * 19))  # fmt: skip
+        print(
+            textwrap.fill(
+                note, 100, initial_indent=f"  {setup.name:17s}", subsequent_indent=" " * 19
+            )
+        )
     cols = f"{'median us':>10s} {'p90 us':>9s} {'wb/pink':>8s} {'pink/wb':>8s}"
     print(f"{'':48s} {'step-interleaved (cold)':^39s}  {'block-interleaved (warm)':^39s}".rstrip())
     print(f"{'robot':16s} {'problem':10s} {'case':20s} {cols}  {cols}")
     for r in runs:
         case = r["peer"]
-        pink = next(p for p in runs if p["setup"] is r["setup"] and p["peer"].library == "pink"
-                    and p["peer"].problem == case.problem)  # fmt: skip
+        pink = next(
+            p
+            for p in runs
+            if p["setup"] is r["setup"]
+            and p["peer"].library == "pink"
+            and p["peer"].problem == case.problem
+        )
         line = f"{r['setup'].name:16s} {case.problem:10s} {case_label(case):20s}"
         for sch in ("cold", "warm"):
             t = np.asarray(r[sch]) * 1e6
             med, ref = float(np.median(t)), float(np.median(pink[sch])) * 1e6
-            ratios = (f"{med / ref:8.2f} {ref / med:8.2f}" if case.library != "pink"
-                      else f"{'':8s} {'':8s}")  # fmt: skip
+            ratios = (
+                f"{med / ref:8.2f} {ref / med:8.2f}"
+                if case.library != "pink"
+                else f"{'':8s} {'':8s}"
+            )
             line += f" {med:10.1f} {np.percentile(t, 90):9.1f} {ratios} "
         print(line.rstrip())
-    print("wb/pink: the case's median over pink daqp's median on the same robot and problem, same "
-          "schedule and run (below 1: wholebody faster); pink/wb: its inverse")  # fmt: skip
+    print(
+        "wb/pink: the case's median over pink daqp's median on the same robot and problem, same "
+        "schedule and run (below 1: wholebody faster); pink/wb: its inverse"
+    )
 
 
 def print_robot_check(setups: list, checks: dict, steps: int) -> None:
     """The agreement check (tolerance 0.1 mm, as peers.py) and the bounds' use per robot."""
-    print(f"\nagreement over {steps} steps of each robot's reference (max over steps and hands "
-          "of the distance to wholebody daqp's hand, same problem; tolerance 0.1 mm)")  # fmt: skip
-    print(f"{'robot':16s} {'case':32s} {'max dev mm':>11s} {'1-step rel dv':>14s} "
-          f"{'tracking mm':>12s}  ok")  # fmt: skip
+    print(
+        f"\nagreement over {steps} steps of each robot's reference (max over steps and hands "
+        "of the distance to wholebody daqp's hand, same problem; tolerance 0.1 mm)"
+    )
+    print(
+        f"{'robot':16s} {'case':32s} {'max dev mm':>11s} {'1-step rel dv':>14s} "
+        f"{'tracking mm':>12s}  ok"
+    )
     for setup in setups:
         check, _ = checks[setup.name]
         for name, r in check.items():
             ok = "yes" if r["deviation"] <= 1e-4 else "NO"
-            print(f"{setup.name:16s} {name:32s} {r['deviation'] * 1e3:11.5f} "
-                  f"{r['first_step_dv']:14.2e} {r['tracking'] * 1e3:12.3f}  {ok}")  # fmt: skip
-    print("largest share of a bound wholebody daqp uses along the reference (1: active; position: "
-          "|u| dt over the step the position limit allows)")  # fmt: skip
+            print(
+                f"{setup.name:16s} {name:32s} {r['deviation'] * 1e3:11.5f} "
+                f"{r['first_step_dv']:14.2e} {r['tracking'] * 1e3:12.3f}  {ok}"
+            )
+    print(
+        "largest share of a bound wholebody daqp uses along the reference (1: active; position: "
+        "|u| dt over the step the position limit allows)"
+    )
     for setup in setups:
         _, use = checks[setup.name]
-        text = ", ".join(f"{p}: position {pos:.3f}, velocity {vel:.3f}"
-                         for p, (pos, vel) in use.items())  # fmt: skip
+        text = ", ".join(
+            f"{p}: position {pos:.3f}, velocity {vel:.3f}" for p, (pos, vel) in use.items()
+        )
         print(f"  {setup.name:17s}{text}")
 
 
@@ -429,8 +489,9 @@ def robot_names(text: str) -> list[str]:
     names = [n.strip() for n in text.split(",") if n.strip() and n.strip() != "none"]
     unknown = [n for n in names if n not in peers.ROBOTS]
     if unknown:
-        raise argparse.ArgumentTypeError(f"unknown robot(s) {', '.join(unknown)}; expected "
-                                         f"{', '.join(peers.ROBOTS)} or none")  # fmt: skip
+        raise argparse.ArgumentTypeError(
+            f"unknown robot(s) {', '.join(unknown)}; expected {', '.join(peers.ROBOTS)} or none"
+        )
     return names
 
 
@@ -438,14 +499,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=400)
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--robots", type=robot_names, default=ROBOTS,
-                        help="real robots against pink, comma-separated (peers.py's ROBOTS: "
-                        "tiago_dual, tiago_dual_fixed, talos_upper); none: skip them "
-                        f"(default {ROBOTS})")  # fmt: skip
-    parser.add_argument("--only-robots", action="store_true",
-                        help="only the real robots (skip mobile_humanoid's table)")  # fmt: skip
-    parser.add_argument("--check-steps", type=int, default=None,
-                        help="steps of the robots' agreement check (default: --steps)")  # fmt: skip
+    parser.add_argument(
+        "--robots",
+        type=robot_names,
+        default=ROBOTS,
+        help="real robots against pink, comma-separated (peers.py's ROBOTS: "
+        "tiago_dual, tiago_dual_fixed, talos_upper); none: skip them "
+        f"(default {ROBOTS})",
+    )
+    parser.add_argument(
+        "--only-robots",
+        action="store_true",
+        help="only the real robots (skip mobile_humanoid's table)",
+    )
+    parser.add_argument(
+        "--check-steps",
+        type=int,
+        default=None,
+        help="steps of the robots' agreement check (default: --steps)",
+    )
     args = parser.parse_args()
     if not args.only_robots:
         run(args.steps, args.repeat)

@@ -82,8 +82,10 @@ def targets(robot: wholebody.Robot, rng: np.random.Generator) -> Goal:
 def errors(poses: list[np.ndarray], goal: Goal) -> tuple[float, float]:
     """The worse hand's position (m) and orientation (rad) error."""
     p = max(float(np.linalg.norm(a[:3, 3] - b[:3, 3])) for a, b in zip(poses, goal, strict=True))
-    r = max(float(np.linalg.norm(pin.log3(a[:3, :3].T @ b[:3, :3])))
-            for a, b in zip(poses, goal, strict=True))  # fmt: skip
+    r = max(
+        float(np.linalg.norm(pin.log3(a[:3, :3].T @ b[:3, :3])))
+        for a, b in zip(poses, goal, strict=True)
+    )
     return p, r
 
 
@@ -101,8 +103,10 @@ def start_configuration(robot: wholebody.Robot, start: str) -> np.ndarray:
 
 def references(robot: wholebody.Robot, q0: np.ndarray, goal: Goal, run: Run) -> list:
     """Per hand, a minimum-jerk trajectory from its pose at ``q0`` to its target."""
-    return [MinimumJerkTrajectory(robot.frame_pose(q0, f), T, run.reference_steps * DT)
-            for f, T in zip(peers.HANDS, goal, strict=True)]  # fmt: skip
+    return [
+        MinimumJerkTrajectory(robot.frame_pose(q0, f), T, run.reference_steps * DT)
+        for f, T in zip(peers.HANDS, goal, strict=True)
+    ]
 
 
 def wholebody_case(
@@ -170,12 +174,13 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=50, help="number of random targets")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--duration", type=float, default=6.0, help="s per run")
-    parser.add_argument("--reference", type=float, default=3.0,
-                        help="s of the minimum-jerk references")  # fmt: skip
-    parser.add_argument("--engine", default="daqp",
-                        help="the HQP's QP engine (daqp, proxsuite, osqp, ...)")  # fmt: skip
-    parser.add_argument("--plain", action="store_true",
-                        help="also the runs with recovery=False")  # fmt: skip
+    parser.add_argument(
+        "--reference", type=float, default=3.0, help="s of the minimum-jerk references"
+    )
+    parser.add_argument(
+        "--engine", default="daqp", help="the HQP's QP engine (daqp, proxsuite, osqp, ...)"
+    )
+    parser.add_argument("--plain", action="store_true", help="also the runs with recovery=False")
     args = parser.parse_args()
     robot = wholebody.load_robot("mobile_humanoid")
     rng = np.random.default_rng(args.seed)
@@ -187,8 +192,9 @@ def main() -> None:
     for start, reference in itertools.product(("neutral", "home"), ("step", "min-jerk")):
         run = Run(start, reference, steps, ref_steps)
         cases: dict[tuple[str, bool], Callable[[Goal, Run], Outcome] | None] = {}
-        for backend, recovery, acc in itertools.product(("projection", "hqp"), recoveries,
-                                                        (False, True)):  # fmt: skip
+        for backend, recovery, acc in itertools.product(
+            ("projection", "hqp"), recoveries, (False, True)
+        ):
             name = backend + ("" if recovery else ", recovery=False")
             cases[(name, acc)] = wholebody_case(robot, backend, acc, recovery, args.engine)
         cases[("pink", False)] = pink_case(robot, start)
@@ -199,24 +205,42 @@ def main() -> None:
             e = np.array([errors(o[0], g) for o, g in zip(out, goals, strict=True)])
             ok = (e[:, 0] <= POSITION_TOL) & (e[:, 1] <= ANGLE_TOL)
             rates[(name, start, reference, acc)] = ok.mean()
-            rows.append((name, start, reference, acc, ok.mean(), e, sum(o[1] for o in out),
-                         sum(o[2] for o in out)))  # fmt: skip
-    print(f"{args.n} random reachable targets (seed {args.seed}), {args.duration:g} s runs, "
-          f"minimum-jerk references of {args.reference:g} s; converged: both hands within "
-          f"{POSITION_TOL * 1e3:g} mm and {ANGLE_TOL:g} rad")  # fmt: skip
-    print(f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc. limits off':>15} "
-          f"{'acc. limits on':>15}")  # fmt: skip
+            rows.append(
+                (
+                    name,
+                    start,
+                    reference,
+                    acc,
+                    ok.mean(),
+                    e,
+                    sum(o[1] for o in out),
+                    sum(o[2] for o in out),
+                )
+            )
+    print(
+        f"{args.n} random reachable targets (seed {args.seed}), {args.duration:g} s runs, "
+        f"minimum-jerk references of {args.reference:g} s; converged: both hands within "
+        f"{POSITION_TOL * 1e3:g} mm and {ANGLE_TOL:g} rad"
+    )
+    print(
+        f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc. limits off':>15} "
+        f"{'acc. limits on':>15}"
+    )
     for name, start, reference in dict.fromkeys((r[0], r[1], r[2]) for r in rows):
         cells = [rates.get((name, start, reference, acc)) for acc in (False, True)]
         text = [f"{c:>15.0%}" if c is not None else f"{'n/a':>15}" for c in cells]
         print(f"{name:<32} {start:<8} {reference:<9} {text[0]} {text[1]}")
-    print(f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc':<4} {'converged':>9}   "
-          f"position error mm p50 / p90 / max   oscillating   retreats")  # fmt: skip
+    print(
+        f"\n{'case':<32} {'start':<8} {'reference':<9} {'acc':<4} {'converged':>9}   "
+        f"position error mm p50 / p90 / max   oscillating   retreats"
+    )
     for name, start, reference, acc, rate, e, oscillating, retreats in rows:
         p = np.percentile(e[:, 0] * 1e3, [50, 90, 100])
-        print(f"{name:<32} {start:<8} {reference:<9} {'on' if acc else 'off':<4} {rate:>9.0%}"
-              f"   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}   {oscillating:>11}"
-              f"   {retreats:>8}")  # fmt: skip
+        print(
+            f"{name:<32} {start:<8} {reference:<9} {'on' if acc else 'off':<4} {rate:>9.0%}"
+            f"   {p[0]:8.2f} / {p[1]:8.2f} / {p[2]:8.1f}   {oscillating:>11}"
+            f"   {retreats:>8}"
+        )
 
 
 if __name__ == "__main__":

@@ -105,8 +105,9 @@ def movement_primitives_case(
     coupling = Obstacles() if terms else None
 
     def run() -> object:
-        dmp = MPDMP(n_dims=3, execution_time=float(t[-1]), dt=float(t[1] - t[0]),
-                    n_weights_per_dim=50)  # fmt: skip
+        dmp = MPDMP(
+            n_dims=3, execution_time=float(t[-1]), dt=float(t[1] - t[0]), n_weights_per_dim=50
+        )
         dmp.imitate(t, X)
         return dmp.open_loop(coupling_term=coupling)
 
@@ -132,8 +133,9 @@ def startup() -> tuple[tuple[float, float], tuple[float, float]]:
         env["NUMBA_CACHE_DIR"] = cache
         runs = []
         for _ in range(2):
-            out = subprocess.run([sys.executable, "-c", STARTUP], env=env, check=True,
-                                 capture_output=True, text=True).stdout  # fmt: skip
+            out = subprocess.run(
+                [sys.executable, "-c", STARTUP], env=env, check=True, capture_output=True, text=True
+            ).stdout
             imp, first = (float(x) for x in out.split())
             runs.append((imp, first))
     return runs[0], runs[1]
@@ -144,8 +146,10 @@ def table(header: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
 
     def line(cells: list[str]) -> str:
-        padded = (c.ljust(w) if i == 0 else c.rjust(w)
-                  for i, (c, w) in enumerate(zip(cells, widths, strict=True)))  # fmt: skip
+        padded = (
+            c.ljust(w) if i == 0 else c.rjust(w)
+            for i, (c, w) in enumerate(zip(cells, widths, strict=True))
+        )
         return "| " + " | ".join(padded) + " |"
 
     rule = "|" + "|".join("-" * (w + 1) + ("-" if i == 0 else ":") for i, w in enumerate(widths))
@@ -313,8 +317,10 @@ def main() -> None:
 
     t, X = demonstration()
     dmp = DMP.fit(X, t)  # compiles the kernels (or loads them) before any timing
-    pots = [DynamicPotential(cylinder(c, 0.04, 0.2, margin=0.02), gain=10.0, beta=2.0, eta=2.0)
-            for c in CENTERS]  # fmt: skip
+    pots = [
+        DynamicPotential(cylinder(c, 0.04, 0.2, margin=0.02), gain=10.0, beta=2.0, eta=2.0)
+        for c in CENTERS
+    ]
     ours, timed, baselines = cases(dmp, t, X, pots)
     path_sets = paths(dmp, pots)
     start = startup()

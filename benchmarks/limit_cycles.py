@@ -107,16 +107,19 @@ def sweep(robot: wb.Robot, make: Callable[[], Solver], cases: list, duration: fl
     reached = cycling = 0
     u_end, chain_end = [], []
     for rotation, axis, shift in cases:
-        log = stalled_run(robot, make(), rotation=rotation, axis=axis, shift=shift,
-                          duration=duration)  # fmt: skip
+        log = stalled_run(
+            robot, make(), rotation=rotation, axis=axis, shift=shift, duration=duration
+        )
         error = log.task_errors["hand"][-1]
         reached += bool(np.linalg.norm(error[:3]) < 1e-3 and np.linalg.norm(error[3:]) < 1e-2)
         last = round(1.0 / log.dt)
         cycling += u_reversals(log.u[-last:]) > last // 2
         u_end.append(float(np.max(np.abs(log.u[-1]))))
         chain_end.append(float(np.linalg.norm(log.task_errors["chain"][-1, :3])))
-    return (f"{reached:>7d}/{len(cases):<3d} {cycling:>7d} {np.median(u_end):>12.2g} "
-            f"{max(u_end):>9.3g} {max(chain_end):>13.2e}")  # fmt: skip
+    return (
+        f"{reached:>7d}/{len(cases):<3d} {cycling:>7d} {np.median(u_end):>12.2g} "
+        f"{max(u_end):>9.3g} {max(chain_end):>13.2e}"
+    )
 
 
 def main() -> None:
@@ -125,14 +128,16 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=5.0, help="s")
     parser.add_argument("--settle", type=float, default=2.0, help="s: the stall from then on")
     parser.add_argument("--rotation", type=float, default=1.5, help="rad about --axis")
-    parser.add_argument("--axis", type=float, nargs=3, default=[1.0, 0.0, 0.0],
-                        help="unit vector (world)")  # fmt: skip
+    parser.add_argument(
+        "--axis", type=float, nargs=3, default=[1.0, 0.0, 0.0], help="unit vector (world)"
+    )
     parser.add_argument("--lift", type=float, default=0.05, help="m")
     parser.add_argument("--damping", type=float, nargs="+", default=[STALL_DAMPING, 0.0])
     parser.add_argument("--engines", nargs="+", default=["daqp"])
     parser.add_argument("--projection", action="store_true", help="run the projection too")
-    parser.add_argument("--targets", type=int, default=0,
-                        help="also run N random targets (see targets())")  # fmt: skip
+    parser.add_argument(
+        "--targets", type=int, default=0, help="also run N random targets (see targets())"
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     robot = wb.load_robot(args.robot)
@@ -143,10 +148,14 @@ def main() -> None:
     ]
     if args.projection:
         runs.append(("projection", wb.ProjectionSolver()))
-    print(f"{args.robot}: rotation {args.rotation} rad about {tuple(args.axis)}, "
-          f"lift {args.lift} m, {args.duration} s, stall from {args.settle} s")  # fmt: skip
-    print(f"{'solver':<26} {'reversals':>9} {'stalled':>11} {'|u| end':>9} {'|u| 0.5s':>9} "
-          f"{'chain end m':>11} {'chain max m':>11} {'overshoot':>9} {'step us':>7}")  # fmt: skip
+    print(
+        f"{args.robot}: rotation {args.rotation} rad about {tuple(args.axis)}, "
+        f"lift {args.lift} m, {args.duration} s, stall from {args.settle} s"
+    )
+    print(
+        f"{'solver':<26} {'reversals':>9} {'stalled':>11} {'|u| end':>9} {'|u| 0.5s':>9} "
+        f"{'chain end m':>11} {'chain max m':>11} {'overshoot':>9} {'step us':>7}"
+    )
     for name, solver in runs:
         log = stalled_run(
             robot,
@@ -158,16 +167,20 @@ def main() -> None:
         )
         r = report(log, args.settle)
         stalled = f"{r['reversals_stalled']}/{r['stalled_steps']}"
-        print(f"{name:<26} {r['reversals']:>9d} {stalled:>11} "
-              f"{r['u_final']:>9.3g} {r['u_max_last_0.5s']:>9.3g} {r['chain_final_m']:>11.2e} "
-              f"{r['chain_max_stalled_m']:>11.2e} {r['limit_overshoot']:>9.1e} "
-              f"{r['step_us']:>7.1f}")  # fmt: skip
+        print(
+            f"{name:<26} {r['reversals']:>9d} {stalled:>11} "
+            f"{r['u_final']:>9.3g} {r['u_max_last_0.5s']:>9.3g} {r['chain_final_m']:>11.2e} "
+            f"{r['chain_max_stalled_m']:>11.2e} {r['limit_overshoot']:>9.1e} "
+            f"{r['step_us']:>7.1f}"
+        )
     if not args.targets:
         return
     cases = targets(args.targets, args.seed)
     print(f"\n{args.targets} random targets (seed {args.seed}), {args.duration} s each")
-    print(f"{'solver':<26} {'reached':>11} {'cycling':>7} {'|u| end p50':>12} {'max':>9} "
-          f"{'chain end max':>13}")  # fmt: skip
+    print(
+        f"{'solver':<26} {'reached':>11} {'cycling':>7} {'|u| end p50':>12} {'max':>9} "
+        f"{'chain end max':>13}"
+    )
     makers: list[tuple[str, Callable[[], Solver]]] = [
         (f"hqp/{engine} mu={mu:g}", partial(wb.HierarchicalQPSolver, engine, stall_damping=mu))
         for engine in args.engines

@@ -34,8 +34,7 @@ WARMUP = 20
 def unlocked(tmp: Path) -> wholebody.Robot:
     """TIAGo++ with only the suspensions locked."""
     text = (robots_dir() / "tiago_dual" / "robot.toml").read_text()
-    kept = [line for line in text.splitlines()
-            if not line.startswith(('"caster_*"', '"hand_*"'))]  # fmt: skip
+    kept = [line for line in text.splitlines() if not line.startswith(('"caster_*"', '"hand_*"'))]
     (tmp / "robot.toml").write_text("\n".join(kept) + "\n")
     return wholebody.load_robot(tmp)
 
@@ -67,15 +66,19 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         robots = {"locked": wholebody.load_robot("tiago_dual"), "unlocked": unlocked(Path(tmp))}
-        cases = {(name, b): case(r, ProjectionSolver() if b == "projection" else
-                                 HierarchicalQPSolver())
-                 for name, r in robots.items() for b in ("projection", "hqp")}  # fmt: skip
+        cases = {
+            (name, b): case(r, ProjectionSolver() if b == "projection" else HierarchicalQPSolver())
+            for name, r in robots.items()
+            for b in ("projection", "hqp")
+        }
         with threadpool_limits(1):
             for _ in range(args.steps + WARMUP):
                 for c in cases.values():
                     step(c)
-    print(f"one control step of TIAGo++, the paper's stack with both hands, "
-          f"{args.steps} steps, step-interleaved")  # fmt: skip
+    print(
+        f"one control step of TIAGo++, the paper's stack with both hands, "
+        f"{args.steps} steps, step-interleaved"
+    )
     print(f"{'robot':<10} {'nu':>4} {'backend':<11} {'median us':>10} {'x locked':>9}")
     for (name, backend), c in cases.items():
         t = np.median(c["times"][WARMUP:]) * 1e6

@@ -169,8 +169,17 @@ def make_setup(robot: wholebody.Robot | None = None) -> Setup:
     jp = robot.joint_positions(q0)
     home = {j: float(jp[robot.index(j)]) for j in joints}
     refs = hand_references(robot, q0, HANDS, REACH, TILT)
-    return Setup(robot, joints, base_cost, _peer_urdf(urdf, wheels, False),
-                 _peer_urdf(urdf, wheels, True), urdf.parent, q0, home, refs)  # fmt: skip
+    return Setup(
+        robot,
+        joints,
+        base_cost,
+        _peer_urdf(urdf, wheels, False),
+        _peer_urdf(urdf, wheels, True),
+        urdf.parent,
+        q0,
+        home,
+        refs,
+    )
 
 
 def hand_references(
@@ -213,8 +222,16 @@ def _peer_urdf(path: Path, wheels: tuple[str, ...], chain: bool) -> str:
             if name != "planar_world":  # MuJoCo wants mass on a body that has a joint
                 inertial = ET.SubElement(link, "inertial")
                 ET.SubElement(inertial, "mass", value="0.001")
-                ET.SubElement(inertial, "inertia", ixx="1e-6", iyy="1e-6", izz="1e-6",
-                              ixy="0", ixz="0", iyz="0")  # fmt: skip
+                ET.SubElement(
+                    inertial,
+                    "inertia",
+                    ixx="1e-6",
+                    iyy="1e-6",
+                    izz="1e-6",
+                    ixy="0",
+                    ixz="0",
+                    iyz="0",
+                )
         for name, kind, axis, child in (
             ("base_x", "prismatic", "1 0 0", "planar_x"),
             ("base_y", "prismatic", "0 1 0", "planar_y"),
@@ -225,8 +242,14 @@ def _peer_urdf(path: Path, wheels: tuple[str, ...], chain: bool) -> str:
             ET.SubElement(j, "child", link=child)
             ET.SubElement(j, "origin", xyz="0 0 0", rpy="0 0 0")
             ET.SubElement(j, "axis", xyz=axis)
-            ET.SubElement(j, "limit", lower=str(-BASE_CHAIN_LIMIT), upper=str(BASE_CHAIN_LIMIT),
-                          effort="1000", velocity=str(BASE_CHAIN_VELOCITY))  # fmt: skip
+            ET.SubElement(
+                j,
+                "limit",
+                lower=str(-BASE_CHAIN_LIMIT),
+                upper=str(BASE_CHAIN_LIMIT),
+                effort="1000",
+                velocity=str(BASE_CHAIN_VELOCITY),
+            )
             parent = child
     return ET.tostring(root, encoding="unicode")
 
@@ -273,10 +296,14 @@ class WholebodyCase(Case):
         robot = self.robot = setup.robot
         self.hands = [FrameTask(robot, f, kp=1.0 / DT, weight=W_HAND) for f in setup.hands]
         posture = PostureTask(robot, kp=1.0 / DT, weight=W_POSTURE)
-        levels = ([Level(self.hands, name="hands"), Level([posture], name="posture")]
-                  if problem == HIERARCHY else [Level([*self.hands, posture])])  # fmt: skip
-        self.stack = Stack(robot, levels, [JointPositionLimits(robot, gain=LIMIT_GAIN),
-                                           VelocityLimits(robot)])  # fmt: skip
+        levels = (
+            [Level(self.hands, name="hands"), Level([posture], name="posture")]
+            if problem == HIERARCHY
+            else [Level([*self.hands, posture])]
+        )
+        self.stack = Stack(
+            robot, levels, [JointPositionLimits(robot, gain=LIMIT_GAIN), VelocityLimits(robot)]
+        )
         self.solver = (
             ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
         )
@@ -337,9 +364,16 @@ class PinkCase(Case):
         self.q0 = pin.neutral(m)
         self.q0[:4] = setup.q0[:4]  # x, y, cos yaw, sin yaw: the same planar root
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
-        self.hands = [PinkFrameTask(f, position_cost=math.sqrt(W_HAND),
-                                    orientation_cost=math.sqrt(W_HAND), lm_damping=0.0,
-                                    gain=1.0) for f in setup.hands]  # fmt: skip
+        self.hands = [
+            PinkFrameTask(
+                f,
+                position_cost=math.sqrt(W_HAND),
+                orientation_cost=math.sqrt(W_HAND),
+                lm_damping=0.0,
+                gain=1.0,
+            )
+            for f in setup.hands
+        ]
         self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)
         self.posture.set_target(self.q0)
         base = BaseDamping(cost=np.sqrt(setup.base_cost), gain=0.0)
@@ -347,8 +381,10 @@ class PinkCase(Case):
             self.tasks, self.constraints = [self.posture, base], self.hands
         else:
             self.tasks, self.constraints = [*self.hands, self.posture, base], None
-        self.limits = [pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),
-                       pink.limits.VelocityLimit(m)]  # fmt: skip
+        self.limits = [
+            pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),
+            pink.limits.VelocityLimit(m),
+        ]
         self.reset()
 
     def reset(self) -> None:
@@ -358,9 +394,16 @@ class PinkCase(Case):
     def step(self, targets):
         for hand, target in zip(self.hands, targets, strict=True):
             hand.set_target(pin.SE3(target))
-        v = self._pink.solve_ik(self.conf, self.tasks, DT, solver=self.backend, damping=1e-12,
-                                limits=self.limits, constraints=self.constraints,
-                                safety_break=False)  # fmt: skip
+        v = self._pink.solve_ik(
+            self.conf,
+            self.tasks,
+            DT,
+            solver=self.backend,
+            damping=1e-12,
+            limits=self.limits,
+            constraints=self.constraints,
+            safety_break=False,
+        )
         self.v = v
         self.conf.integrate_inplace(v, DT)  # also updates the kinematics for the next step
 
@@ -394,9 +437,17 @@ class MinkCase(Case):
         self.q0[ibq] = setup.robot.base_pose(setup.q0)
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
         self.ibq = ibq
-        self.hands = [mink.FrameTask(f, "body", position_cost=math.sqrt(W_HAND),
-                                     orientation_cost=math.sqrt(W_HAND), gain=1.0,
-                                     lm_damping=0.0) for f in HANDS]  # fmt: skip
+        self.hands = [
+            mink.FrameTask(
+                f,
+                "body",
+                position_cost=math.sqrt(W_HAND),
+                orientation_cost=math.sqrt(W_HAND),
+                gain=1.0,
+                lm_damping=0.0,
+            )
+            for f in HANDS
+        ]
         posture_cost = np.full(m.nv, math.sqrt(W_POSTURE))
         posture_cost[self.ib] = 0.0
         self.posture = mink.PostureTask(m, cost=posture_cost, gain=1.0)
@@ -411,8 +462,7 @@ class MinkCase(Case):
         robot = setup.robot
         vmax = {j: float(robot.velocity_limits[robot.index(j)]) for j in setup.joints}
         vmax.update(dict.fromkeys(BASE_JOINTS, BASE_CHAIN_VELOCITY))
-        self.limits = [mink.ConfigurationLimit(m, gain=LIMIT_GAIN),
-                       mink.VelocityLimit(m, vmax)]  # fmt: skip
+        self.limits = [mink.ConfigurationLimit(m, gain=LIMIT_GAIN), mink.VelocityLimit(m, vmax)]
         self.reset()
 
     def reset(self) -> None:
@@ -423,8 +473,15 @@ class MinkCase(Case):
         SE3 = self._mink.SE3
         for hand, target in zip(self.hands, targets, strict=True):
             hand.set_target(SE3.from_matrix(target))
-        v = self._mink.solve_ik(self.conf, self.tasks, DT, self.backend, damping=1e-12,
-                                limits=self.limits, constraints=self.constraints)  # fmt: skip
+        v = self._mink.solve_ik(
+            self.conf,
+            self.tasks,
+            DT,
+            self.backend,
+            damping=1e-12,
+            limits=self.limits,
+            constraints=self.constraints,
+        )
         self.v = v
         self.conf.integrate_inplace(v, DT)
 
@@ -624,13 +681,17 @@ class RobotSetup(HandReferences):
     def base(self) -> str:
         """How the base is modelled in both libraries (one line, for the output)."""
         if self.mobile:
-            return (f"{self.robot.base.type} base kept: wholebody drives the wheel speeds u_w "
-                    "(v_b = B u_w); pink the planar root's twist v_b, wheels welded, with "
-                    "N^T v_b = 0 (no lateral velocity) as an equality, the wheels' posture rows "
-                    "as sqrt(W) B^+ v_b and |B^+ v_b| <= wheel speed limits")  # fmt: skip
+            return (
+                f"{self.robot.base.type} base kept: wholebody drives the wheel speeds u_w "
+                "(v_b = B u_w); pink the planar root's twist v_b, wheels welded, with "
+                "N^T v_b = 0 (no lateral velocity) as an equality, the wheels' posture rows "
+                "as sqrt(W) B^+ v_b and |B^+ v_b| <= wheel speed limits"
+            )
         if ROBOTS[self.name].fixed_base:
-            return ("base held still (robot.toml without [base], wheels locked): the fixed "
-                    "model in both libraries")  # fmt: skip
+            return (
+                "base held still (robot.toml without [base], wheels locked): the fixed "
+                "model in both libraries"
+            )
         return "fixed base (robot.toml): the same model in both libraries"
 
     def base_twist(self, u: np.ndarray) -> np.ndarray:
@@ -765,13 +826,22 @@ class RobotPinkCase(PinkCase):
         if setup.mobile:
             self.q0[:4] = setup.q0[:4]  # x, y, cos yaw, sin yaw: the same planar root
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
-        self.hands = [PinkFrameTask(f, position_cost=math.sqrt(W_HAND),
-                                    orientation_cost=math.sqrt(W_HAND), lm_damping=0.0,
-                                    gain=1.0) for f in setup.hands]  # fmt: skip
+        self.hands = [
+            PinkFrameTask(
+                f,
+                position_cost=math.sqrt(W_HAND),
+                orientation_cost=math.sqrt(W_HAND),
+                lm_damping=0.0,
+                gain=1.0,
+            )
+            for f in setup.hands
+        ]
         self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)  # skips the root
         self.posture.set_target(self.q0)
-        self.limits = [pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),
-                       pink.limits.VelocityLimit(m)]  # fmt: skip
+        self.limits = [
+            pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),
+            pink.limits.VelocityLimit(m),
+        ]
         tasks, equalities = self._base(setup, [self.posture])
         if problem == HIERARCHY:
             self.tasks, self.constraints = tasks, [*self.hands, *equalities]
@@ -837,8 +907,9 @@ def limit_use(setup: Setup | RobotSetup, case: WholebodyCase, steps: int) -> tup
         u = case.u
         ahead = np.where(u > 0, upper - jp, jp - lower)[robot.positional]
         with np.errstate(divide="ignore"):
-            position = max(position, float(np.max(np.abs(u[robot.positional]) * DT
-                                                  / (LIMIT_GAIN * ahead))))  # fmt: skip
+            position = max(
+                position, float(np.max(np.abs(u[robot.positional]) * DT / (LIMIT_GAIN * ahead)))
+            )
         velocity = max(velocity, float(np.max(np.abs(u) / robot.velocity_limits)))
     case.reset()
     return position, velocity
@@ -847,8 +918,11 @@ def limit_use(setup: Setup | RobotSetup, case: WholebodyCase, steps: int) -> tup
 # ---------------------------------------------------------------------- checks
 def reference_case(cases: list[Case], problem: str) -> Case:
     """wholebody's HQP (daqp) case of the problem: the exact QP solution, the yardstick."""
-    return next(c for c in cases if c.library == "wholebody" and c.problem == problem
-                and c.backend == "daqp")  # fmt: skip
+    return next(
+        c
+        for c in cases
+        if c.library == "wholebody" and c.problem == problem and c.backend == "daqp"
+    )
 
 
 def probe_targets(setup: Setup | RobotSetup) -> tuple[np.ndarray, np.ndarray]:
@@ -902,8 +976,12 @@ def run_check(
         ref = reference_case(cases, case.problem)
         dev = np.linalg.norm(hands[case.name] - hands[ref.name], axis=2).max()
         dv = np.abs(first[case.name] - first[ref.name]).max() / np.abs(first[ref.name]).max()
-        out[case.name] = {"deviation": float(dev), "first_step_dv": float(dv),
-                          "tracking": track[case.name], "reference": ref.name}  # fmt: skip
+        out[case.name] = {
+            "deviation": float(dev),
+            "first_step_dv": float(dv),
+            "tracking": track[case.name],
+            "reference": ref.name,
+        }
     return out
 
 
@@ -948,11 +1026,19 @@ BASE_NOTE = {
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=400, help="timed steps per repeat "
-                        "(one reach forth and back is 400)")  # fmt: skip
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=400,
+        help="timed steps per repeat (one reach forth and back is 400)",
+    )
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--check-steps", type=int, default=None,
-                        help="steps of the agreement check (default: --steps)")  # fmt: skip
+    parser.add_argument(
+        "--check-steps",
+        type=int,
+        default=None,
+        help="steps of the agreement check (default: --steps)",
+    )
     args = parser.parse_args()
     # qpsolvers warns at every osqp call that it converts the dense matrices to sparse ones:
     # that conversion is part of pink's and mink's step with osqp, the warning is noise.
@@ -965,10 +1051,12 @@ def main() -> None:
     times, warm = run_timing(setup, cases, args.steps, args.repeat)
 
     robot = setup.robot
-    print(f"\none control step, mobile_humanoid (nu = {robot.nu}), dt = {DT} s, "
-          f"{args.steps} steps x {args.repeat}; {platform.machine()} "
-          f"{platform.processor() or ''}, Python {platform.python_version()}, "
-          f"numpy {np.__version__}".replace("  ", " "))  # fmt: skip
+    print(
+        f"\none control step, mobile_humanoid (nu = {robot.nu}), dt = {DT} s, "
+        f"{args.steps} steps x {args.repeat}; {platform.machine()} "
+        f"{platform.processor() or ''}, Python {platform.python_version()}, "
+        f"numpy {np.__version__}".replace("  ", " ")
+    )
     print(
         "problem: 2 hand tasks (6-D, w = 1) + posture (w = "
         f"{W_POSTURE:g}) + base twist cost + joint position/velocity limits"
@@ -978,10 +1066,12 @@ def main() -> None:
     for lib in libraries:
         print(f"  {lib:10s} {BASE_NOTE[lib]}")
     print()
-    head = (f"{'':33s} {'step-interleaved (cold)':^39s}  {'block-interleaved (warm)':^22s}\n"
-            f"{'library':10s} {'backend':11s} {'problem':10s} {'median us':>10s} "
-            f"{'p90 us':>9s} {'x wb proj':>10s} {'x wb hqp':>9s}  {'median us':>10s} "
-            f"{'x wb hqp':>9s}")  # fmt: skip
+    head = (
+        f"{'':33s} {'step-interleaved (cold)':^39s}  {'block-interleaved (warm)':^22s}\n"
+        f"{'library':10s} {'backend':11s} {'problem':10s} {'median us':>10s} "
+        f"{'p90 us':>9s} {'x wb proj':>10s} {'x wb hqp':>9s}  {'median us':>10s} "
+        f"{'x wb hqp':>9s}"
+    )
     print(head)
     print("-" * len(head.splitlines()[-1]))
     for problem in (SINGLE, HIERARCHY):
@@ -996,9 +1086,11 @@ def main() -> None:
             backend = (
                 "hqp daqp" if (c.library == "wholebody" and c.backend == "daqp") else c.backend
             )
-            print(f"{c.library:10s} {backend:11s} {problem:10s} {med:10.1f} "
-                  f"{np.percentile(t, 90):9.1f} {med / wb_proj:10.2f} {med / wb_hqp:9.2f}  "
-                  f"{med_warm:10.1f} {med_warm / wb_hqp_warm:9.2f}")  # fmt: skip
+            print(
+                f"{c.library:10s} {backend:11s} {problem:10s} {med:10.1f} "
+                f"{np.percentile(t, 90):9.1f} {med / wb_proj:10.2f} {med / wb_hqp:9.2f}  "
+                f"{med_warm:10.1f} {med_warm / wb_hqp_warm:9.2f}"
+            )
     print(
         "x wb proj / x wb hqp: median over wholebody's projection / HQP (daqp) median for "
         "the same problem and schedule, same run"
@@ -1012,13 +1104,17 @@ def main() -> None:
         f"\nagreement over {args.check_steps or args.steps} steps of the shared reference (max "
         "over steps and hands of the distance to wholebody's hand; tolerance 0.1 mm)"
     )
-    print(f"{'case':36s} {'vs':28s} {'max dev mm':>11s} {'1-step rel dv':>14s} "
-          f"{'tracking mm':>12s}  ok")  # fmt: skip
+    print(
+        f"{'case':36s} {'vs':28s} {'max dev mm':>11s} {'1-step rel dv':>14s} "
+        f"{'tracking mm':>12s}  ok"
+    )
     for c in cases:
         r = check[c.name]
         ok = "yes" if r["deviation"] <= 1e-4 else "NO"
-        print(f"{c.name:36s} {r['reference']:28s} {r['deviation'] * 1e3:11.5f} "
-              f"{r['first_step_dv']:14.2e} {r['tracking'] * 1e3:12.3f}  {ok}")  # fmt: skip
+        print(
+            f"{c.name:36s} {r['reference']:28s} {r['deviation'] * 1e3:11.5f} "
+            f"{r['first_step_dv']:14.2e} {r['tracking'] * 1e3:12.3f}  {ok}"
+        )
 
     print("\ntargets (step-interleaved, the headline; block-interleaved in brackets)")
     for problem, peers, factor, wb_names in (

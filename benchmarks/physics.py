@@ -30,8 +30,14 @@ from wholebody.resources import tasks_dir
 from wholebody.scenarios import load_scenario, plots, run_scenario
 from wholebody.sim import MujocoPlant
 
-DEFAULT = ["coordinated_carry", "independent_dual_arm", "reach_generalisation",
-           "tiago_dual_carry", "talos_upper_reach", "panda_reach"]  # fmt: skip
+DEFAULT = [
+    "coordinated_carry",
+    "independent_dual_arm",
+    "reach_generalisation",
+    "tiago_dual_carry",
+    "talos_upper_reach",
+    "panda_reach",
+]
 
 
 class _Timed:
@@ -64,8 +70,12 @@ def measure(name: str, backend: str, sim: str) -> dict[str, float]:
         run = run_scenario(spec, backend=backend, sim=sim)
         wall = time.perf_counter() - start
     control = float(run.log.step_time.sum())
-    return {"wall": wall, "control": control, "plant": plant.total,
-            "simulated": len(run.log) * spec.dt}  # fmt: skip
+    return {
+        "wall": wall,
+        "control": control,
+        "plant": plant.total,
+        "simulated": len(run.log) * spec.dt,
+    }
 
 
 def main() -> None:
@@ -74,8 +84,12 @@ def main() -> None:
     parser.add_argument("--scenarios", nargs="+", default=DEFAULT)
     parser.add_argument("--figure", type=Path, default=None)
     args = parser.parse_args()
-    cases = [(n, b, s) for n in args.scenarios for b in ("projection", "hqp")
-             for s in ("kinematic", "mujoco")]  # fmt: skip
+    cases = [
+        (n, b, s)
+        for n in args.scenarios
+        for b in ("projection", "hqp")
+        for s in ("kinematic", "mujoco")
+    ]
     for case in cases[:4]:  # warm, both backends: kernels loaded, first-call costs paid
         measure(*case)
     results: dict[tuple[str, str, str], list[dict[str, float]]] = {c: [] for c in cases}
@@ -90,14 +104,18 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenarios:
         for backend in ("projection", "hqp"):
-            phys = {k: statistics.median(r[k] for r in results[(name, backend, "mujoco")])
-                    for k in ("wall", "control", "plant", "simulated")}  # fmt: skip
+            phys = {
+                k: statistics.median(r[k] for r in results[(name, backend, "mujoco")])
+                for k in ("wall", "control", "plant", "simulated")
+            }
             kin = statistics.median(r["wall"] for r in results[(name, backend, "kinematic")])
             rest = phys["wall"] - phys["control"] - phys["plant"]
-            print(f"| {name} | {backend} | {phys['simulated']:.1f} | {phys['wall']:.2f} | "
-                  f"{phys['simulated'] / phys['wall']:.1f} | {phys['control']:.2f} | "
-                  f"{phys['plant']:.2f} | {rest:.2f} | {kin:.2f} | "
-                  f"{phys['wall'] / kin:.1f} |")  # fmt: skip
+            print(
+                f"| {name} | {backend} | {phys['simulated']:.1f} | {phys['wall']:.2f} | "
+                f"{phys['simulated'] / phys['wall']:.1f} | {phys['control']:.2f} | "
+                f"{phys['plant']:.2f} | {rest:.2f} | {kin:.2f} | "
+                f"{phys['wall'] / kin:.1f} |"
+            )
     if args.figure is not None:
         spec = load_scenario(tasks_dir() / "coordinated_carry.toml")
         run = run_scenario(spec, sim="mujoco")

@@ -59,17 +59,29 @@ class Case:
         self.robot, self.frame, self.rate, self.sim = robot, frame, rate, sim
         domain = random.randint(1, 101)  # 0-101: clear of Linux ephemeral ports
         path = os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])
-        env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "PYTHONPATH": path,
-               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # fmt: skip
+        env = {
+            **os.environ,
+            "ROS_DOMAIN_ID": str(domain),
+            "PYTHONPATH": path,
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        }
         self.log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (closed in close)
         base = [sys.executable, "-m", "wholebody"]
         rate_arg = ["--rate", f"{rate:g}"]
         self.procs = [
-            subprocess.Popen([*base, "ros-sim", robot.name, "--sim", sim, *rate_arg], env=env,
-                             stdout=self.log, stderr=subprocess.STDOUT),
-            subprocess.Popen([*base, "ros", robot.name, "--task", frame, *rate_arg], env=env,
-                             stdout=self.log, stderr=subprocess.STDOUT),
-        ]  # fmt: skip
+            subprocess.Popen(
+                [*base, "ros-sim", robot.name, "--sim", sim, *rate_arg],
+                env=env,
+                stdout=self.log,
+                stderr=subprocess.STDOUT,
+            ),
+            subprocess.Popen(
+                [*base, "ros", robot.name, "--task", frame, *rate_arg],
+                env=env,
+                stdout=self.log,
+                stderr=subprocess.STDOUT,
+            ),
+        ]
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node("ros_loop_bench", context=self.context)
@@ -80,8 +92,7 @@ class Case:
         self.odom: Odometry | None = None
         self.status: dict[str, str] = {}
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(JointState, "/wholebody/command", self._on_command,
-                                      reliable)  # fmt: skip
+        self.node.create_subscription(JointState, "/wholebody/command", self._on_command, reliable)
         self.node.create_subscription(JointState, "/joint_states", self._on_state, 10)
         self.node.create_subscription(Odometry, "/odom", self._on_odom, 10)
         self.node.create_subscription(DiagnosticArray, "/wholebody/status", self._on_status, 10)
@@ -112,8 +123,7 @@ class Case:
         robot, q = self.robot, self.robot.neutral()
         for name, value in zip(self.state.name, self.state.position, strict=True):
             j = robot.model.joints[robot.model.getJointId(name)]
-            q[j.idx_q : j.idx_q + j.nq] = ((math.cos(value), math.sin(value)) if j.nq == 2
-                                           else value)  # fmt: skip
+            q[j.idx_q : j.idx_q + j.nq] = (math.cos(value), math.sin(value)) if j.nq == 2 else value
         if robot.base.mobile:
             p, o = self.odom.pose.pose.position, self.odom.pose.pose.orientation
             yaw = yaw_of(o.x, o.y, o.z, o.w)
@@ -130,9 +140,15 @@ class Case:
 
     def measure(self, seconds: float) -> dict[str, float]:
         """Start tracking, then listen for ``seconds`` (module docstring)."""
-        ready = lambda: (self.status and self.state is not None  # noqa: E731
-                         and (self.odom is not None or not self.robot.base.mobile)
-                         and self.target.get_subscription_count() > 0)  # fmt: skip
+
+        def ready() -> bool:
+            return bool(
+                self.status
+                and self.state is not None
+                and (self.odom is not None or not self.robot.base.mobile)
+                and self.target.get_subscription_count() > 0
+            )
+
         self.spin(300.0, ready)
         start = self.pose()
         other = start.copy()
@@ -155,11 +171,16 @@ class Case:
         latency = (got[:, 0] - got[:, 1])[got[:, 1] > 0] / 1e6
         p50, p99 = np.percentile(period, [50, 99])
         l50, l99 = np.percentile(latency, [50, 99])
-        return {"period_p50": p50, "period_p99": p99, "period_max": period.max(),
-                "latency_p50": l50, "latency_p99": l99,
-                "missed": 100.0 * missed / (window * self.rate),
-                "step_p50": float(self.status["step time p50 (us)"]),
-                "step_p99": float(self.status["step time p99 (us)"])}  # fmt: skip
+        return {
+            "period_p50": p50,
+            "period_p99": p99,
+            "period_max": period.max(),
+            "latency_p50": l50,
+            "latency_p99": l99,
+            "missed": 100.0 * missed / (window * self.rate),
+            "step_p50": float(self.status["step time p50 (us)"]),
+            "step_p99": float(self.status["step time p99 (us)"]),
+        }
 
     def close(self) -> None:
         for p in self.procs:
@@ -179,8 +200,9 @@ class Case:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robot", default="mobile_humanoid")
-    ap.add_argument("--frame", default=None, help="the controlled frame (default: the "
-                    "first arm's tool frame)")  # fmt: skip
+    ap.add_argument(
+        "--frame", default=None, help="the controlled frame (default: the first arm's tool frame)"
+    )
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--rates", default=",".join(f"{r:g}" for r in RATES))
@@ -202,8 +224,10 @@ def main() -> None:
         f"{robot.name} ({robot.nu} velocities), frame {frame}; {args.rounds} rounds of "
         f"{args.seconds:g} s per case, medians over rounds (max: the largest)\n"
     )
-    head = ("| rate (Hz) | sim | period p50 / p99 / max (ms) | latency p50 / p99 (ms) | "
-            "missed (%) | step p50 / p99 (us) |")  # fmt: skip
+    head = (
+        "| rate (Hz) | sim | period p50 / p99 / max (ms) | latency p50 / p99 (ms) | "
+        "missed (%) | step p50 / p99 (us) |"
+    )
     print(head)
     print("|" + "---|" * 6)
     for (rate, sim), rows in results.items():

@@ -34,8 +34,9 @@ EXTRA = ("elbow_centre", "wrist_centre", "upper_arm")  # per side, after the too
 def build(robot: wholebody.Robot, count: int, backend: str) -> dict:
     sides = ("left", "right")
     tools = [FrameTask(robot, f"{s}_tool", kp=20.0) for s in sides]
-    extras = [FrameTask(robot, f"{s}_{e}", kp=5.0, weight=0.1)
-              for e in EXTRA for s in sides][: count - 2]  # fmt: skip
+    extras = [FrameTask(robot, f"{s}_{e}", kp=5.0, weight=0.1) for e in EXTRA for s in sides][
+        : count - 2
+    ]
     q0 = robot.home()
     for task in extras:
         task.set_target(robot.frame_pose(q0, task.frame))
@@ -46,8 +47,17 @@ def build(robot: wholebody.Robot, count: int, backend: str) -> dict:
     stack = Stack(robot, levels, [JointPositionLimits(robot), VelocityLimits(robot)])
     solver = ProjectionSolver() if backend == "projection" else HierarchicalQPSolver(backend)
     homes = [robot.frame_pose(q0, t.frame) for t in tools]
-    return {"robot": robot, "stack": stack, "solver": solver, "tools": tools, "homes": homes,
-            "q": q0, "q0": q0, "times": [], "bounds": 0}  # fmt: skip
+    return {
+        "robot": robot,
+        "stack": stack,
+        "solver": solver,
+        "tools": tools,
+        "homes": homes,
+        "q": q0,
+        "q0": q0,
+        "times": [],
+        "bounds": 0,
+    }
 
 
 def step(case: dict, k: int) -> None:
@@ -88,21 +98,29 @@ def main() -> None:
         for k in range(args.steps):
             for case in cases.values():
                 step(case, k)
-    print(f"one control step, step-interleaved, {args.steps} steps x {args.repeat}; "
-          f"{platform.machine()}, Python {platform.python_version()}")  # fmt: skip
-    print(f"{'robot':16s} {'nu':>3s} {'frame tasks':>11s} {'projection us':>14s} "
-          f"{'hqp daqp us':>12s} {'x 2 tasks (proj, hqp)':>22s} "
-          f"{'bounds % (proj, hqp)':>21s}")  # fmt: skip
+    print(
+        f"one control step, step-interleaved, {args.steps} steps x {args.repeat}; "
+        f"{platform.machine()}, Python {platform.python_version()}"
+    )
+    print(
+        f"{'robot':16s} {'nu':>3s} {'frame tasks':>11s} {'projection us':>14s} "
+        f"{'hqp daqp us':>12s} {'x 2 tasks (proj, hqp)':>22s} "
+        f"{'bounds % (proj, hqp)':>21s}"
+    )
     med = {key: float(np.median(c["times"])) * 1e6 for key, c in cases.items()}
     for name in ROBOTS:
         for count in COUNTS:
             (nu,) = {k[1] for k in cases if k[0] == name}
             p, h = med[(name, nu, count, "projection")], med[(name, nu, count, "daqp")]
             p2, h2 = med[(name, nu, 2, "projection")], med[(name, nu, 2, "daqp")]
-            bp, bh = (100 * cases[(name, nu, count, b)]["bounds"] / (args.steps * args.repeat)
-                      for b in ("projection", "daqp"))  # fmt: skip
-            print(f"{name:16s} {nu:3d} {count:11d} {p:14.1f} {h:12.1f} "
-                  f"{p / p2:11.2f} {h / h2:10.2f} {bp:10.0f} {bh:10.0f}")  # fmt: skip
+            bp, bh = (
+                100 * cases[(name, nu, count, b)]["bounds"] / (args.steps * args.repeat)
+                for b in ("projection", "daqp")
+            )
+            print(
+                f"{name:16s} {nu:3d} {count:11d} {p:14.1f} {h:12.1f} "
+                f"{p / p2:11.2f} {h / h2:10.2f} {bp:10.0f} {bh:10.0f}"
+            )
 
 
 if __name__ == "__main__":

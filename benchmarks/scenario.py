@@ -46,8 +46,13 @@ print(json.dumps({"import": t1 - t0, "first": runs[0], "second": runs[1]}))
 def run_case(src: Path, scenario: Path, backend: str) -> dict[str, float]:
     """One fresh process importing wholebody from ``src``: its import and two run times, s."""
     env = {"PYTHONPATH": str(src), "PATH": "/usr/bin:/bin"}
-    out = subprocess.run([sys.executable, "-c", _CHILD, str(scenario), backend], env=env,
-                         capture_output=True, text=True, check=True)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(scenario), backend],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -70,17 +75,23 @@ def main() -> None:
         for tree, backend in order:
             times[tree, backend].append(run_case(trees[tree], scenario, backend))
     print(f"{args.scenario}: run_scenario wall time, s (median of {args.rounds} processes)")
-    print(f"{'tree':<10} {'backend':<11} {'import':>7} {'first':>7} {'second':>7}"
-          f" {'x first':>8} {'x second':>9}")  # fmt: skip
+    print(
+        f"{'tree':<10} {'backend':<11} {'import':>7} {'first':>7} {'second':>7}"
+        f" {'x first':>8} {'x second':>9}"
+    )
     for tree, backend in cases:
         med = {k: statistics.median(r[k] for r in times[tree, backend]) for k in times[cases[0]][0]}
         ratio = ""
         if "baseline" in trees and tree == "this tree":
-            base = {k: statistics.median(r[k] for r in times["baseline", backend])
-                    for k in ("first", "second")}  # fmt: skip
+            base = {
+                k: statistics.median(r[k] for r in times["baseline", backend])
+                for k in ("first", "second")
+            }
             ratio = f" {base['first'] / med['first']:>8.2f} {base['second'] / med['second']:>9.2f}"
-        print(f"{tree:<10} {backend:<11} {med['import']:>7.2f} {med['first']:>7.3f}"
-              f" {med['second']:>7.3f}{ratio}")  # fmt: skip
+        print(
+            f"{tree:<10} {backend:<11} {med['import']:>7.2f} {med['first']:>7.3f}"
+            f" {med['second']:>7.3f}{ratio}"
+        )
     if "baseline" in trees:
         print("x first / x second: the baseline's median over this tree's, same run")
 

@@ -21,14 +21,20 @@ from wholebody.resources import tasks_dir
 from wholebody.scenarios import load_scenario, run_scenario
 from wholebody.scenarios.runner import scenario_robot
 
-SCENARIOS = ("reach_generalisation", "obstacle_avoidance", "independent_dual_arm",
-             "coordinated_carry")  # fmt: skip
+SCENARIOS = (
+    "reach_generalisation",
+    "obstacle_avoidance",
+    "independent_dual_arm",
+    "coordinated_carry",
+)
 
 
 def main() -> None:
     names = sys.argv[1:] or SCENARIOS
-    print(f"{'scenario':<22} {'accel':<6} {'backend':<11} {'max du/(a dt)':>13} "
-          f"{'steps over':>10} {'failures':>8} {'worst MAE mm':>12}")  # fmt: skip
+    print(
+        f"{'scenario':<22} {'accel':<6} {'backend':<11} {'max du/(a dt)':>13} "
+        f"{'steps over':>10} {'failures':>8} {'worst MAE mm':>12}"
+    )
     for name in names:
         base = load_scenario(tasks_dir() / f"{name}.toml")
         amax = scenario_robot(base).acceleration_limits
@@ -41,9 +47,11 @@ def main() -> None:
                 over = int(np.count_nonzero((ratio > 1.0 + 1e-6).any(axis=1)))
                 m = run.metrics
                 worst = max(v for hand in m["mae_m"].values() for v in hand.values())
-                print(f"{name:<22} {'on' if on else 'off':<6} {backend:<11} "
-                      f"{ratio.max():>13.2f} {over:>10d} {m['solver_failures']:>8d} "
-                      f"{worst * 1e3:>12.3f}")  # fmt: skip
+                print(
+                    f"{name:<22} {'on' if on else 'off':<6} {backend:<11} "
+                    f"{ratio.max():>13.2f} {over:>10d} {m['solver_failures']:>8d} "
+                    f"{worst * 1e3:>12.3f}"
+                )
 
 
 if __name__ == "__main__":

@@ -67,8 +67,9 @@ def soak(backend: str, steps: int, block: int) -> list[tuple[int, float, float, 
             q = controller.q_next.copy()
             times[k] = time.perf_counter() - start
         for hand, (pose, _) in zip(hands, samples[(done + block) % period], strict=True):
-            error = max(error, float(np.linalg.norm(robot.frame_pose(q, hand.frame)[:3, 3]
-                                                    - pose[:3, 3])))  # fmt: skip
+            error = max(
+                error, float(np.linalg.norm(robot.frame_pose(q, hand.frame)[:3, 3] - pose[:3, 3]))
+            )
         rows.append((done + block, resident_mb(), float(np.median(times)) * 1e6, error * 1e3))
     controller.close()
     return rows
@@ -85,9 +86,11 @@ def report(backend: str, rows: list[tuple[int, float, float, float]]) -> None:
     steps = np.array([r[0] for r in rows], dtype=float)
     medians = np.array([r[2] for r in rows])
     slope = np.polyfit(steps, medians, 1)[0] * 1e5 if len(rows) > 1 else 0.0
-    print(f"  resident memory {rows[-1][1] - rows[0][1]:+.2f} MB from step {rows[0][0]} to "
-          f"{rows[-1][0]}; last block's median step {medians[-1] / medians[0]:.3f}x the "
-          f"first's; trend {slope:+.3f} us per 100 000 steps")  # fmt: skip
+    print(
+        f"  resident memory {rows[-1][1] - rows[0][1]:+.2f} MB from step {rows[0][0]} to "
+        f"{rows[-1][0]}; last block's median step {medians[-1] / medians[0]:.3f}x the "
+        f"first's; trend {slope:+.3f} us per 100 000 steps"
+    )
 
 
 def main() -> None:
@@ -96,9 +99,11 @@ def main() -> None:
     parser.add_argument("--block", type=int, default=10_000)
     parser.add_argument("--backends", default="projection,hqp")
     args = parser.parse_args()
-    print(f"soak, mobile_humanoid, the paper's stack, {args.steps} steps per backend in blocks "
-          f"of {args.block}, dt = {DT} s; {platform.machine()}, Python "
-          f"{platform.python_version()}")  # fmt: skip
+    print(
+        f"soak, mobile_humanoid, the paper's stack, {args.steps} steps per backend in blocks "
+        f"of {args.block}, dt = {DT} s; {platform.machine()}, Python "
+        f"{platform.python_version()}"
+    )
     for backend in args.backends.split(","):
         report(backend, soak(backend, args.steps, args.block))
 

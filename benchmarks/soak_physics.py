@@ -59,26 +59,41 @@ def case(spec, backend: str, sensor: JointSensor | None, latency: int | None) ->
     seen = max(m["max_tracking_error_m"].values())
     if sensor is None:  # what the controller saw is the true state
         log = run.log
-        mean = np.mean([np.nanmean(np.linalg.norm(log.frame_positions[h]
-                                                  - log.reference_positions[h], axis=1))
-                        for h in log.frame_positions])  # fmt: skip
+        mean = np.mean(
+            [
+                np.nanmean(
+                    np.linalg.norm(log.frame_positions[h] - log.reference_positions[h], axis=1)
+                )
+                for h in log.frame_positions
+            ]
+        )
         true_max, chain = seen, m["closed_chain_error_max_m"]
     else:
         mean = np.mean(list(m["true_mean_tracking_error_m"].values()))
         true_max = max(m["true_max_tracking_error_m"].values())
         chain = m["true_closed_chain_error_max_m"]
-    return {"mean": 1e3 * mean, "max": 1e3 * true_max, "chain": 1e3 * chain, "seen": 1e3 * seen,
-            "stopped": m["stopped"], "t": run.log.t, "errors": true_hand_errors(run)}  # fmt: skip
+    return {
+        "mean": 1e3 * mean,
+        "max": 1e3 * true_max,
+        "chain": 1e3 * chain,
+        "seen": 1e3 * seen,
+        "stopped": m["stopped"],
+        "t": run.log.t,
+        "errors": true_hand_errors(run),
+    }
 
 
 def report(label: str, backend: str, c: dict) -> None:
     ok = "yes" if c["max"] <= BOUND * 1e3 and c["stopped"] is None else "NO"
-    print(f"| {label} | {backend} | {c['mean']:.3f} | {c['max']:.3f} | {c['chain']:.3f} | "
-          f"{ok} | {c['seen']:.3f} |")  # fmt: skip
+    print(
+        f"| {label} | {backend} | {c['mean']:.3f} | {c['max']:.3f} | {c['chain']:.3f} | "
+        f"{ok} | {c['seen']:.3f} |"
+    )
 
 
-def figure(path: Path, curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]],
-           title: str) -> None:  # fmt: skip
+def figure(
+    path: Path, curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], title: str
+) -> None:
     """The worse hand's true error (mm) over time, per backend and case."""
     import matplotlib
 
@@ -110,20 +125,26 @@ def main() -> None:
     parser.add_argument("--figure", type=Path, default=None)
     args = parser.parse_args()
     spec = load_scenario(tasks_dir() / "coordinated_carry.toml")
-    print(f"coordinated_carry under MuJoCo, {spec.duration:.0f} s at {spec.rate_hz:.0f} Hz; "
-          f"sensor noise U[-{args.noise:g}, {args.noise:g}] rad (m) per encoder, delay "
-          f"{args.delay} period(s) = {args.delay / spec.rate_hz * 1e3:.0f} ms; "
-          f"{platform.machine()}, Python {platform.python_version()}\n")  # fmt: skip
-    print("errors in mm, on the simulated configuration; 'seen': the largest hand error the "
-          "controller saw\n")  # fmt: skip
+    print(
+        f"coordinated_carry under MuJoCo, {spec.duration:.0f} s at {spec.rate_hz:.0f} Hz; "
+        f"sensor noise U[-{args.noise:g}, {args.noise:g}] rad (m) per encoder, delay "
+        f"{args.delay} period(s) = {args.delay / spec.rate_hz * 1e3:.0f} ms; "
+        f"{platform.machine()}, Python {platform.python_version()}\n"
+    )
+    print(
+        "errors in mm, on the simulated configuration; 'seen': the largest hand error the "
+        "controller saw\n"
+    )
     print("| case | backend | hand mean | hand max | closed chain max | within 5 mm | seen max |")
     print("|---|---|---|---|---|---|---|")
     curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     for backend in args.backends.split(","):
         exact = case(spec, backend, None, None)
         report("exact", backend, exact)
-        runs = [case(spec, backend, JointSensor(args.noise, args.delay, seed), None)
-                for seed in range(args.seeds)]  # fmt: skip
+        runs = [
+            case(spec, backend, JointSensor(args.noise, args.delay, seed), None)
+            for seed in range(args.seeds)
+        ]
         for seed, c in enumerate(runs):
             report(f"noise + delay, seed {seed}", backend, c)
         worst = max(runs, key=lambda c: c["max"])
@@ -136,8 +157,12 @@ def main() -> None:
             "noise + delay, uncompensated": (stale["t"], stale["errors"]),
         }
     if args.figure is not None:
-        figure(args.figure, curves, f"Coordinated carry under MuJoCo: joints read with "
-               f"±{args.noise:g} rad noise, {args.delay} period(s) late")  # fmt: skip
+        figure(
+            args.figure,
+            curves,
+            f"Coordinated carry under MuJoCo: joints read with "
+            f"±{args.noise:g} rad noise, {args.delay} period(s) late",
+        )
         print(f"\nfigure: {args.figure}")
 
 

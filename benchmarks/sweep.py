@@ -48,8 +48,12 @@ def measure(campaign, mode: str) -> dict[str, float]:
         result = run_sweep(campaign, out, workers=workers, ray=mode == "ray", progress=False)
         wall = time.perf_counter() - start
     own = statistics.mean(r["wall_s"] for r in result.rows)
-    return {"wall": wall, "cases": len(result.rows), "own": own,
-            "overhead": wall * workers / len(result.rows) - own}  # fmt: skip
+    return {
+        "wall": wall,
+        "cases": len(result.rows),
+        "own": own,
+        "overhead": wall * workers / len(result.rows) - own,
+    }
 
 
 def main() -> None:
@@ -79,8 +83,10 @@ def main() -> None:
     for mode in modes:
         med = {k: statistics.median(r[k] for r in results[mode]) for k in results[mode][0]}
         workers = 1 if mode == "local 1" else 2
-        print(f"| {mode} | {workers} | {med['wall']:.1f} | {60 * med['cases'] / med['wall']:.1f} "
-              f"| {med['own']:.2f} | {med['overhead']:.2f} |")  # fmt: skip
+        print(
+            f"| {mode} | {workers} | {med['wall']:.1f} | {60 * med['cases'] / med['wall']:.1f} "
+            f"| {med['own']:.2f} | {med['overhead']:.2f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -33,12 +33,17 @@ def main(names: list[str]) -> None:
                 print(f"{name:24s} {backend:10s} skipped: {exc}", flush=True)
                 continue
             m = run.metrics
-            ends = {h: f"{e['position_m'] * 1e3:.2f} mm" + (
-                        "" if e["rotation_rad"] is None else f" / {e['rotation_rad']:.4f} rad")
-                    for h, e in m["final_error"].items()}  # fmt: skip
-            print(f"{name:24s} {backend:10s} steps {len(run.log):5d} failures "
-                  f"{m['solver_failures']:4d} unmet {json.dumps(m['unmet_steps'])} ends {ends} "
-                  f"[{time.perf_counter() - start:.0f} s]", flush=True)  # fmt: skip
+            ends = {
+                h: f"{e['position_m'] * 1e3:.2f} mm"
+                + ("" if e["rotation_rad"] is None else f" / {e['rotation_rad']:.4f} rad")
+                for h, e in m["final_error"].items()
+            }
+            print(
+                f"{name:24s} {backend:10s} steps {len(run.log):5d} failures "
+                f"{m['solver_failures']:4d} unmet {json.dumps(m['unmet_steps'])} ends {ends} "
+                f"[{time.perf_counter() - start:.0f} s]",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

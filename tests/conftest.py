@@ -60,8 +60,13 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     pytest_cmd = f"{shlex.quote(sys.executable)} -m pytest -q -p no:cacheprovider {files}"
     script = f"NUMBA_DISABLE_JIT=1 {pytest_cmd} && NUMBA_BOUNDSCHECK=1 {pytest_cmd}"
     out = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (closed in sessionfinish)
-    proc = subprocess.Popen(["bash", "-c", script], stdout=out, stderr=subprocess.STDOUT,
-                            env={**os.environ, _MODE: "1"}, cwd=here.parent)  # fmt: skip
+    proc = subprocess.Popen(
+        ["bash", "-c", script],
+        stdout=out,
+        stderr=subprocess.STDOUT,
+        env={**os.environ, _MODE: "1"},
+        cwd=here.parent,
+    )
     _background.update(proc=proc, out=out)
 
 

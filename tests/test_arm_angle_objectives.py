@@ -108,8 +108,11 @@ def test_the_pull_brings_the_arm_angle_to_the_human_one(humanoid, backend):
     hand = wb.FrameTask(humanoid, arm.tool, kp=20.0)
     hand.set_target(humanoid.frame_pose(q, arm.tool))
     pull = HumanArmAngle(humanoid, arm, Constant(0.4), weight=5.0)
-    stack = wb.Stack(humanoid, [[hand], wb.Level([pull], gain=1.0)],
-                     [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)])  # fmt: skip
+    stack = wb.Stack(
+        humanoid,
+        [[hand], wb.Level([pull], gain=1.0)],
+        [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)],
+    )
     alpha0 = alpha_of(humanoid, humanoid.update(q), arm)
     solver = backend()
     for _ in range(300):
@@ -132,8 +135,11 @@ def test_paper_weights_choose_the_spring_and_the_pull(humanoid):
     assert sum(isinstance(o, ArmAngleSpring) and o.signed for o in signed) == 2
     plain = paper_objectives(humanoid, PaperWeights(spring="none"), 0.1)
     assert all(o.stiffness.k == 0.0 for o in plain if isinstance(o, ArmPotentialEnergy))
-    pulls = [o for o in paper_objectives(humanoid, PaperWeights(human_arm_angle=5.0), 0.1)
-             if isinstance(o, HumanArmAngle)]  # fmt: skip
+    pulls = [
+        o
+        for o in paper_objectives(humanoid, PaperWeights(human_arm_angle=5.0), 0.1)
+        if isinstance(o, HumanArmAngle)
+    ]
     assert len(pulls) == 2 and all(o.weight == 5.0 for o in pulls)
     assert all(isinstance(o.model, NetworkArmAngle) for o in pulls)  # the shipped model
     with pytest.raises(DimensionError, match="spring must be one of"):
@@ -167,7 +173,8 @@ def test_bad_models_and_arms_are_named(humanoid):
 
 @pytest.mark.parametrize("arm", ["left", "right"])
 def test_the_task_row_is_the_residuals_jacobian_and_the_curvature_bounds_its_hessian(
-        humanoid, rng, arm):  # fmt: skip
+    humanoid, rng, arm
+):
     """Row ``d(alpha - alpha_h)/du`` (no fade: eps 1e-7 m), and the objective's curvature
     ``diag(c) >= w a a^T`` (Gershgorin) with ``a`` that row."""
     task = HumanArmAngleTask(humanoid, arm, Linear(), fade=1e-7, arm_only=False)
@@ -201,10 +208,12 @@ def test_the_task_level_decays_the_residual_at_its_rate(humanoid, backend, arm_o
     arm = humanoid.arm("right")
     hand = wb.FrameTask(humanoid, arm.wrist, kp=20.0, orientation=False)
     hand.set_target(humanoid.frame_pose(q, arm.wrist))
-    task = HumanArmAngleTask(humanoid, arm, Constant(0.4), kp=5.0, max_rate=10.0,
-                             arm_only=arm_only, fade=1e-3)  # w = 1 to 1e-4  # fmt: skip
-    stack = wb.Stack(humanoid, [[hand], [task]],
-                     [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)])  # fmt: skip
+    task = HumanArmAngleTask(
+        humanoid, arm, Constant(0.4), kp=5.0, max_rate=10.0, arm_only=arm_only, fade=1e-3
+    )  # w = 1 to 1e-4
+    stack = wb.Stack(
+        humanoid, [[hand], [task]], [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)]
+    )
     e0 = task.error(humanoid.update(q))[0]
     solver = backend()
     for _ in range(20):
@@ -218,8 +227,11 @@ def test_the_task_level_decays_the_residual_at_its_rate(humanoid, backend, arm_o
 
 
 def test_the_task_level_is_built_by_paper_weights(humanoid):
-    stack = wb.paper_stack(humanoid, [wb.FrameTask(humanoid, "right_tool")],
-                           weights=PaperWeights(human_arm_angle_kp=5.0))  # fmt: skip
+    stack = wb.paper_stack(
+        humanoid,
+        [wb.FrameTask(humanoid, "right_tool")],
+        weights=PaperWeights(human_arm_angle_kp=5.0),
+    )
     level = stack.levels[1]
     assert [type(t).__name__ for t in level.tasks] == ["HumanArmAngleTask"] * 2
     assert all(t.kp == 5.0 and isinstance(t.pull.model, NetworkArmAngle) for t in level.tasks)

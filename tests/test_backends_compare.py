@@ -52,8 +52,9 @@ def test_same_u_when_no_bound_is_active(humanoid, rng, objectives):
     L, R = hands(humanoid)
     # the paper's stack with a descent gain small enough that the objective step often fits
     # in the box (with the default gain the wheels' cheap metric saturates them)
-    stack = paper_stack(humanoid, (L, R), objectives=objectives, stiffness=0.1,
-                        weights=PaperWeights(gain=0.01))  # fmt: skip
+    stack = paper_stack(
+        humanoid, (L, R), objectives=objectives, stiffness=0.1, weights=PaperWeights(gain=0.01)
+    )
     proj, hqp = ProjectionSolver(), HierarchicalQPSolver()
     checked = 0
     for _ in range(30):
@@ -98,7 +99,10 @@ def test_with_bounds_active_the_qp_keeps_the_box_and_the_task(humanoid, rng):
         if np.any(t.u < lo - 1e-9) or np.any(t.u > hi + 1e-9):
             textbook_outside += 1
     assert short_but_exact >= 3 and better >= 10 and textbook_outside >= 20, (
-        short_but_exact, better, textbook_outside)  # fmt: skip
+        short_but_exact,
+        better,
+        textbook_outside,
+    )
 
 
 @pytest.mark.parametrize(
@@ -110,8 +114,11 @@ def test_both_backends_report_unweighted_task_residuals(humanoid, rng, solver):
     L = FrameTask(humanoid, "left_tool", kp=10.0, weight=4.0)
     R = FrameTask(humanoid, "right_tool", kp=10.0, weight=[1.0, 2.0, 0.5, 0.0, 3.0, 0.25])
     posture = PostureTask(humanoid, kp=0.5, weight=0.01)
-    stack = Stack(humanoid, [[L, R, posture], [JointLimitAvoidance(humanoid)]],
-                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [[L, R, posture], [JointLimitAvoidance(humanoid)]],
+        [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
+    )
     state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
     near_targets(state, (L, R), rng, reach=0.05)
     result = solver.solve(stack, state, DT)

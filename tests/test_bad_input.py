@@ -73,8 +73,11 @@ def test_every_npz_reader_names_a_spoiled_file(tmp_path, log_file, how):
 def test_read_npz_says_what_the_file_is_not(tmp_path):
     np.save(tmp_path / "one.npy", np.ones(3))
     (tmp_path / "text.npz").write_text("hello")
-    cases = {"one.npy": "a single .npy array", "text.npz": "no zip header",
-             "missing.npz": "No such file"}  # fmt: skip
+    cases = {
+        "one.npy": "a single .npy array",
+        "text.npz": "no zip header",
+        "missing.npz": "No such file",
+    }
     for name, reason in cases.items():
         with pytest.raises(DataError, match=reason):
             read_npz(tmp_path / name, "thing")
@@ -274,8 +277,9 @@ def test_ctrl_c_during_compare_keeps_the_finished_backends(tmp_path, monkeypatch
 
     monkeypatch.setattr("wholebody.scenarios.run_scenario", second_interrupted)
     out = tmp_path / "cmp"
-    code = cli.main(["compare", "reach_generalisation", "--out", str(out),
-                     "--backends", "pinv", "projection"])  # fmt: skip
+    code = cli.main(
+        ["compare", "reach_generalisation", "--out", str(out), "--backends", "pinv", "projection"]
+    )
     err = capsys.readouterr().err
     assert code == 130 and "not run: projection; finished: pinv" in err
     rows = json.loads((out / "comparison.json").read_text())["rows"]

@@ -77,8 +77,7 @@ def test_info_abridges_a_long_frame_list(monkeypatch):
     assert f"link_{cli.FRAMES_SHOWN + 6}" in full and "joint frames (1): j1" in full
 
 
-def test_the_frames_hint_names_the_directory_a_robot_was_loaded_from(tmp_path, monkeypatch,
-                                                                   capsys):  # fmt: skip
+def test_the_frames_hint_names_the_directory_a_robot_was_loaded_from(tmp_path, monkeypatch, capsys):
     """A robot loaded from a directory of its own is pointed at by that directory's absolute
     path in the --frames hint: the hinted command loads it from any directory."""
     (tmp_path / "mine").mkdir()
@@ -96,16 +95,28 @@ def test_the_frames_hint_names_the_directory_a_robot_was_loaded_from(tmp_path, m
 def test_a_reader_that_leaves_early_ends_info_without_a_traceback():
     """``wholebody info ... | head -1``: the reader closes the pipe before the output is
     written; the command ends quietly with the status of a program stopped by SIGPIPE."""
-    proc = subprocess.Popen([sys.executable, "-m", "wholebody", "info", "dual_arm_torso"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wholebody", "info", "dual_arm_torso"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     proc.stdout.close()  # before the child has imported anything, so it writes after
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141, err
     assert "Traceback" not in err and "BrokenPipe" not in err
 
 
-HEAVY = ("numba", "matplotlib", "scipy", "torch", "meshcat", "tqdm", "wholebody.scenarios",
-         "wholebody.humanlike", "wholebody.kernels")  # fmt: skip
+HEAVY = (
+    "numba",
+    "matplotlib",
+    "scipy",
+    "torch",
+    "meshcat",
+    "tqdm",
+    "wholebody.scenarios",
+    "wholebody.humanlike",
+    "wholebody.kernels",
+)
 
 
 @pytest.mark.parametrize(
@@ -127,8 +138,9 @@ def test_help_and_argument_errors_import_nothing_heavy(argv):
         f"             if m.split('.')[0] in {HEAVY!r} or m.startswith({HEAVY!r}))\n"
         "print('NEW', new, 'CODE', code)\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=120, check=False)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+    )
     assert "NEW [] CODE" in done.stdout, done.stdout + done.stderr
 
 
@@ -195,8 +207,9 @@ def test_run_writes_the_log_metrics_and_figures(tmp_path, capsys):
     assert np.isclose(log.t[-1], 10.99)
     out = capsys.readouterr().out
     assert "worst hand MAE" in out
-    median, rate = map(float, re.search(r"control step median (\d+) us \(1/median = (\d+) Hz\)",
-                                        out).groups())  # fmt: skip
+    median, rate = map(
+        float, re.search(r"control step median (\d+) us \(1/median = (\d+) Hz\)", out).groups()
+    )
     assert rate == pytest.approx(1e6 / metrics["step_time_us"]["median"], abs=1)
     assert median == pytest.approx(metrics["step_time_us"]["median"], abs=1)
 
@@ -218,8 +231,13 @@ def test_compare_writes_table_2(tmp_path):
     assert "MSE x (m²)" in table and "waist travel (rad)" in table and "343.46 Hz" in table
     assert "| median step (us) | 1 / median step (Hz) |" in table
     for backend in ("pinv", "projection"):  # each backend's figures, like run's
-        for name in ("run.npz", "metrics.json", "hands.png", "joint_velocities.png",
-                     "arm_energy.png"):  # fmt: skip
+        for name in (
+            "run.npz",
+            "metrics.json",
+            "hands.png",
+            "joint_velocities.png",
+            "arm_energy.png",
+        ):
             assert (out / backend / name).is_file(), (backend, name)
 
 

@@ -83,8 +83,7 @@ def test_rows_are_the_distances_derivative(humanoid, scene, rng):
         for pair in scene.distances(humanoid.update(q), 0.15)[:8]:
 
             def distance(s, n=pair.name):
-                return np.array([next(p.distance for p in scene.distances(s, 0.2)
-                                      if p.name == n)])  # fmt: skip
+                return np.array([next(p.distance for p in scene.distances(s, 0.2) if p.name == n)])
 
             fd = jacobian_fd(humanoid, q, distance, 1e-5)
             np.testing.assert_allclose(pair.row, fd[0], atol=1e-4)
@@ -129,8 +128,9 @@ def _reach_past_a_ball(humanoid, solver, constrained):
     collision = wb.CollisionAvoidance(humanoid, obstacles=[ball])
     hand = wb.FrameTask(humanoid, "right_tool", kp=10.0, orientation=False)
     levels = [[collision], [hand]] if constrained else [[hand]]
-    stack = wb.Stack(humanoid, levels, [wb.JointPositionLimits(humanoid),
-                                        wb.VelocityLimits(humanoid)])  # fmt: skip
+    stack = wb.Stack(
+        humanoid, levels, [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)]
+    )
     reference = MinimumJerkTrajectory(start, goal, 2.0)
     closest, messages = np.inf, set()
     for k in range(300):
@@ -152,8 +152,14 @@ def test_a_reach_past_an_obstacle_keeps_the_safety_distance_on_every_step(humano
     closest, messages, collision = _reach_past_a_ball(humanoid, backend(), constrained=True)
     assert closest >= collision.safety
     if backend is wb.ProjectionSolver:  # the held row and the task it limited are named
-        assert any(re.search(r"held inequality rows: collision\[\d+\] right_hand_\d_capsule\|ball"
-                             r".*limited: right_tool", m) for m in messages)  # fmt: skip
+        assert any(
+            re.search(
+                r"held inequality rows: collision\[\d+\] right_hand_\d_capsule\|ball"
+                r".*limited: right_tool",
+                m,
+            )
+            for m in messages
+        )
 
 
 def test_every_link_can_be_one_capsule_or_keep_its_own_shapes(humanoid):
@@ -328,8 +334,9 @@ def test_the_carry_keeps_the_carried_panel_as_a_collision_shape(tmp_path):
 
     shutil.copytree(tasks_dir(), tmp_path / "tasks")
     path = tmp_path / "tasks" / "coordinated_carry.toml"
-    text = path.read_text().replace("[[phases]]", '[collision]\nobstacles = ["shelf_board"]\n\n'
-                                    "[[phases]]", 1)  # fmt: skip
+    text = path.read_text().replace(
+        "[[phases]]", '[collision]\nobstacles = ["shelf_board"]\n\n[[phases]]', 1
+    )
     path.write_text(text)
     m = run_scenario(load_scenario(path), backend="hqp").metrics
     assert m["min_collision_pair"] == "panel|shelf_board"  # it rests on the board at the grasp

@@ -124,8 +124,9 @@ def test_summary_of_logs_joined_with_an_unmonitored_run(humanoid):
     monitors = [ArmPotentialEnergy(humanoid, arm, 0.1) for arm in ("left", "right")]
     moving = {hand: MinimumJerkTrajectory(start, goal, 0.2)}
     holding = {hand: MinimumJerkTrajectory(goal, goal, 0.1)}
-    first = Controller(humanoid, stack, ProjectionSolver(), dt=0.01, monitors=monitors,
-                       references=moving).run(q0, 0.2)  # fmt: skip
+    first = Controller(
+        humanoid, stack, ProjectionSolver(), dt=0.01, monitors=monitors, references=moving
+    ).run(q0, 0.2)
     second = Controller(humanoid, stack, ProjectionSolver(), dt=0.01, references=holding).run(
         np.array(first.meta["final_q"]), 0.1
     )
@@ -154,8 +155,11 @@ def test_solver_failures_count_only_what_could_be_met_for_every_backend(torso, t
         pose[0, 3] += reach
         hand.set_target(pose)
         posture = PostureTask(torso, target=target, kp=50.0)
-        stack = Stack(torso, [Level([hand], name="hand"), Level([posture], name="posture")],
-                      [VelocityLimits(torso)])  # fmt: skip
+        stack = Stack(
+            torso,
+            [Level([hand], name="hand"), Level([posture], name="posture")],
+            [VelocityLimits(torso)],
+        )
         log = Controller(torso, stack, solver, dt=0.01).run(q0, 0.1)
         log = RunLog.load(log.save(tmp_path / "run.npz"))  # the rule survives a round trip
         return log, summary(log)["solver_failures"]
@@ -212,9 +216,18 @@ def test_runs_with_different_periods_are_not_joined_and_an_empty_log_has_no_metr
         concatenate([a, b])
     assert len(concatenate([a, a])) == 2 * len(a)
     nq, nu = a.q.shape[1], a.u.shape[1]
-    empty = RunLog(np.zeros(0), np.zeros((0, nq)), np.zeros((0, nu)), np.zeros((0, nu)),
-                   np.zeros(0), np.zeros(0), np.zeros(0, np.int8), np.zeros(0, bool),
-                   np.zeros((0, 1)), meta=dict(a.meta))  # fmt: skip
+    empty = RunLog(
+        np.zeros(0),
+        np.zeros((0, nq)),
+        np.zeros((0, nu)),
+        np.zeros((0, nu)),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros(0, np.int8),
+        np.zeros(0, bool),
+        np.zeros((0, 1)),
+        meta=dict(a.meta),
+    )
     with pytest.raises(DataError, match="no steps"):
         summary(empty)
 
@@ -231,8 +244,13 @@ def test_references_sampled_in_blocks_are_the_trajectory_at_every_step(humanoid)
     end[:3, 3] += (0.1, 0.0, 0.1)
     duration = (module._BLOCK + 76) * 0.01
     traj = MinimumJerkTrajectory(start, end, duration)
-    ctrl = Controller(robot, paper_stack(robot, [hand], objectives=False), ProjectionSolver(),
-                      dt=0.01, references={hand: traj})  # fmt: skip
+    ctrl = Controller(
+        robot,
+        paper_stack(robot, [hand], objectives=False),
+        ProjectionSolver(),
+        dt=0.01,
+        references={hand: traj},
+    )
     log = ctrl.run(robot.home(), duration)
     expected = np.array([traj.sample(t).pose[:3, 3] for t in log.t])
     np.testing.assert_allclose(log.reference_positions[hand.name], expected, atol=1e-12)
@@ -252,8 +270,13 @@ def test_a_joint_resting_on_its_limit_does_not_stop_a_hand_integral(humanoid, ba
 
     robot = humanoid
     elbow = robot.index("left_elbow_flexion")
-    q0 = robot.configuration({"right_shoulder_flexion": 0.3, "right_elbow_flexion": 1.2,
-                              "left_elbow_flexion": robot.position_limits[1][elbow]})  # fmt: skip
+    q0 = robot.configuration(
+        {
+            "right_shoulder_flexion": 0.3,
+            "right_elbow_flexion": 1.2,
+            "left_elbow_flexion": robot.position_limits[1][elbow],
+        }
+    )
     hand = FrameTask(robot, "right_tool", kp=5.0, ki=5.0)
     goal = robot.frame_pose(q0, hand.frame)
     goal[:3, 3] += (0.02, 0.0, 0.0)

@@ -21,8 +21,11 @@ DT = 0.01
 
 def readme_tasks() -> dict:
     """The guide's CoMTask and UprightTask classes (``docs/guides/tasks.md``), as written there."""
-    code = next(b for b in re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.S)
-                if "class CoMTask" in b)  # fmt: skip
+    code = next(
+        b
+        for b in re.findall(r"```python\n(.*?)```", GUIDE.read_text(), flags=re.S)
+        if "class CoMTask" in b
+    )
     code = code[: code.index("robot = wb.load_robot")]
     namespace: dict = {"__name__": "readme_tasks"}
     exec(compile(code, str(GUIDE), "exec"), namespace)
@@ -42,8 +45,11 @@ def test_the_readme_tasks_reach_their_goals_on_both_backends(humanoid, tasks, ba
     for x in (q, humanoid.random_configuration(rng, margin=0.1)):  # exact Jacobians
         assert_task_jacobian(com, humanoid, x, com.compute_error)
         assert_task_jacobian(upright, humanoid, x, upright.error)
-    stack = wb.Stack(humanoid, [[com, upright], [wb.PostureTask(humanoid)]],
-                     [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)])  # fmt: skip
+    stack = wb.Stack(
+        humanoid,
+        [[com, upright], [wb.PostureTask(humanoid)]],
+        [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)],
+    )
     solver = backend()
     tilt0 = np.linalg.norm(upright.error(humanoid.update(q)))
     for _ in range(300):
@@ -127,10 +133,19 @@ def test_a_controller_follows_a_reference_with_a_users_task_and_logs_any_objecti
     goal[:3, 3] += (0.1, 0.0, 0.1)
     height = Height(humanoid)
     assert_objective_gradient(height, humanoid, q)
-    stack = wb.Stack(humanoid, [[grip], [wb.PostureTask(humanoid)]],
-                     [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)])  # fmt: skip
-    ctrl = wb.Controller(humanoid, stack, wb.ProjectionSolver(), dt=DT, monitors=[height],
-                         references={grip: MinimumJerkTrajectory(start, goal, 1.0)})  # fmt: skip
+    stack = wb.Stack(
+        humanoid,
+        [[grip], [wb.PostureTask(humanoid)]],
+        [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)],
+    )
+    ctrl = wb.Controller(
+        humanoid,
+        stack,
+        wb.ProjectionSolver(),
+        dt=DT,
+        monitors=[height],
+        references={grip: MinimumJerkTrajectory(start, goal, 1.0)},
+    )
     log = ctrl.run(q, 1.5)
     final = humanoid.frame_pose(np.array(log.meta["final_q"]), "right_tool")[:3, 3]
     assert np.abs(final - goal[:3, 3]).max() < 1e-4
@@ -138,8 +153,13 @@ def test_a_controller_follows_a_reference_with_a_users_task_and_logs_any_objecti
     heights = [humanoid.frame_pose(x, "right_tool")[2, 3] for x in log.q[::25]]
     np.testing.assert_allclose(log.objectives["hand_height"][::25], heights, atol=1e-12)
     with pytest.raises(WholebodyError, match="set_target"):
-        wb.Controller(humanoid, stack, wb.ProjectionSolver(), dt=DT,
-                      references={wb.PostureTask(humanoid): None})  # fmt: skip
+        wb.Controller(
+            humanoid,
+            stack,
+            wb.ProjectionSolver(),
+            dt=DT,
+            references={wb.PostureTask(humanoid): None},
+        )
     with pytest.raises(WholebodyError, match="monitors are objectives"):
         wb.Controller(humanoid, stack, wb.ProjectionSolver(), dt=DT, monitors=[grip])
 

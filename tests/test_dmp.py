@@ -255,8 +255,9 @@ def test_invalid_arguments() -> None:
     with pytest.raises(DimensionError, match=r"state must hold x and v of shape \(3,\)"):
         stepper.step(DMPState(np.zeros(1), np.zeros(1)), 0.01)
     listed = stepper.step(DMPState([0.1, 0.2, 0.3], [0.0, 0.0, 0.0]), 0.01)  # lists are fine
-    np.testing.assert_allclose(listed.x, stepper.step(DMPState(np.array([0.1, 0.2, 0.3]),
-                                                               np.zeros(3)), 0.01).x)  # fmt: skip
+    np.testing.assert_allclose(
+        listed.x, stepper.step(DMPState(np.array([0.1, 0.2, 0.3]), np.zeros(3)), 0.01).x
+    )
 
 
 def test_dmp_trajectory(dmp: DMP) -> None:

@@ -110,8 +110,9 @@ def test_a_campaigns_fingerprint_leaves_the_scenario_format_out(tmp_path):
     campaign = load_campaign(path)
     unnumbered = {k: v for k, v in campaign.scenario.items() if k != "format"}
     assert campaign.scenario["format"] == SCENARIO.current
-    assert dataclasses.replace(campaign, scenario=unnumbered).fingerprint() == \
-        campaign.fingerprint()  # fmt: skip
+    assert (
+        dataclasses.replace(campaign, scenario=unnumbered).fingerprint() == campaign.fingerprint()
+    )
 
 
 SHIPPED = [

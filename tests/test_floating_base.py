@@ -44,8 +44,14 @@ def talos() -> wholebody.Robot:
 
 def test_talos_loads_standing_on_its_soles(talos):
     assert talos.base.type == "floating" and talos.base.floating
-    assert talos.actuated_joints[:6] == ("base_vx", "base_vy", "base_vz", "base_wx",
-                                         "base_wy", "base_wz")  # fmt: skip
+    assert talos.actuated_joints[:6] == (
+        "base_vx",
+        "base_vy",
+        "base_vz",
+        "base_wx",
+        "base_wy",
+        "base_wz",
+    )
     assert (talos.nq, talos.nv, talos.nu) == (37, 36, 36)
     np.testing.assert_array_equal(talos.actuation, np.eye(36))
     np.testing.assert_array_equal(talos.velocity_limits[:6], 1.0)  # the [base] defaults
@@ -67,14 +73,16 @@ def test_floating_jacobians_equal_finite_differences_on_the_manifold(talos, rng)
         q = talos.random_configuration(rng, margin=0.1, base_range=0.5)
         q[3:7] = pin.Quaternion(pin.exp3(rng.uniform(-0.5, 0.5, 3))).coeffs()  # tilted too
         for frame in (*SOLES, HANDS[0], "head_2_link"):
-            np.testing.assert_allclose(talos.frame_jacobian(q, frame),
-                                       frame_jacobian_fd(talos, q, frame), atol=1e-6)  # fmt: skip
-        np.testing.assert_allclose(talos.update(q).com_jacobian(),
-                                   jacobian_fd(talos, q, lambda s: s.com_position()),
-                                   atol=1e-6)  # fmt: skip
+            np.testing.assert_allclose(
+                talos.frame_jacobian(q, frame), frame_jacobian_fd(talos, q, frame), atol=1e-6
+            )
+        np.testing.assert_allclose(
+            talos.update(q).com_jacobian(),
+            jacobian_fd(talos, q, lambda s: s.com_position()),
+            atol=1e-6,
+        )
         H = frame_hessian(talos.update(q), hand, mask)
-        np.testing.assert_allclose(H, jacobian_fd(talos, q, lambda s: s.jacobian(hand)),
-                                   atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(H, jacobian_fd(talos, q, lambda s: s.jacobian(hand)), atol=1e-6)
 
 
 def test_the_base_moves_in_its_own_frame_and_reads_back_as_roll_pitch_yaw(talos, rng):
@@ -82,8 +90,9 @@ def test_the_base_moves_in_its_own_frame_and_reads_back_as_roll_pitch_yaw(talos,
     u = np.zeros(talos.nu)
     u[0] = 0.5  # base_vx: forward along the base's x, which points at yaw 1.0
     moved = talos.integrate(q, u, 1.0)
-    np.testing.assert_allclose(moved[:3] - q[:3], [0.5 * np.cos(1.0), 0.5 * np.sin(1.0), 0.0],
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        moved[:3] - q[:3], [0.5 * np.cos(1.0), 0.5 * np.sin(1.0), 0.0], atol=1e-12
+    )
     np.testing.assert_allclose(talos.base_pose(q), (0.3, -0.2, 1.0), atol=1e-12)
     near = [pin.rpy.rpyToMatrix(0.3, s * (np.pi / 2 - 1e-4), -0.2) for s in (1, -1)]
     for R in [pin.exp3(rng.uniform(-3, 3, 3)) for _ in range(20)] + near:
@@ -138,8 +147,11 @@ def _stand_and_reach(robot: wholebody.Robot, extra_levels=(), feet_kp: float = 1
         goals[t.name] = start.copy()
         goals[t.name][:3, 3] += offset
         references[t] = MinimumJerkTrajectory(start, goals[t.name], 2.0)
-    stack = Stack(robot, [feet, *extra_levels, hands, [PostureTask(robot)]],
-                  [JointPositionLimits(robot), VelocityLimits(robot)])  # fmt: skip
+    stack = Stack(
+        robot,
+        [feet, *extra_levels, hands, [PostureTask(robot)]],
+        [JointPositionLimits(robot), VelocityLimits(robot)],
+    )
     return stack, references, goals, soles
 
 
@@ -149,16 +161,20 @@ def _sole_error(robot, q, soles) -> float:
     worst = 0.0
     for name, P in soles.items():
         T = state.pose(robot.frame(name))
-        worst = max(worst, np.abs(T[:3, 3] - P[:3, 3]).max(),
-                    np.linalg.norm(pin.log3(T[:3, :3] @ P[:3, :3].T)))  # fmt: skip
+        worst = max(
+            worst,
+            np.abs(T[:3, 3] - P[:3, 3]).max(),
+            np.linalg.norm(pin.log3(T[:3, :3] @ P[:3, :3].T)),
+        )
     return worst
 
 
 @pytest.mark.parametrize("solver", [ProjectionSolver, HierarchicalQPSolver])
 def test_both_backends_reach_with_the_soles_held(talos, solver):
     stack, references, goals, soles = _stand_and_reach(talos)
-    log = wholebody.Controller(talos, stack, solver(), dt=DT,
-                               references=references).run(talos.home(), 2.5)  # fmt: skip
+    log = wholebody.Controller(talos, stack, solver(), dt=DT, references=references).run(
+        talos.home(), 2.5
+    )
     assert max(_sole_error(talos, q, soles) for q in log.q) < 1e-6
     state = talos.update(log.q[-1])
     for name, goal in goals.items():
@@ -176,8 +192,9 @@ def test_the_centre_of_mass_task_has_the_jacobian_of_its_error(talos, rng):
     np.testing.assert_allclose(rows.J, -jacobian_fd(talos, q, com.error), atol=1e-6)
     np.testing.assert_allclose(rows.v, 2.0 * com.error(talos.update(q)))
     home = ComTask(talos, "xz").target  # the default: the centre of mass at home
-    np.testing.assert_allclose(com.error(talos.update(talos.home())), [0.1 - home[0],
-                                                                      0.9 - home[2]])  # fmt: skip
+    np.testing.assert_allclose(
+        com.error(talos.update(talos.home())), [0.1 - home[0], 0.9 - home[2]]
+    )
     with pytest.raises(DimensionError, match="axes"):
         ComTask(talos, "xw")
 
@@ -198,12 +215,14 @@ def test_talos_stands_in_mujoco_while_its_hands_reach(talos):
     pelvis.set_target(state.pose(talos.base_frame).copy())
     level = [ComTask(talos, "xy", kp=5.0), pelvis]
     stack, references, goals, soles = _stand_and_reach(talos, [level], feet_kp=10.0)
-    kinematic = wholebody.Controller(talos, stack, ProjectionSolver(), dt=DT,
-                                     references=references).run(q0, 2.5)  # fmt: skip
+    kinematic = wholebody.Controller(
+        talos, stack, ProjectionSolver(), dt=DT, references=references
+    ).run(q0, 2.5)
     plant = MujocoPlant(talos, settings=talos.sim_settings)
     plant.reset(q0)
-    log = wholebody.Controller(talos, stack, ProjectionSolver(), dt=DT, references=references,
-                               plant=plant).run(q0, 2.5)  # fmt: skip
+    log = wholebody.Controller(
+        talos, stack, ProjectionSolver(), dt=DT, references=references, plant=plant
+    ).run(q0, 2.5)
     assert plant.stop_reason is None and len(log.q) == 250
     assert np.array(plant.log.torque_peak)[:, :6].max() == 0.0  # nothing drives the base
     for q, q_kinematic in zip(log.q, kinematic.q, strict=True):

@@ -82,8 +82,19 @@ def synthetic(rng, n=8, box=0.5, shift=False):
             rows = {"t1": slice(0, 2), "t2": slice(2, A.shape[0])}
         else:
             rows = {"objectives": slice(0, n)}
-        levels.append(LevelProblem(f"level {i}", A, b, np.zeros((0, n)), np.zeros(0),
-                                   np.zeros(0), rows, {}, 0.5 if i == 2 else 0.0))  # fmt: skip
+        levels.append(
+            LevelProblem(
+                f"level {i}",
+                A,
+                b,
+                np.zeros((0, n)),
+                np.zeros(0),
+                np.zeros(0),
+                rows,
+                {},
+                0.5 if i == 2 else 0.0,
+            )
+        )
     centre = rng.uniform(-0.4, 0.4, n) if shift else np.zeros(n)
     lower = centre - box * rng.uniform(0.2, 1.0, n)
     upper = centre + box * rng.uniform(0.2, 1.0, n)
@@ -128,8 +139,9 @@ def test_engine_edge_cases_are_statuses_not_crashes(name):
         assert sol.status == QPStatus.SOLVED
         np.testing.assert_allclose(sol.x, -g, atol=1e-6)
     C, box = np.ones((1, 3)), (-np.ones(3), np.ones(3))
-    crossed = make_engine(name).solve(np.eye(3), g, C, [1.0], [2.0], np.r_[0.5, -1, -1],
-                                      np.r_[0.0, 1, 1])  # fmt: skip
+    crossed = make_engine(name).solve(
+        np.eye(3), g, C, [1.0], [2.0], np.r_[0.5, -1, -1], np.r_[0.0, 1, 1]
+    )
     assert crossed.status == QPStatus.INFEASIBLE
     # sum(x) in [5, 6] with |x_i| <= 1: no solution (proxsuite stops at its iteration limit)
     far = make_engine(name).solve(np.eye(3), g, C, np.array([5.0]), np.array([6.0]), *box)
@@ -144,8 +156,9 @@ def test_unknown_engine_is_a_clear_error():
     assert HierarchicalQPSolver().in_kernel and not HierarchicalQPSolver("proxsuite").in_kernel
 
 
-@pytest.mark.parametrize(("engine", "good"), [("daqp", "primal_tol"), ("proxsuite", "eps_abs"),
-                                              ("osqp", "eps_abs")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("engine", "good"), [("daqp", "primal_tol"), ("proxsuite", "eps_abs"), ("osqp", "eps_abs")]
+)
 def test_a_misspelt_engine_setting_is_refused_on_construction(engine, good):
     """It was accepted, then daqp ignored it, osqp failed every solve and proxsuite raised
     out of solve()."""
@@ -233,8 +246,9 @@ def test_a_tall_level_is_solved_accurately_at_every_condition_number(rng, kappa)
             spread = np.r_[np.ones(n - 1), 1.0 / kappa]
         A = (U * spread) @ V.T
         for b in (A @ rng.normal(size=n), rng.normal(size=m)):  # consistent, then not
-            level = LevelProblem("tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
-                                 {"t": slice(0, m)})  # fmt: skip
+            level = LevelProblem(
+                "tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0), {"t": slice(0, m)}
+            )
             box = np.full(n, 1e12)
             u = solver.solve_problem(StackProblem([level], -box, box, np.ones(n), {})).u
             exact = np.linalg.lstsq(A, b, rcond=None)[0]
@@ -270,8 +284,10 @@ def test_a_wide_level_then_a_diagonal_one_are_exact_at_every_condition_number(rn
         A3 = 0.1 * np.eye(n)
         rows = [(A1, rng.normal(size=4)), (A2, rng.normal(size=len(A2))), (A3, rng.normal(size=n))]
         empty = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
-        levels = [LevelProblem(f"l{k}", A, b, *empty, {"t": slice(0, len(b))})
-                  for k, (A, b) in enumerate(rows)]  # fmt: skip
+        levels = [
+            LevelProblem(f"l{k}", A, b, *empty, {"t": slice(0, len(b))})
+            for k, (A, b) in enumerate(rows)
+        ]
         box = 1e6 if trial % 2 else 0.3
         lower, upper = -np.full(n, box), np.full(n, box)
         if trial % 4 == 1:  # 0 outside the box, the first level's solution p inside it
@@ -314,8 +330,12 @@ def set_targets(state, tasks, rng, reach):
 def test_robot_stack_is_lexicographically_optimal(humanoid, rng):
     L, R = hands(humanoid)
     energy = [ArmPotentialEnergy(humanoid, "left", 0.1), ArmPotentialEnergy(humanoid, "right", 0.1)]
-    stack = Stack(humanoid, [[L, R], Level(energy, gain=0.5)], limits(humanoid),
-                  metric=np.r_[np.full(4, 0.01), np.ones(humanoid.nu - 4)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [[L, R], Level(energy, gain=0.5)],
+        limits(humanoid),
+        metric=np.r_[np.full(4, 0.01), np.ones(humanoid.nu - 4)],
+    )
     solver = HierarchicalQPSolver()
     bound_limited = 0
     for _ in range(30):
@@ -391,10 +411,13 @@ def test_redundant_level_solves(humanoid, rng):
     L, R = hands(humanoid)
     chain = RelativeFrameTask(humanoid, "left_tool", "right_tool", name="closed_chain")
     twin = FrameTask(humanoid, "left_tool", kp=10.0, name="left_twin")
-    energy = Level([ArmPotentialEnergy(humanoid, "left", 0.1),
-                    ArmPotentialEnergy(humanoid, "right", 0.1)], gain=0.5)  # fmt: skip
-    stack = Stack(humanoid, [[L, R, chain, twin], energy, [JointLimitAvoidance(humanoid)]],
-                  limits(humanoid))  # fmt: skip
+    energy = Level(
+        [ArmPotentialEnergy(humanoid, "left", 0.1), ArmPotentialEnergy(humanoid, "right", 0.1)],
+        gain=0.5,
+    )
+    stack = Stack(
+        humanoid, [[L, R, chain, twin], energy, [JointLimitAvoidance(humanoid)]], limits(humanoid)
+    )
     solver = HierarchicalQPSolver()
     for reach in (0.01, 0.3):
         state = humanoid.update(humanoid.random_configuration(rng, margin=0.05))
@@ -408,7 +431,8 @@ def test_redundant_level_solves(humanoid, rng):
         assert solver.levels[0].rank == 12
         assert solver.levels[2].free == 0  # the objective level used up the freedom
         assert result.task_residuals[L.name] == pytest.approx(
-            result.task_residuals["left_twin"], abs=1e-9)  # fmt: skip
+            result.task_residuals["left_twin"], abs=1e-9
+        )
         if reach == 0.01:
             assert result.level_residuals[0] < 1e-8
 
@@ -464,8 +488,10 @@ def test_non_finite_level_is_reported_and_skipped(humanoid, rng, kind):
     L, R = hands(humanoid)
     state = humanoid.update(humanoid.random_configuration(rng, margin=0.1))
     set_targets(state, (L, R), rng, 0.01)
-    for levels, name in (([[L, R], [BrokenTask(kind)], [PostureTask(humanoid)]], "level 1"),
-                         ([[BrokenTask(kind)], [L, R]], "level 0")):  # fmt: skip
+    for levels, name in (
+        ([[L, R], [BrokenTask(kind)], [PostureTask(humanoid)]], "level 1"),
+        ([[BrokenTask(kind)], [L, R]], "level 0"),
+    ):
         stack = Stack(humanoid, levels, limits(humanoid))
         result = HierarchicalQPSolver().solve(stack, state, DT)
         assert result.status == SolverStatus.FAILED
@@ -518,8 +544,9 @@ def test_out_of_limits_start_recovers(humanoid, rng):
     robot = humanoid
     lower, upper = robot.position_limits
     L, R = hands(robot)
-    stack = Stack(robot, [[L, R], Level([ArmPotentialEnergy(robot, "left", 0.1)], gain=0.5)],
-                  limits(robot))  # fmt: skip
+    stack = Stack(
+        robot, [[L, R], Level([ArmPotentialEnergy(robot, "left", 0.1)], gain=0.5)], limits(robot)
+    )
 
     def violation(q):
         jp = robot.joint_positions(q)
@@ -554,8 +581,9 @@ def test_warm_start_changes_nothing_but_time(humanoid, rng):
     """proxsuite keeps a workspace per level and warm-starts it (daqp is called from the
     kernel, cold: its answers do not depend on earlier steps)."""
     L, R = hands(humanoid, kp=30.0)
-    stack = Stack(humanoid, [[L, R], Level([ArmPotentialEnergy(humanoid, "left", 0.1)])],
-                  limits(humanoid))  # fmt: skip
+    stack = Stack(
+        humanoid, [[L, R], Level([ArmPotentialEnergy(humanoid, "left", 0.1)])], limits(humanoid)
+    )
     warm, cold = (
         HierarchicalQPSolver("proxsuite"),
         HierarchicalQPSolver("proxsuite", warm_start=False),
@@ -586,11 +614,13 @@ def test_result_fields(humanoid, rng):
     result = HierarchicalQPSolver().solve(stack, state, DT)
     rows = L.compute(state)
     assert result.task_residuals[L.name] == pytest.approx(
-        np.linalg.norm(rows.J @ result.u - rows.v), abs=1e-10)  # fmt: skip
+        np.linalg.norm(rows.J @ result.u - rows.v), abs=1e-10
+    )
     post = PostureTask(humanoid, kp=0.2)  # unweighted
     pr = post.compute(state)
     assert result.task_residuals["posture"] == pytest.approx(
-        np.linalg.norm(pr.J @ result.u - pr.v), rel=1e-9)  # fmt: skip
+        np.linalg.norm(pr.J @ result.u - pr.v), rel=1e-9
+    )
     assert result.level_residuals.shape == (2,) and result.scale.tolist() == [1.0, 1.0]
     assert result.solve_time > 0 and "daqp" in result.message
     assert result.status in (SolverStatus.OK, SolverStatus.BOUNDS_ACTIVE)

@@ -24,11 +24,20 @@ def top_level_with_a_lower_level(seed: int = 1075) -> StackProblem:
     b = rng.normal(size=m) * rng.choice([0.3, 1, 3])
     C = rng.normal(size=(1, n))
     hi = rng.normal(size=1) * rng.choice([0.3, 1, 3])
-    L0 = LevelProblem("L0", A, b, C, np.full(1, -np.inf), hi, {"t0": slice(0, m)},
-                      {"i0": slice(0, 1)})  # fmt: skip
+    L0 = LevelProblem(
+        "L0", A, b, C, np.full(1, -np.inf), hi, {"t0": slice(0, m)}, {"i0": slice(0, 1)}
+    )
     m1 = int(rng.integers(1, n + 1))
-    L1 = LevelProblem("L1", rng.normal(size=(m1, n)), rng.normal(size=m1), np.zeros((0, n)),
-                      np.zeros(0), np.zeros(0), {"t1": slice(0, m1)}, {})  # fmt: skip
+    L1 = LevelProblem(
+        "L1",
+        rng.normal(size=(m1, n)),
+        rng.normal(size=m1),
+        np.zeros((0, n)),
+        np.zeros(0),
+        np.zeros(0),
+        {"t1": slice(0, m1)},
+        {},
+    )
     h = rng.uniform(0.1, 0.5, n) * rng.choice([0.3, 1, 3])
     return StackProblem([L0, L1], -h, h, np.ones(n), {})
 
@@ -45,9 +54,16 @@ def objective(lev: LevelProblem, x: np.ndarray) -> float:
 def test_the_cascade_removes_the_tikhonov_bias_of_a_level_with_inequality_rows(engine):
     """10 x1 = 10 and x2 >= 100 are met exactly at (1, 100); the Tikhonov term used to leave
     x2 = 99.99999 and the row reported INFEASIBLE."""
-    lev = LevelProblem("top", np.array([[10.0, 0.0]]), np.array([10.0]), np.array([[0.0, 1.0]]),
-                       np.array([100.0]), np.array([np.inf]), {"task": slice(0, 1)},
-                       {"above": slice(0, 1)})  # fmt: skip
+    lev = LevelProblem(
+        "top",
+        np.array([[10.0, 0.0]]),
+        np.array([10.0]),
+        np.array([[0.0, 1.0]]),
+        np.array([100.0]),
+        np.array([np.inf]),
+        {"task": slice(0, 1)},
+        {"above": slice(0, 1)},
+    )
     problem = StackProblem([lev], np.full(2, -1000.0), np.full(2, 1000.0), np.ones(2), {})
     r = HierarchicalQPSolver(engine).solve_problem(problem)
     assert r.status == SolverStatus.OK and not r.infeasible
@@ -109,13 +125,40 @@ def test_a_level_bought_off_its_optimum_by_the_tikhonov_term_does_not_freeze_the
     n = 4
     none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
     rows = [
-        ([[0.10768802093886205, -0.11149084417956046, -0.006547636480641782, -0.016465019683374993]], [0.4839591707781613]),
-        ([[0.1014796419487467, -0.02417750431791603, -0.010611651929785377, -0.06214827546833107]], [0.3420448611465455]),
-        ([[-0.5742738652264434, 1.5340271673908883, -0.8381439152506317, -0.5730366720775424],
-          [0.435038123239999, -1.162094151085485, 0.6349314812574374, 0.4341008941265498]], [-0.9784726279284293, 0.7412367538749924]),
-    ]  # fmt: skip
-    levels = [LevelProblem(f"L{k}", np.array(A), np.array(b), *none,
-                           {f"t{k}": slice(0, len(b))}, {}) for k, (A, b) in enumerate(rows)]  # fmt: skip
+        (
+            [
+                [
+                    0.10768802093886205,
+                    -0.11149084417956046,
+                    -0.006547636480641782,
+                    -0.016465019683374993,
+                ]
+            ],
+            [0.4839591707781613],
+        ),
+        (
+            [
+                [
+                    0.1014796419487467,
+                    -0.02417750431791603,
+                    -0.010611651929785377,
+                    -0.06214827546833107,
+                ]
+            ],
+            [0.3420448611465455],
+        ),
+        (
+            [
+                [-0.5742738652264434, 1.5340271673908883, -0.8381439152506317, -0.5730366720775424],
+                [0.435038123239999, -1.162094151085485, 0.6349314812574374, 0.4341008941265498],
+            ],
+            [-0.9784726279284293, 0.7412367538749924],
+        ),
+    ]
+    levels = [
+        LevelProblem(f"L{k}", np.array(A), np.array(b), *none, {f"t{k}": slice(0, len(b))}, {})
+        for k, (A, b) in enumerate(rows)
+    ]
     lower = np.array(
         [-0.05253910673085642, -2.0671328175526664, -3.5174178321854197, -0.8560662118772109]
     )
@@ -140,7 +183,7 @@ def test_proxsuite_keeps_solving_a_stack_with_a_safety_half_space(humanoid):
         FrameTask,
         JointPositionLimits,
         PostureTask,
-        VelocityLimits,  # fmt: skip
+        VelocityLimits,
     )
 
     q = humanoid.home()
@@ -150,10 +193,16 @@ def test_proxsuite_keeps_solving_a_stack_with_a_safety_half_space(humanoid):
     goal[:3, 3] += [0.2, 0.0, -0.3]
     hand.set_target(goal)
     floor = FrameHalfSpace(humanoid, "right_tool", [0, 0, 1], start[2, 3] - 0.1)
-    stack = Stack(humanoid, [Level([floor], name="safety"), Level([hand], name="hand"),
-                             Level([PostureTask(humanoid, kp=1.0)], name="posture")],
-                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
-                  metric=paper_metric(humanoid))  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [
+            Level([floor], name="safety"),
+            Level([hand], name="hand"),
+            Level([PostureTask(humanoid, kp=1.0)], name="posture"),
+        ],
+        [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
+        metric=paper_metric(humanoid),
+    )
     solver = HierarchicalQPSolver("proxsuite")
     for _ in range(40):
         state = humanoid.update(q)
@@ -167,18 +216,26 @@ def test_proxsuite_keeps_solving_a_stack_with_a_safety_half_space(humanoid):
 def _equality_levels(rows: list[tuple[list[list[float]], list[float]]]) -> list[LevelProblem]:
     n = len(rows[0][0][0])
     none = (np.zeros((0, n)), np.zeros(0), np.zeros(0))
-    return [LevelProblem(f"L{k}", np.array(A), np.array(b), *none, {f"t{k}": slice(0, len(b))},
-                         {}) for k, (A, b) in enumerate(rows)]  # fmt: skip
+    return [
+        LevelProblem(f"L{k}", np.array(A), np.array(b), *none, {f"t{k}": slice(0, len(b))}, {})
+        for k, (A, b) in enumerate(rows)
+    ]
 
 
 @pytest.mark.parametrize("engine", ["daqp", "osqp"])
 def test_round_off_rows_do_not_use_up_a_lower_levels_freedom(engine):
     """L0 leaves a segment free; L1's row is 2e-16 along it (pure round-off) and used to be
     given rank 1, which froze the segment: L2 then missed its optimum (4.33 against 4.05)."""
-    levels = _equality_levels([([[-1.0, 1.0, 0.6, 0.25], [-1.0, 1.0, 0.3, -0.95]], [-3.0, 0.0]),
-                               ([[0.0, 0.0, 0.0, 1.0]], [3.0]), ([[0.1, 1.0, 0.0, 0.0]], [-5.0])])  # fmt: skip
-    problem = StackProblem(levels, np.array([-1.0, -1.0, -0.1, -0.1]),
-                           np.array([1.0, 1.0, 0.1, 0.1]), np.ones(4), {})  # fmt: skip
+    levels = _equality_levels(
+        [
+            ([[-1.0, 1.0, 0.6, 0.25], [-1.0, 1.0, 0.3, -0.95]], [-3.0, 0.0]),
+            ([[0.0, 0.0, 0.0, 1.0]], [3.0]),
+            ([[0.1, 1.0, 0.0, 0.0]], [-5.0]),
+        ]
+    )
+    problem = StackProblem(
+        levels, np.array([-1.0, -1.0, -0.1, -0.1]), np.array([1.0, 1.0, 0.1, 0.1]), np.ones(4), {}
+    )
     u = HierarchicalQPSolver(engine).solve_problem(problem).u
     np.testing.assert_allclose(u, [0.49, -1.0, -0.1, -0.1], atol=1e-6)  # the certified optimum
 
@@ -188,8 +245,9 @@ def test_a_bound_the_optimal_set_does_not_move_along_is_not_pinned_away(engine):
     """The box caps L0 at x1 = 1 and leaves the segment x0 in [-1, -0.5], x2 = -1.1 - 0.2 x0;
     pinning x1 projected to a round-off row that removed the segment, and L2 got x0 = -0.5
     (residual 0.5) instead of -1 (0.39)."""
-    levels = _equality_levels([([[0.2, -0.9, 1.0], [0.2, -0.3, 1.0]], [-2.9, -0.5]),
-                               ([[0.4, 0.0, 0.9]], [-1.6])])  # fmt: skip
+    levels = _equality_levels(
+        [([[0.2, -0.9, 1.0], [0.2, -0.3, 1.0]], [-2.9, -0.5]), ([[0.4, 0.0, 0.9]], [-1.6])]
+    )
     problem = StackProblem(levels, -np.ones(3), np.ones(3), np.ones(3), {})
     u = HierarchicalQPSolver(engine).solve_problem(problem).u
     np.testing.assert_allclose(u, [-1.0, 1.0, -0.9], atol=1e-6)
@@ -200,10 +258,26 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
     """Three stacks of the second fuzzing round (each against a hand-derived optimum)."""
     n, none = 3, (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
     # (1) a level of one inequality row, x >= 400: its Tikhonov bias left it violated by 8e-6
-    L0 = LevelProblem("L0", np.zeros((0, 1)), np.zeros(0), np.array([[0.05]]), np.array([20.0]),
-                      np.array([np.inf]), {}, {"above": slice(0, 1)})  # fmt: skip
-    L1 = LevelProblem("L1", np.eye(1), np.zeros(1), np.zeros((0, 1)), np.zeros(0), np.zeros(0),
-                      {"t1": slice(0, 1)}, {})  # fmt: skip
+    L0 = LevelProblem(
+        "L0",
+        np.zeros((0, 1)),
+        np.zeros(0),
+        np.array([[0.05]]),
+        np.array([20.0]),
+        np.array([np.inf]),
+        {},
+        {"above": slice(0, 1)},
+    )
+    L1 = LevelProblem(
+        "L1",
+        np.eye(1),
+        np.zeros(1),
+        np.zeros((0, 1)),
+        np.zeros(0),
+        np.zeros(0),
+        {"t1": slice(0, 1)},
+        {},
+    )
     r = HierarchicalQPSolver(engine).solve_problem(
         StackProblem([L0, L1], np.full(1, -1000.0), np.full(1, 1000.0), np.ones(1), {})
     )
@@ -212,10 +286,24 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
     # (2) an inequality level above objectives: the bounded least squares (BVLS) of the
     # objectives' level ignored the inherited row and violated it by 0.66
     C = np.array([[1.0351879907581838, -0.7756413745956193, 1.6667497504903537]])
-    L0 = LevelProblem("L0", np.zeros((0, n)), np.zeros(0), C, np.array([0.8062776506186784]),
-                      np.array([np.inf]), {}, {"half_space": slice(0, 1)})  # fmt: skip
-    L1 = LevelProblem("L1", np.eye(n), np.array([2.2191508000828906, -1.7598913582999285,
-                      -2.813567964954028]), *none, {"t1": slice(0, n)}, {})  # fmt: skip
+    L0 = LevelProblem(
+        "L0",
+        np.zeros((0, n)),
+        np.zeros(0),
+        C,
+        np.array([0.8062776506186784]),
+        np.array([np.inf]),
+        {},
+        {"half_space": slice(0, 1)},
+    )
+    L1 = LevelProblem(
+        "L1",
+        np.eye(n),
+        np.array([2.2191508000828906, -1.7598913582999285, -2.813567964954028]),
+        *none,
+        {"t1": slice(0, n)},
+        {},
+    )
     u = (
         HierarchicalQPSolver(engine)
         .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
@@ -224,11 +312,24 @@ def test_inequality_only_levels_and_slacks_are_exact_in_the_cascade(engine):
     assert C[0] @ u >= 0.8062776506186784 - 1e-8
     # (3) the slack of a violated row presses on a bound too: pinning from the equality rows
     # alone took a free direction from the next level (1.94 optimal, 2.02 found)
-    L0 = LevelProblem("L0", np.array([[-0.9, -0.3, -0.9]]), np.array([2.7]),
-                      np.array([[-1.2, -0.4, 1.1]]), np.array([-np.inf]), np.array([-0.6]),
-                      {"t0": slice(0, 1)}, {"i0": slice(0, 1)})  # fmt: skip
-    L1 = LevelProblem("L1", np.array([[1.5, 0.8, 0.2], [-1.9, -0.3, 0.4]]),
-                      np.array([-0.8, -0.4]), *none, {"t1": slice(0, 2)}, {})  # fmt: skip
+    L0 = LevelProblem(
+        "L0",
+        np.array([[-0.9, -0.3, -0.9]]),
+        np.array([2.7]),
+        np.array([[-1.2, -0.4, 1.1]]),
+        np.array([-np.inf]),
+        np.array([-0.6]),
+        {"t0": slice(0, 1)},
+        {"i0": slice(0, 1)},
+    )
+    L1 = LevelProblem(
+        "L1",
+        np.array([[1.5, 0.8, 0.2], [-1.9, -0.3, 0.4]]),
+        np.array([-0.8, -0.4]),
+        *none,
+        {"t1": slice(0, 2)},
+        {},
+    )
     u = (
         HierarchicalQPSolver(engine)
         .solve_problem(StackProblem([L0, L1], -np.ones(n), np.ones(n), np.ones(n), {}))
@@ -245,14 +346,20 @@ def test_degenerate_and_ill_conditioned_levels_in_the_cascade(engine):
     engine stopped 3.7 % above the bounded least squares (BVLS ran out of iterations)."""
     row = np.array([[-0.15, -0.47, -1.0]])
     none = (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
-    levels = [LevelProblem("L0", row, np.array([-3.5]), *none, {"t0": slice(0, 1)}, {}),
-              LevelProblem("L1", 1.2 * row, np.array([4.77]), *none, {"t1": slice(0, 1)}, {})]  # fmt: skip
+    levels = [
+        LevelProblem("L0", row, np.array([-3.5]), *none, {"t0": slice(0, 1)}, {}),
+        LevelProblem("L1", 1.2 * row, np.array([4.77]), *none, {"t1": slice(0, 1)}, {}),
+    ]
     box = np.array([-1.0, -np.inf, -1.0]), np.array([1.0, np.inf, 1.0])
     r = HierarchicalQPSolver(engine).solve_problem(StackProblem(levels, *box, np.ones(3), {}))
     assert r.level_residuals[0] < 1e-6 and ("L0", "t0") not in r.infeasible
-    A = np.array([[0.7432992844579642, 1.3956691799968912, -1.6596900207256087],
-                  [-2.857295096361623, -5.371464595273765, 6.373232673829478],
-                  [1.3417655506407502, 2.5330469464517904, -2.9822336150290942]])  # fmt: skip
+    A = np.array(
+        [
+            [0.7432992844579642, 1.3956691799968912, -1.6596900207256087],
+            [-2.857295096361623, -5.371464595273765, 6.373232673829478],
+            [1.3417655506407502, 2.5330469464517904, -2.9822336150290942],
+        ]
+    )
     b = np.array([0.04744111040380759, 0.02734634733457533, -0.5447686686658867])
     lo = np.array([-112.4481878597328, -200.88631992778832, -5.382834797819274])
     hi = np.array([209.79712291742493, 238.5391295942699, 10.781618844429781])

@@ -81,8 +81,10 @@ def test_engine_edge_cases_are_statuses_not_crashes(name):
 
 def test_an_unknown_solver_or_setting_is_refused_on_construction():
     available = ", ".join(qpsolvers.available_solvers)
-    with pytest.raises(SolverError, match=f"unknown qpsolvers solver 'no_such_solver'.*"
-                                          f"available_solvers here: {available}"):  # fmt: skip
+    with pytest.raises(
+        SolverError,
+        match=f"unknown qpsolvers solver 'no_such_solver'.*available_solvers here: {available}",
+    ):
         HierarchicalQPSolver("qpsolvers:no_such_solver")
     with pytest.raises(SolverError, match="unknown qpsolvers solver ''"):
         make_engine("qpsolvers:")
@@ -122,13 +124,22 @@ def test_robot_stack_is_lexicographically_optimal(humanoid, rng, name):
     that: only the first level is compared)."""
     L, R = hands(humanoid)
     energy = [ArmPotentialEnergy(humanoid, "left", 0.1), ArmPotentialEnergy(humanoid, "right", 0.1)]
-    stack = Stack(humanoid, [[L, R], Level(energy, gain=0.5)], limits(humanoid),
-                  metric=np.r_[np.full(4, 0.01), np.ones(humanoid.nu - 4)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [[L, R], Level(energy, gain=0.5)],
+        limits(humanoid),
+        metric=np.r_[np.full(4, 0.01), np.ones(humanoid.nu - 4)],
+    )
     z0 = humanoid.frame_pose(humanoid.home(), "left_tool")[2, 3]
-    tables = [FrameHalfSpace(humanoid, f, [0, 0, 1], z0 - 0.05, gain=0.5, name=f"table_{f}")
-              for f in ("left_tool", "right_tool")]  # fmt: skip
-    tabled = Stack(humanoid, [[L, tables[0]], [R, tables[1]], [PostureTask(humanoid, kp=1.0)]],
-                   limits(humanoid))  # fmt: skip
+    tables = [
+        FrameHalfSpace(humanoid, f, [0, 0, 1], z0 - 0.05, gain=0.5, name=f"table_{f}")
+        for f in ("left_tool", "right_tool")
+    ]
+    tabled = Stack(
+        humanoid,
+        [[L, tables[0]], [R, tables[1]], [PostureTask(humanoid, kp=1.0)]],
+        limits(humanoid),
+    )
     solver, ref = hqp(name), HierarchicalQPSolver()
     bound_limited = 0
     for trial in range(40):
@@ -145,7 +156,8 @@ def test_robot_stack_is_lexicographically_optimal(humanoid, rng, name):
             assert kkt.max() < 1e-6, kkt
         other = ref.solve(current, state, DT)
         levels, tol = (slice(None), 1e-7) if name == EXACT else (slice(0, 1), 1e-3)
-        np.testing.assert_allclose(result.level_residuals[levels],
-                                   other.level_residuals[levels], rtol=1e-6, atol=tol)  # fmt: skip
+        np.testing.assert_allclose(
+            result.level_residuals[levels], other.level_residuals[levels], rtol=1e-6, atol=tol
+        )
         bound_limited += result.status == SolverStatus.INFEASIBLE
     assert bound_limited >= 1

@@ -44,13 +44,13 @@ def test_the_path_interpolates_the_samples_and_their_slopes():
     np.testing.assert_allclose(s.linear_velocities[:2], [[1, 0, 0], [0, 1, 0]])
 
 
-def test_the_mapped_wrist_keeps_the_persons_directions_with_the_robots_lengths(humanoid,
-                                                                               trials):  # fmt: skip
+def test_the_mapped_wrist_keeps_the_persons_directions_with_the_robots_lengths(humanoid, trials):
     for rec in trials:
         arm = humanoid.arm("right" if rec.side == "R" else "left")
         path = robot_wrist_path(arm, rec)
-        assert np.all(np.linalg.norm(path, axis=1)
-                      <= arm.upper_arm_length + arm.forearm_length + 1e-9)  # fmt: skip
+        assert np.all(
+            np.linalg.norm(path, axis=1) <= arm.upper_arm_length + arm.forearm_length + 1e-9
+        )
         # the arm's plane and the wrist's height order are the person's: z up stays up
         human = lab_to_canonical(rec.wrist - rec.shoulder, rec.side)
         robot = path * [1.0, 1.0 if arm.side == "right" else -1.0, 1.0]
@@ -69,9 +69,12 @@ def test_a_trial_is_tracked_and_the_pull_sets_the_elbow(humanoid, trials):
         plain = run_trial(humanoid, rec, None)
         assert plain.wrist_error_median_m < 1e-3 and plain.wrist_error_m < 0.05
         assert plain.human.size > 100
-        pulled = run_trial(humanoid, rec, PaperWeights(spring="none", energy=0.0,
-                                                       human_arm_angle=5.0),
-                           arm_angle_model=Constant(0.4))  # fmt: skip
+        pulled = run_trial(
+            humanoid,
+            rec,
+            PaperWeights(spring="none", energy=0.0, human_arm_angle=5.0),
+            arm_angle_model=Constant(0.4),
+        )
         assert pulled.wrist_error_median_m < 1e-3 and pulled.wrist_error_m < 0.05
         assert abs(np.median(pulled.robot) - 0.4) < 0.05
         assert abs(np.median(pulled.robot) - 0.4) < abs(np.median(plain.robot) - 0.4)
@@ -136,7 +139,9 @@ def test_held_out_models_never_saw_the_participant_they_drive(tmp_path):
             (rec / f.name).write_bytes(f.read_bytes())
     models = held_out_arm_angle_models(load_recordings(rec), only=["ADL002"])
     assert list(models) == ["ADL002"] and models["ADL002"].meta["participants"] == [
-        "ADL001", "ADL003"]  # fmt: skip
+        "ADL001",
+        "ADL003",
+    ]
     out = _evaluate(tmp_path / "out", "--recordings", str(rec), "--held-out")
     assert out["arm_angle_model"].startswith("held out")
     c = out["controllers"]

@@ -39,9 +39,19 @@ def _random_net(rng, hidden=(6, 5), spread=0.2) -> NetworkArmAngle:
     sizes = [3, *hidden, 1]
     W = [rng.normal(size=(b, a)) for a, b in itertools.pairwise(sizes)]
     b = [rng.normal(size=n) for n in sizes[1:]]
-    return NetworkArmAngle(W, b, rng.normal(size=3) * 0.1, rng.uniform(0.2, 0.5, 3), 0.3, 0.25,
-                           spread, spread_between=0.12, spread_within=0.16,
-                           input_low=-np.ones(3), input_high=np.ones(3))  # fmt: skip
+    return NetworkArmAngle(
+        W,
+        b,
+        rng.normal(size=3) * 0.1,
+        rng.uniform(0.2, 0.5, 3),
+        0.3,
+        0.25,
+        spread,
+        spread_between=0.12,
+        spread_within=0.16,
+        input_low=-np.ones(3),
+        input_high=np.ones(3),
+    )
 
 
 # ---------------------------------------------------------------------------- the models
@@ -52,8 +62,9 @@ def test_network_gradient_equals_finite_differences(rng):
         alpha, g = net.evaluate(p)
         assert alpha == pytest.approx(float(net.predict(p)), abs=1e-14)
         np.testing.assert_allclose(g, net.gradient(p), atol=1e-13)
-        fd = [(net.evaluate(p + h * e)[0] - net.evaluate(p - h * e)[0]) / (2 * h)
-              for e in np.eye(3)]  # fmt: skip
+        fd = [
+            (net.evaluate(p + h * e)[0] - net.evaluate(p - h * e)[0]) / (2 * h) for e in np.eye(3)
+        ]
         np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-9)
     P = rng.uniform(-1, 1, (7, 3))  # vectorised forms agree with the one-point form
     np.testing.assert_allclose(net.predict(P), [net.evaluate(p)[0] for p in P], atol=1e-14)
@@ -70,9 +81,14 @@ def test_the_robot_queries_with_its_own_lengths_and_chains_the_gradient(rng):
     assert net.evaluate(normalised_wrist(2 * w, 2 * L1, 2 * L2))[0] == pytest.approx(a1)
     g = net.evaluate(normalised_wrist(w, L1, L2))[1] / (L1 + L2)
     h = 1e-7
-    fd = [(net.evaluate(normalised_wrist(w + h * e, L1, L2))[0]
-           - net.evaluate(normalised_wrist(w - h * e, L1, L2))[0]) / (2 * h)
-          for e in np.eye(3)]  # fmt: skip
+    fd = [
+        (
+            net.evaluate(normalised_wrist(w + h * e, L1, L2))[0]
+            - net.evaluate(normalised_wrist(w - h * e, L1, L2))[0]
+        )
+        / (2 * h)
+        for e in np.eye(3)
+    ]
     np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-9)
     with pytest.raises(DimensionError, match="lengths must be > 0"):
         normalised_wrist(w, 0.0, L2)
@@ -145,8 +161,13 @@ def test_file_round_trip_and_malformed_files(rng, tmp_path: Path):
 # ---------------------------------------------------------------------------- the records
 @pytest.fixture(scope="module")
 def trials():
-    names = [f"ADL00{i}_{t}_{s}{n}" for i in (2, 5, 9) for t in ("forward", "combing")
-             for s in "RL" for n in (1, 2)]  # fmt: skip
+    names = [
+        f"ADL00{i}_{t}_{s}{n}"
+        for i in (2, 5, 9)
+        for t in ("forward", "combing")
+        for s in "RL"
+        for n in (1, 2)
+    ]
     return [load_recording(real_recordings_dir() / f"{n}.csv") for n in names]
 
 
@@ -180,8 +201,9 @@ def test_ill_defined_frames_are_dropped(trials):
     """A hanging arm (vertical shoulder-wrist line) or a straight one: no arm angle."""
     t = trials[0]
     down = np.array([0.0, 0.0, -1.0])
-    hanging = replace(t, elbow=t.shoulder + 0.28 * down + [0.02, 0.0, 0.0],
-                      wrist=t.shoulder + 0.52 * down)  # fmt: skip
+    hanging = replace(
+        t, elbow=t.shoulder + 0.28 * down + [0.02, 0.0, 0.0], wrist=t.shoulder + 0.52 * down
+    )
     with pytest.raises(DataError, match="no frame of the 1 recording"):
         arm_angle_records([hanging])
     straight = replace(t, elbow=t.shoulder + 0.5 * (t.wrist - t.shoulder))
@@ -194,8 +216,13 @@ def test_kim_baseline_is_the_calibrated_model_per_person(trials):
     rec = arm_angle_records(trials, people, n_records=120)
     kim = kim_predictions(rec, CALIBRATED)
     for i in (0, 50, 119):  # one person at a time through the model's own predict
-        one = CALIBRATED.predict(np.zeros(3), rec.wrist[i], rec.upper_arm[i], rec.forearm[i],
-                                 people[rec.participant[i]].stature)  # fmt: skip
+        one = CALIBRATED.predict(
+            np.zeros(3),
+            rec.wrist[i],
+            rec.upper_arm[i],
+            rec.forearm[i],
+            people[rec.participant[i]].stature,
+        )
         assert kim[i] == pytest.approx(float(one), abs=1e-12)
     with pytest.raises(DataError, match="stature of ADL002"):
         kim_predictions(arm_angle_records(trials[:2], None, n_records=10), CALIBRATED)
@@ -251,9 +278,19 @@ def _toy(rng) -> ArmAngleRecords:
     alpha = 0.2 + p @ [0.3, -0.2, 0.5] + np.array([offset[w] for w in who])
     alpha = alpha + rng.normal(scale=0.05, size=n)
     z = np.zeros((n, 3))
-    return ArmAngleRecords(p, alpha, 0.5 * p, np.full(n, 0.28), np.full(n, 0.24),
-                           np.full(n, 1.7), z, np.arange(n) / 100.0, who, np.full(n, "t"),
-                           trial)  # fmt: skip
+    return ArmAngleRecords(
+        p,
+        alpha,
+        0.5 * p,
+        np.full(n, 0.28),
+        np.full(n, 0.24),
+        np.full(n, 1.7),
+        z,
+        np.arange(n) / 100.0,
+        who,
+        np.full(n, "t"),
+        trial,
+    )
 
 
 def test_cross_validation_scores_recomputed(rng):
@@ -264,11 +301,13 @@ def test_cross_validation_scores_recomputed(rng):
         s = rec.participant == person
         train = rec.subset(~s)
         # the held-out prediction is the model trained without that person
-        np.testing.assert_allclose(cv["predictions"]["network"][s],
-                                   _Linear(train).predict(rec.p[s]))  # fmt: skip
+        np.testing.assert_allclose(
+            cv["predictions"]["network"][s], _Linear(train).predict(rec.p[s])
+        )
         assert cv["predictions"]["constant"][s][0] == pytest.approx(train.alpha.mean())
-        assert row["network"]["rms_deg"] == pytest.approx(math.degrees(np.sqrt(np.mean(
-            net[s] ** 2))))  # fmt: skip
+        assert row["network"]["rms_deg"] == pytest.approx(
+            math.degrees(np.sqrt(np.mean(net[s] ** 2)))
+        )
         assert row["network"]["low"] <= row["network"]["rms_deg"] <= row["network"]["high"]
         assert row["network"]["rms_deg"] < row["constant"]["rms_deg"]
     total, between, within = spread_of(net, rec.participant)
@@ -291,8 +330,11 @@ def test_cross_validation_scores_recomputed(rng):
 
 
 def test_wrap_keeps_residuals_in_minus_pi_pi():
-    np.testing.assert_allclose(wrap(np.array([0.0, np.pi, -np.pi, 1.5 * np.pi, 2 * np.pi + 0.1])),
-                               [0.0, np.pi, np.pi, -0.5 * np.pi, 0.1], atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        wrap(np.array([0.0, np.pi, -np.pi, 1.5 * np.pi, 2 * np.pi + 0.1])),
+        [0.0, np.pi, np.pi, -0.5 * np.pi, 0.1],
+        atol=1e-12,
+    )
 
 
 # ---------------------------------------------------------------------------- training
@@ -351,7 +393,10 @@ def test_shipped_network_and_its_card_agree():
     cv = net.meta["cross_validation"]
     sp = cv["spread"]
     assert (net.spread, net.spread_between, net.spread_within) == (
-        sp["spread"], sp["between"], sp["within"])  # fmt: skip
+        sp["spread"],
+        sp["between"],
+        sp["within"],
+    )
     assert net.spread == pytest.approx(math.hypot(net.spread_between, net.spread_within))
     # the spread is the rms over every held-out record (participants alike): the summary's
     assert math.degrees(net.spread) == pytest.approx(cv["summary"]["network"]["rms_deg"], abs=0.05)
@@ -381,8 +426,9 @@ def test_shipped_network_recomputed_on_its_own_records():
     from wholebody.humanlike.recordings import load_recordings
 
     net = default_arm_angle_model()
-    rec = arm_angle_records(load_recordings(), load_participants(),
-                            n_records=net.meta["data"]["records"])  # fmt: skip
+    rec = arm_angle_records(
+        load_recordings(), load_participants(), n_records=net.meta["data"]["records"]
+    )
     assert len(rec) == net.meta["training"]["records"]
     rms = float(np.sqrt(np.mean(wrap(rec.alpha - net.predict(rec.p)) ** 2)))
     assert 0.5 * net.spread < rms < net.spread
@@ -422,14 +468,34 @@ def test_cross_validation_runs_the_real_fit_end_to_end(tmp_path: Path):
     from wholebody.cli import main
 
     out, card = tmp_path / "aa.npz", tmp_path / "README.md"
-    argv = ["stiffness", "armangle", "fit", "--tasks", "forward", "--records", "240", "--epochs",
-            "2", "--bootstrap", "20", "--no-kim-scatter", "--quiet", "--date", "2026-12-24",
-            "--out", str(out), "--card", str(card)]  # fmt: skip
+    argv = [
+        "stiffness",
+        "armangle",
+        "fit",
+        "--tasks",
+        "forward",
+        "--records",
+        "240",
+        "--epochs",
+        "2",
+        "--bootstrap",
+        "20",
+        "--no-kim-scatter",
+        "--quiet",
+        "--date",
+        "2026-12-24",
+        "--out",
+        str(out),
+        "--card",
+        str(card),
+    ]
     assert main(argv) == 0
     net = NetworkArmAngle.load(out)
     text = card.read_text()
     assert "Date: 2026-12-24." in text and "| forward | 120 |" in text
     assert f"`spread` {math.degrees(net.spread):.1f} deg" in text
     assert "--tasks forward" in text and "--no-kim-scatter" in text
-    assert net.meta["data"]["tasks"] == ["forward"] and len(net.meta["cross_validation"]
-                                                               ["participants"]) == 12  # fmt: skip
+    assert (
+        net.meta["data"]["tasks"] == ["forward"]
+        and len(net.meta["cross_validation"]["participants"]) == 12
+    )

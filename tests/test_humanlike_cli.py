@@ -30,8 +30,20 @@ def _run(*argv: str) -> int:
 @pytest.mark.slow
 def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     ds_path = tmp_path / "ds.npz"
-    assert _run("dataset", "--no-real", "--synthetic-participants", "3", "--records", "300",
-                "--quiet", "--out", str(ds_path)) == 0  # fmt: skip
+    assert (
+        _run(
+            "dataset",
+            "--no-real",
+            "--synthetic-participants",
+            "3",
+            "--records",
+            "300",
+            "--quiet",
+            "--out",
+            str(ds_path),
+        )
+        == 0
+    )
     ds = StiffnessDataset.load(ds_path)
     assert 250 <= len(ds) <= 300
     assert set(ds.source) == {"synthetic"} and set(ds.participant) == {"SYN01", "SYN02", "SYN03"}
@@ -41,9 +53,27 @@ def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     assert "synthetic: 108 trials" in out
 
     net_path, card = tmp_path / "k.npz", tmp_path / "card.md"
-    assert _run("fit", "--dataset", str(ds_path), "--test-participants", "SYN03",
-                "--hidden", "4,4", "--epochs", "3", "--quiet", "--date", "2026-11-22",
-                "--out", str(net_path), "--card", str(card)) == 0  # fmt: skip
+    assert (
+        _run(
+            "fit",
+            "--dataset",
+            str(ds_path),
+            "--test-participants",
+            "SYN03",
+            "--hidden",
+            "4,4",
+            "--epochs",
+            "3",
+            "--quiet",
+            "--date",
+            "2026-11-22",
+            "--out",
+            str(net_path),
+            "--card",
+            str(card),
+        )
+        == 0
+    )
     net = NetworkStiffness.load(net_path)
     scores = net.meta["scores_held_out_participants"]
     assert set(scores) >= {"network", "svr", "mean"}
@@ -53,26 +83,52 @@ def test_dataset_fit_report_end_to_end(tmp_path: Path, capsys):
     assert f"{scores['svr']['r2']:.3f}" in text
     assert "--test-participants SYN03" in text  # the card's command reproduces this split
     # ... and the dataset's options: the card's dataset command rebuilds this dataset
-    assert ("wholebody stiffness dataset --robot mobile_humanoid --arm right --records 300 "
-            "--seed 0 --synthetic-participants 3 --no-real --out") in text  # fmt: skip
+    assert (
+        "wholebody stiffness dataset --robot mobile_humanoid --arm right --records 300 "
+        "--seed 0 --synthetic-participants 3 --no-real --out"
+    ) in text
 
     rep = tmp_path / "rep"
-    assert _run("report", "--model", str(net_path), "--dataset", str(ds_path), "--quiet",
-                "--out", str(rep)) == 0  # fmt: skip
+    assert (
+        _run(
+            "report",
+            "--model",
+            str(net_path),
+            "--dataset",
+            str(ds_path),
+            "--quiet",
+            "--out",
+            str(rep),
+        )
+        == 0
+    )
     assert (rep / "k_workspace.png").stat().st_size > 10_000
     saved = json.loads((rep / "scores.json").read_text())
     again = saved["recomputed_network_held_out"]
     assert again["r2"] == pytest.approx(scores["network"]["r2"], abs=1e-9)
     with pytest.raises(DataError, match=r"nope\.npz"):  # a dataset named must exist
-        _run("report", "--model", str(net_path), "--dataset", str(tmp_path / "nope.npz"),
-             "--quiet", "--out", str(rep))  # fmt: skip
+        _run(
+            "report",
+            "--model",
+            str(net_path),
+            "--dataset",
+            str(tmp_path / "nope.npz"),
+            "--quiet",
+            "--out",
+            str(rep),
+        )
 
 
 @pytest.mark.parametrize(
     "argv",
-    [("fit", "--epochs", "0"), ("fit", "--batch-size", "0"), ("fit", "--threads", "0"),
-     ("dataset", "--synthetic-participants", "-1"), ("dataset", "--records", "0")],
-)  # fmt: skip
+    [
+        ("fit", "--epochs", "0"),
+        ("fit", "--batch-size", "0"),
+        ("fit", "--threads", "0"),
+        ("dataset", "--synthetic-participants", "-1"),
+        ("dataset", "--records", "0"),
+    ],
+)
 def test_counts_are_checked_by_the_parser(argv, capsys):
     with pytest.raises(SystemExit) as info:
         _run(*argv)
@@ -89,13 +145,15 @@ def test_svr_baseline_on_a_noise_free_slice(humanoid):
     from wholebody.humanlike.svr import fit_svr, select_svr
     from wholebody.humanlike.synthetic import DEFAULT_PARTICIPANTS, generate_synthetic
 
-    model = dataclasses.replace(CALIBRATED, sd_participant=0.0, sd_block=0.0, sd_trial=0.0,
-                                sd_within=0.0)  # fmt: skip
+    model = dataclasses.replace(
+        CALIBRATED, sd_participant=0.0, sd_block=0.0, sd_trial=0.0, sd_within=0.0
+    )
     recs = generate_synthetic(DEFAULT_PARTICIPANTS[:4], seed=0, model=model)
     ds, _ = build_dataset(recs, ArmParameters.from_robot(humanoid), n_records=600)
     train, test = ds.split(["SYN02"])
-    params, table = select_svr(train.wrist, train.k, train.participant,
-                               grid={"C": (1.0, 10.0), "gamma": (1.0,)})  # fmt: skip
+    params, table = select_svr(
+        train.wrist, train.k, train.participant, grid={"C": (1.0, 10.0), "gamma": (1.0,)}
+    )
     assert len(table) == 2 and params["C"] in (1.0, 10.0)
     s = regression_scores(test.k, fit_svr(train.wrist, train.k, **params).predict(test.wrist))
     assert s["r2"] > 0.5

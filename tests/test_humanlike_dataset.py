@@ -31,8 +31,12 @@ def params(humanoid) -> ArmParameters:
 
 @pytest.fixture(scope="module")
 def recordings():
-    real = [load_recording(real_recordings_dir() / f"ADL00{i}_{t}_{s}1.csv")
-            for i in (1, 2, 9) for t in ("forward", "across") for s in "RL"]  # fmt: skip
+    real = [
+        load_recording(real_recordings_dir() / f"ADL00{i}_{t}_{s}1.csv")
+        for i in (1, 2, 9)
+        for t in ("forward", "across")
+        for s in "RL"
+    ]
     return real + generate_synthetic(DEFAULT_PARTICIPANTS[:2], seed=0)
 
 
@@ -87,8 +91,9 @@ def test_split_by_participant_and_file_round_trip(recordings, params, tmp_path: 
 def test_no_surviving_frame_is_a_data_error(recordings, params, tmp_path: Path):
     rec = recordings[0]
     down = np.array([0.0, 0.0, 1.0])
-    hanging = replace(rec, elbow=rec.shoulder - 0.3 * down + [0.01, 0.0, 0.0],
-                      wrist=rec.shoulder - 0.55 * down)  # fmt: skip
+    hanging = replace(
+        rec, elbow=rec.shoulder - 0.3 * down + [0.01, 0.0, 0.0], wrist=rec.shoulder - 0.55 * down
+    )
     with pytest.raises(DataError, match="no frame of the 1 recording"):
         build_dataset([hanging], params, n_records=100)
     ds, _ = build_dataset(recordings[:2], params, n_records=50)
@@ -103,8 +108,9 @@ def test_shipped_dataset():
     assert set(ds.source) == {"real"} and "synthetic" not in ds.meta
     assert set(DEFAULT_TEST_PARTICIPANTS) <= set(ds.participant)
     assert all(p.startswith("ADL") for p in DEFAULT_TEST_PARTICIPANTS)
-    assert ds.meta["real"]["tasks"] == {t: 120 for t in ("across", "combing", "drinking",
-                                                         "forward")}  # fmt: skip
+    assert ds.meta["real"]["tasks"] == {
+        t: 120 for t in ("across", "combing", "drinking", "forward")
+    }
     tasks = {t.split("_")[1] for t in ds.trial}
     assert tasks == {"forward", "across", "drinking", "combing"}
     per_trial = np.unique(ds.trial, return_counts=True)[1]
@@ -124,16 +130,18 @@ def test_real_data_by_default_and_tasks_on_request(params):
     assert "arm_angle_model" not in info  # nothing synthetic to shape
     assert info["real"]["tasks"] == {"forward": 120}
     assert {t.split("_")[1] for t in ds.trial} == {"forward"}
-    syn, _, info = make_dataset(params, real=False, synthetic=DEFAULT_PARTICIPANTS[:1],
-                                n_records=60)  # fmt: skip
+    syn, _, info = make_dataset(
+        params, real=False, synthetic=DEFAULT_PARTICIPANTS[:1], n_records=60
+    )
     assert set(syn.source) == {"synthetic"} and info["arm_angle_model"]["calibrated_on"]
 
 
 def test_participants_that_shaped_the_synthetic_data_cannot_be_held_out(params):
     """The synthetic elbows come from an arm-angle model calibrated on real participants;
     scoring on one of them would leak: fit_and_evaluate refuses."""
-    ds, _, info = make_dataset(params, real=False, synthetic=DEFAULT_PARTICIPANTS[:2],
-                               n_records=200)  # fmt: skip
+    ds, _, info = make_dataset(
+        params, real=False, synthetic=DEFAULT_PARTICIPANTS[:2], n_records=200
+    )
     assert info["arm_angle_model"]["calibrated_on"] == list(CALIBRATED_ON)
     assert not set(CALIBRATED_ON) & set(DEFAULT_TEST_PARTICIPANTS)
     with pytest.raises(DataError, match="ADL001 shaped the synthetic training data"):
@@ -152,17 +160,28 @@ def test_reference_networks_are_scored_alike_and_must_not_have_seen_the_test_peo
     from wholebody.humanlike.training import TrainingConfig
 
     for person in ("ADL001", "ADL003", "ADL005", "ADL008"):  # a slice of the recordings
-        for name in (f"{person}_forward_R1", f"{person}_forward_L2", f"{person}_drinking_R3",
-                     f"{person}_drinking_L4", f"{person}_combing_R1"):  # fmt: skip
+        for name in (
+            f"{person}_forward_R1",
+            f"{person}_forward_L2",
+            f"{person}_drinking_R3",
+            f"{person}_drinking_L4",
+            f"{person}_combing_R1",
+        ):
             shutil.copy(real_recordings_dir() / f"{name}.csv", tmp_path)
-    ds, _, _ = make_dataset(params, recordings_dir=tmp_path, tasks=("forward", "drinking"),
-                            n_records=400)  # fmt: skip
+    ds, _, _ = make_dataset(
+        params, recordings_dir=tmp_path, tasks=("forward", "drinking"), n_records=400
+    )
     assert {t.split("_")[1] for t in ds.trial} == {"forward", "drinking"}
     ref = default_stiffness()
     held = ref.meta["split"]["test_participants"]
-    out = fit_and_evaluate(ds, test_participants=["ADL003", "ADL008"], svr=False,
-                           config=TrainingConfig(hidden=(4,), epochs=2),
-                           references={"before": ref}, n_boot=30)  # fmt: skip
+    out = fit_and_evaluate(
+        ds,
+        test_participants=["ADL003", "ADL008"],
+        svr=False,
+        config=TrainingConfig(hidden=(4,), epochs=2),
+        references={"before": ref},
+        n_boot=30,
+    )
     det = out.network.meta["scores_real_held_out"]
     _, test = ds.split(["ADL003", "ADL008"])
     for name, net in (("network", out.network), ("before", ref)):
@@ -183,5 +202,10 @@ def test_reference_networks_are_scored_alike_and_must_not_have_seen_the_test_peo
     assert out.network.meta["references"]["before"]["split"]["test_participants"] == held
     seen = sorted(set(ds.participant) - set(held))[0]
     with pytest.raises(DataError, match=f"trained on test participant.*{seen}"):
-        fit_and_evaluate(ds, test_participants=[seen], svr=False, references={"before": ref},
-                         config=TrainingConfig(hidden=(4,), epochs=1))  # fmt: skip
+        fit_and_evaluate(
+            ds,
+            test_participants=[seen],
+            svr=False,
+            references={"before": ref},
+            config=TrainingConfig(hidden=(4,), epochs=1),
+        )

@@ -133,8 +133,9 @@ def test_file_round_trip_and_errors(trained, tmp_path: Path, rng):
     named = net.save(tmp_path / "model.weights")
     assert named.name == "model.weights.npz" and named.is_file()
     # without a training range: none after a round trip either (not an infinite box)
-    bare = NetworkStiffness(net.weights, net.biases, net.x_mean, net.x_scale, net.k_mean,
-                            net.k_scale, net.floor_beta)  # fmt: skip
+    bare = NetworkStiffness(
+        net.weights, net.biases, net.x_mean, net.x_scale, net.k_mean, net.k_scale, net.floor_beta
+    )
     again = NetworkStiffness.load(bare.save(tmp_path / "bare.npz"))
     with pytest.raises(DataError, match="no stored training range"):
         again.in_range(np.zeros(3))
@@ -151,8 +152,11 @@ def test_shipped_default_plugs_into_the_arm_energy(humanoid):
     assert model.meta["robot"] == "mobile_humanoid"
     k, g = model.evaluate(np.array([0.25, 0.05, -0.25]))
     assert k > 0 and g.shape == (3,)
-    joints = {"right_shoulder_flexion": 0.6, "right_elbow_flexion": 1.1,
-              "right_shoulder_abduction": 0.3}  # fmt: skip
+    joints = {
+        "right_shoulder_flexion": 0.6,
+        "right_elbow_flexion": 1.1,
+        "right_shoulder_abduction": 0.3,
+    }
     q = humanoid.configuration(joints, base_pose=(0.1, -0.2, 0.3))
     energy = ArmPotentialEnergy(humanoid, "right", model)
     value = energy.evaluate(humanoid.update(q))
@@ -170,8 +174,11 @@ def test_model_selection_follows_the_one_standard_error_rule(small_split):
     folds = group_folds(train.participant, 3)
     for tr, va in folds:  # whole participants held out in each fold
         assert not set(train.participant[tr]) & set(train.participant[va])
-    cands = [{"hidden": (4,), "weight_decay": 0.1}, {"hidden": (8, 8), "weight_decay": 0.0},
-             {"hidden": (8,), "weight_decay": 0.0}]  # fmt: skip
+    cands = [
+        {"hidden": (4,), "weight_decay": 0.1},
+        {"hidden": (8, 8), "weight_decay": 0.0},
+        {"hidden": (8,), "weight_decay": 0.0},
+    ]
     chosen, table = select_model(train, cands, TrainingConfig(epochs=4))
     assert len(table) == 3 and sum(r["chosen"] for r in table) == 1
     best = min(table, key=lambda r: r["cv_mse"])

@@ -234,8 +234,12 @@ def _malformed(tmp_path: Path) -> list[tuple[str, Path, list[str]]]:
     short = base.tolist()
     short[2] = short[2][:5]
     add("short_row", short, ["row 3", "5 fields", "'elbow_y'"])
-    add("duplicate_column", base.tolist(), ["'wrist_x'", "repeated"],
-        header=[*HEADER[:-1], "wrist_x"])  # fmt: skip
+    add(
+        "duplicate_column",
+        base.tolist(),
+        ["'wrist_x'", "repeated"],
+        header=[*HEADER[:-1], "wrist_x"],
+    )
     return cases
 
 
@@ -258,8 +262,14 @@ def test_declared_units_that_do_not_fit_are_caught(good: Path):
 
 def test_malformed_npz_files(good: Path, tmp_path: Path):
     rec = load_csv_recording(good)
-    ok = {"time_s": rec.time_s, "shoulder": rec.shoulder, "elbow": rec.elbow,
-          "wrist": rec.wrist, "units": np.array("m"), "side": np.array("R")}  # fmt: skip
+    ok = {
+        "time_s": rec.time_s,
+        "shoulder": rec.shoulder,
+        "elbow": rec.elbow,
+        "wrist": rec.wrist,
+        "units": np.array("m"),
+        "side": np.array("R"),
+    }
     cases = {
         "missing_key": ({k: v for k, v in ok.items() if k != "elbow"}, ["missing key", "'elbow'"]),
         "bad_shape": ({**ok, "wrist": ok["wrist"][:, :2]}, ["'wrist'", "expected shape"]),

@@ -70,8 +70,9 @@ def test_kim_closed_form_matches_the_criterion_by_search(rng):
         assert np.cos(free - best) == pytest.approx(1.0, abs=1e-5)
         down = float(kim_arm_angle(S, W, L1, L2, T, CANONICAL_SIDE))
         assert abs(down) <= np.pi / 2
-        assert np.cos(down - best) == pytest.approx(1.0 if abs(best) <= np.pi / 2 else -1.0,
-                                                    abs=1e-5)  # fmt: skip
+        assert np.cos(down - best) == pytest.approx(
+            1.0 if abs(best) <= np.pi / 2 else -1.0, abs=1e-5
+        )
         flipped += abs(best) > np.pi / 2
     assert 0 < flipped < 8  # both cases were exercised
 
@@ -127,10 +128,18 @@ def test_synthetic_recordings_are_labelled_and_reproducible():
 def test_calibration_on_real_reaches():
     """On a subset of the real reaches the fitted target explains the arm angle better than
     Kim et al.'s head-centre target, which puts the elbow far too lateral."""
-    recs = [r for r in load_recordings(tasks=("forward", "across"))
-            if r.trial <= 2 and r.participant <= "ADL006"]  # fmt: skip
-    cal = calibrate(recs, load_participants(), every=10, medial=np.linspace(-0.05, 0.15, 9),
-                    up=np.linspace(0.0, 0.3, 13))  # fmt: skip
+    recs = [
+        r
+        for r in load_recordings(tasks=("forward", "across"))
+        if r.trial <= 2 and r.participant <= "ADL006"
+    ]
+    cal = calibrate(
+        recs,
+        load_participants(),
+        every=10,
+        medial=np.linspace(-0.05, 0.15, 9),
+        up=np.linspace(0.0, 0.3, 13),
+    )
     pub_mean, pub_sd = cal.published_residual
     mean, sd = cal.calibrated_residual
     assert abs(pub_mean) > 20.0  # the head-centre target puts the elbow far too lateral
@@ -161,16 +170,22 @@ def test_synthetic_out_writes_the_recordings_the_dataset_was_built_from(humanoid
     written beside the dataset must be those recordings."""
     sub = tmp_path / "real"
     sub.mkdir()
-    for name in ("ADL001_forward_R1", "ADL001_across_R1", "ADL002_forward_R1",
-                 "ADL002_across_R1"):  # fmt: skip
+    for name in ("ADL001_forward_R1", "ADL001_across_R1", "ADL002_forward_R1", "ADL002_across_R1"):
         shutil.copy(real_recordings_dir() / f"{name}.csv", sub)
     params = ArmParameters.from_robot(humanoid, "right")
-    make_dataset(params, recordings_dir=sub, recalibrate=True, synthetic=DEFAULT_PARTICIPANTS[:1],
-                 n_records=200, synthetic_out=tmp_path / "syn")  # fmt: skip
+    make_dataset(
+        params,
+        recordings_dir=sub,
+        recalibrate=True,
+        synthetic=DEFAULT_PARTICIPANTS[:1],
+        n_records=200,
+        synthetic_out=tmp_path / "syn",
+    )
     model = calibrate(load_recordings(sub), load_participants()).model
     expected = generate_synthetic(DEFAULT_PARTICIPANTS[:1], seed=0, model=model)
     written = sorted((tmp_path / "syn").glob("*.npz"))
     assert len(written) == len(expected)
     for rec in expected:
-        np.testing.assert_array_equal(load_recording(tmp_path / "syn" / f"{rec.name}.npz").elbow,
-                                      rec.elbow)  # fmt: skip
+        np.testing.assert_array_equal(
+            load_recording(tmp_path / "syn" / f"{rec.name}.npz").elbow, rec.elbow
+        )

@@ -59,8 +59,10 @@ def suggest(d: Path, capsys) -> str:
     return capsys.readouterr().out
 
 
-@pytest.mark.skipif(example_robot_data_share() is None, reason="example-robot-data is not "
-                    "installed (pip install '.[robots]' from the checkout)")  # fmt: skip
+@pytest.mark.skipif(
+    example_robot_data_share() is None,
+    reason="example-robot-data is not installed (pip install '.[robots]' from the checkout)",
+)
 def test_baxters_arm_axes_do_not_meet_and_the_suggested_frames_make_it_load(tmp_path, capsys):
     """Baxter (example-robot-data, not shipped): the error names the three frames off their
     centres and the command; the pasted suggestion loads, with the shoulder where the axes
@@ -71,8 +73,11 @@ def test_baxters_arm_axes_do_not_meet_and_the_suggested_frames_make_it_load(tmp_
     with pytest.raises(ConfigError) as info:
         wholebody.load_robot(d)
     text = str(info.value)
-    for key, frame in (("shoulder", "left_upper_shoulder"), ("elbow", "left_upper_elbow"),
-                       ("wrist", "left_upper_forearm")):  # fmt: skip
+    for key, frame in (
+        ("shoulder", "left_upper_shoulder"),
+        ("elbow", "left_upper_elbow"),
+        ("wrist", "left_upper_forearm"),
+    ):
         assert f"the {key} '{frame}' is " in text
     assert f"wholebody info {d.resolve()} --suggest-frames" in text
     printed = suggest(d, capsys)
@@ -84,9 +89,11 @@ def test_baxters_arm_axes_do_not_meet_and_the_suggested_frames_make_it_load(tmp_
     arm = robot.arm("left")
     assert arm.shoulder.name == "left_shoulder_centre" and arm.wrist.name == "left_wrist_centre"
     state = robot.update(robot.neutral())
-    for frame, joints in ((arm.shoulder, ("left_s1", "left_e0")),
-                          (arm.elbow, ("left_e1", "left_w0")),
-                          (arm.wrist, ("left_w1", "left_w2"))):  # fmt: skip
+    for frame, joints in (
+        (arm.shoulder, ("left_s1", "left_e0")),
+        (arm.elbow, ("left_e1", "left_w0")),
+        (arm.wrist, ("left_w1", "left_w2")),
+    ):
         for j in joints:  # on each axis, to the 20 um the suggestion allows
             assert _distance_to_axis(robot, state.position(frame), j) < 2e-5
     assert "joint centres already" in suggest(d, capsys)
@@ -108,8 +115,9 @@ def test_an_elbow_frame_two_centimetres_off_its_axis_is_named_and_put_back(tmp_p
     shutil.copytree(robots_dir() / "dual_arm_torso", d)
     toml = d / "robot.toml"
     text = toml.read_text().replace('elbow = "left_elbow_centre"', 'elbow = "my_elbow"', 1)
-    toml.write_text(text + '\n[frames.my_elbow]\nparent = "left_elbow_centre"\n'
-                    "xyz = [0.02, 0.0, 0.0]\n")  # fmt: skip
+    toml.write_text(
+        text + '\n[frames.my_elbow]\nparent = "left_elbow_centre"\nxyz = [0.02, 0.0, 0.0]\n'
+    )
     with pytest.raises(ConfigError) as info:
         wholebody.load_robot(d)
     text = str(info.value)

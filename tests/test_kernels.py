@@ -84,9 +84,14 @@ def test_log3_and_jlog3_are_pinocchios(rng, kind):
     for _ in range(200):
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
-        angle = {"generic": rng.uniform(0, np.pi), "small": rng.uniform(0, 1e-5),
-                 "near_pi": np.pi - rng.uniform(0, 1e-5), "zero": 0.0, "pi": np.pi,
-                 "perturbed": rng.uniform(0, np.pi)}[kind]  # fmt: skip
+        angle = {
+            "generic": rng.uniform(0, np.pi),
+            "small": rng.uniform(0, 1e-5),
+            "near_pi": np.pi - rng.uniform(0, 1e-5),
+            "zero": 0.0,
+            "pi": np.pi,
+            "perturbed": rng.uniform(0, np.pi),
+        }[kind]
         R = pin.exp3(angle * axis)
         if kind == "perturbed":  # not quite orthonormal: both re-orthonormalise
             R = R + 1e-9 * rng.normal(size=(3, 3))

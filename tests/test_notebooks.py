@@ -51,8 +51,9 @@ def _outputs(cell) -> list[tuple]:
         if o.output_type == "stream" and o.name == "stdout":
             out.append(("stdout", _normalised(o.text)))
         elif o.output_type in ("execute_result", "display_data"):
-            out.append((o.output_type, tuple(sorted(o.data)),
-                        _normalised(o.data.get("text/plain", ""))))  # fmt: skip
+            out.append(
+                (o.output_type, tuple(sorted(o.data)), _normalised(o.data.get("text/plain", "")))
+            )
         elif o.output_type == "error":
             out.append(("error", o.ename, o.evalue))
     return out
@@ -108,7 +109,9 @@ def test_the_dev_extra_installs_what_opens_the_notebooks():
         import tomli as tomllib
 
     project = tomllib.loads((NOTEBOOKS.parent / "pyproject.toml").read_text())["project"]
-    dev = {re.split(r"[<>=!~ ;\[]", r, maxsplit=1)[0].lower()
-           for r in project["optional-dependencies"]["dev"]}  # fmt: skip
+    dev = {
+        re.split(r"[<>=!~ ;\[]", r, maxsplit=1)[0].lower()
+        for r in project["optional-dependencies"]["dev"]
+    }
     assert {"jupyterlab", "notebook"} & dev
     assert {"nbclient", "nbformat", "ipykernel"} <= dev

@@ -322,11 +322,14 @@ def test_fixed_step_rk4_is_asked_for_by_an_infinite_tolerance(scene_dmp: DMP) ->
     assert np.max(np.linalg.norm(fine.positions - ref.positions, axis=1)) < 1e-4
 
 
-@pytest.mark.parametrize("make", [
-    lambda e: cylinder([0, 0, 0], 0.04, 0.2, exponent=e),
-    lambda e: box([0, 0, 0], [0.1, 0.1, 0.1], exponent=e),
-    lambda e: Superquadric([0, 0, 0], np.eye(3), [0.1, 0.1, 0.1], e, e),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda e: cylinder([0, 0, 0], 0.04, 0.2, exponent=e),
+        lambda e: box([0, 0, 0], [0.1, 0.1, 0.1], exponent=e),
+        lambda e: Superquadric([0, 0, 0], np.eye(3), [0.1, 0.1, 0.1], e, e),
+    ],
+)
 def test_exponents_beyond_32_are_refused(make) -> None:
     """|u|^(2 * 100) overflows a metre away from a 4 cm cylinder: inf and NaN forces."""
     make(32.0)

@@ -18,8 +18,11 @@ from wholebody.scenarios.spec import ObjectSpec
 DT = 0.01
 
 
-def synthetic_log(phases: dict[str, tuple[np.ndarray, np.ndarray]], hands: int = 1,
-                  angle: np.ndarray | None = None) -> RunLog:  # fmt: skip
+def synthetic_log(
+    phases: dict[str, tuple[np.ndarray, np.ndarray]],
+    hands: int = 1,
+    angle: np.ndarray | None = None,
+) -> RunLog:
     """A log whose hands' references move along straight lines, one per phase ``name:
     (start, end)`` of 100 steps each (hands 0.3 m apart in y), executed 1 mm off; two arms,
     the arm angle ``angle`` (rad, default a slow sweep); 4 joints in 2 groups."""
@@ -36,21 +39,36 @@ def synthetic_log(phases: dict[str, tuple[np.ndarray, np.ndarray]], hands: int =
     names = ["right", "left"][:hands]
     ref_by = {h: ref + np.array([0.0, -0.3 * i, 0.0]) for i, h in enumerate(names)}
     angle = np.linspace(-1.0, 1.0, n) if angle is None else angle
-    arm = ArmTrace(energy=np.sin(t) - 5, gravity=np.sin(t) - 5.2, spring=np.cos(t) ** 2 / 5,
-                   arm_angle=angle, stiffness=np.full(n, 0.1), rho=np.full(n, 0.1))  # fmt: skip
+    arm = ArmTrace(
+        energy=np.sin(t) - 5,
+        gravity=np.sin(t) - 5.2,
+        spring=np.cos(t) ** 2 / 5,
+        arm_angle=angle,
+        stiffness=np.full(n, 0.1),
+        rho=np.full(n, 0.1),
+    )
     u = np.column_stack([np.sin(t * k) for k in range(1, 5)])
     u[n // 2, 0] = 9.0  # a one-step spike
     return RunLog(
-        t=t, q=np.zeros((n, 4)), u=u, joint_positions=np.zeros((n, 4)),
-        step_time=np.full(n, 1e-4), solve_time=np.full(n, 1e-4),
-        status=np.zeros(n, dtype=int), limit_hit=np.zeros(n, dtype=bool),
+        t=t,
+        q=np.zeros((n, 4)),
+        u=u,
+        joint_positions=np.zeros((n, 4)),
+        step_time=np.full(n, 1e-4),
+        solve_time=np.full(n, 1e-4),
+        status=np.zeros(n, dtype=int),
+        limit_hit=np.zeros(n, dtype=bool),
         level_residuals=np.zeros((n, 1)),
         frame_positions={h: r + 0.001 for h, r in ref_by.items()},
         reference_positions=ref_by,
         arms={"left": arm, "right": arm},
-        meta={"dt": DT, "phases": spans, "groups": {"left_arm": [0, 1], "wheels": [2, 3]},
-              "actuated_joints": ["shoulder", "elbow", "wheel_a", "wheel_b"]},
-    )  # fmt: skip
+        meta={
+            "dt": DT,
+            "phases": spans,
+            "groups": {"left_arm": [0, 1], "wheels": [2, 3]},
+            "actuated_joints": ["shoulder", "elbow", "wheel_a", "wheel_b"],
+        },
+    )
 
 
 HOME = np.array([0.1, -0.47, 0.4])
@@ -77,8 +95,12 @@ def test_reaches_are_told_apart_and_goals_named():
     (the returns to one place share a label), start and goal markers in the legend."""
     log = synthetic_log(REACHES)
     goals = plots.phase_goals(log)
-    assert [label for _, label, _ in goals] == ["reach_1", "return_1, return_2", "reach_2",
-                                                "reach_3"]  # fmt: skip
+    assert [label for _, label, _ in goals] == [
+        "reach_1",
+        "return_1, return_2",
+        "reach_2",
+        "reach_3",
+    ]
     fig = plots.hand_paths_figure(log)
     (ax,) = fig.axes
     colours = {line.get_color() for line in ax.lines if line.get_linestyle() == "-"}
@@ -94,8 +116,11 @@ def test_a_drive_gets_panels_near_the_hands():
     log = synthetic_log(DRIVE, hands=2)
     fig = plots.hand_paths_figure(log, carried={})
     titles = [ax.get_title() for ax in fig.axes]
-    assert titles == ["hand paths (whole run)", "near the hands at the end of 'approach'",
-                      "near the hands at the end"]  # fmt: skip
+    assert titles == [
+        "hand paths (whole run)",
+        "near the hands at the end of 'approach'",
+        "near the hands at the end",
+    ]
     for ax in fig.axes[1:]:
         assert ax.get_xlim()[1] - ax.get_xlim()[0] < 1.5
     assert len(plots.hand_paths_figure(synthetic_log(REACHES)).axes) == 1  # no drive
@@ -105,11 +130,19 @@ def test_hand_paths_draw_objects_and_obstacles():
     """Props, obstacles and a carried object are drawn; obstacles add the top view."""
     log = synthetic_log(REACHES)
     objects = {
-        "shelf": ObjectSpec(name="shelf", kind="box", position=(1.8, -0.2, 0.43),
-                            size=(0.3, 1.6, 0.03)),
-        "post": ObjectSpec(name="post", kind="cylinder", position=(1.7, -0.4, 0.6), radius=0.04,
-                           height=0.2, obstacle=True, margin=0.03),
-    }  # fmt: skip
+        "shelf": ObjectSpec(
+            name="shelf", kind="box", position=(1.8, -0.2, 0.43), size=(0.3, 1.6, 0.03)
+        ),
+        "post": ObjectSpec(
+            name="post",
+            kind="cylinder",
+            position=(1.7, -0.4, 0.6),
+            radius=0.04,
+            height=0.2,
+            obstacle=True,
+            margin=0.03,
+        ),
+    }
     fig = plots.hand_paths_figure(log, objects)
     assert len(fig.axes) == 2 and "top view" in fig.axes[1].get_title()
     legend = [t.get_text() for t in fig.legends[0].get_texts()]

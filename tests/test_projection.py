@@ -246,11 +246,22 @@ def test_a_tall_level_is_its_least_squares_solution_at_every_condition_number(rn
         V, _ = np.linalg.qr(rng.normal(size=(n, n)))
         A = (U * (0.03 * np.logspace(np.log10(kappa), 0, n))) @ V.T
         for b in (A @ rng.normal(size=n), rng.normal(size=m)):  # consistent, then not
-            levels = [LevelProblem("tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
-                                   {"t": slice(0, m)}),
-                      LevelProblem("rest", np.eye(n), rng.normal(size=n), np.zeros((0, n)),
-                                   np.zeros(0), np.zeros(0), {"objectives": slice(0, n)}, {},
-                                   1.0)]  # fmt: skip
+            levels = [
+                LevelProblem(
+                    "tall", A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0), {"t": slice(0, m)}
+                ),
+                LevelProblem(
+                    "rest",
+                    np.eye(n),
+                    rng.normal(size=n),
+                    np.zeros((0, n)),
+                    np.zeros(0),
+                    np.zeros(0),
+                    {"objectives": slice(0, n)},
+                    {},
+                    1.0,
+                ),
+            ]
             box = np.full(n, 1e12)
             problem = StackProblem(levels, -box, box, np.ones(n), {})
             u = ProjectionSolver().solve_problem(problem).u
@@ -270,10 +281,20 @@ def test_round_off_of_a_computed_projector_does_not_damp_a_tall_level_below(rng)
         V, _ = np.linalg.qr(rng.normal(size=(n, n)))
         A0 = (U * [220, 207, 161, 1.3, 1.2, 0.56, 0.004, 0, 0]) @ V[:, :9].T
         A1, b1 = rng.normal(size=(46, n)), rng.normal(size=46)
-        levels = [LevelProblem("L0", A0, rng.normal(size=9), np.zeros((0, n)), np.zeros(0),
-                               np.zeros(0), {"t0": slice(0, 9)}),
-                  LevelProblem("L1", A1, b1, np.zeros((0, n)), np.zeros(0), np.zeros(0),
-                               {"t1": slice(0, 46)})]  # fmt: skip
+        levels = [
+            LevelProblem(
+                "L0",
+                A0,
+                rng.normal(size=9),
+                np.zeros((0, n)),
+                np.zeros(0),
+                np.zeros(0),
+                {"t0": slice(0, 9)},
+            ),
+            LevelProblem(
+                "L1", A1, b1, np.zeros((0, n)), np.zeros(0), np.zeros(0), {"t1": slice(0, 46)}
+            ),
+        ]
         box = np.full(n, 1e12)
         u = ProjectionSolver().solve_problem(StackProblem(levels, -box, box, np.ones(n), {})).u
         N = np.linalg.svd(A0)[2][7:].T  # what level 0 leaves free, exactly
@@ -284,8 +305,9 @@ def test_round_off_of_a_computed_projector_does_not_damp_a_tall_level_below(rng)
 def _level(name, A, b):
     """A level of one task (rows ``A u = b``), no inequality rows."""
     n = A.shape[1]
-    return LevelProblem(name, A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
-                        {name: slice(0, A.shape[0])})  # fmt: skip
+    return LevelProblem(
+        name, A, b, np.zeros((0, n)), np.zeros(0), np.zeros(0), {name: slice(0, A.shape[0])}
+    )
 
 
 def _wide(rng, m, n, largest=5.0, smallest=0.05):
@@ -350,8 +372,9 @@ def test_a_posture_level_takes_the_general_routes_step(rng, tight, diagonal):
             A1 = np.diag(weights)
             A1[3, 7] = off
             box = np.full(n, 1.5 if tight else 1e12)
-            problem = StackProblem([_level("hands", A0, b0), _level("posture", A1, b1)],
-                                   -box, box, np.ones(n), {})  # fmt: skip
+            problem = StackProblem(
+                [_level("hands", A0, b0), _level("posture", A1, b1)], -box, box, np.ones(n), {}
+            )
             result = solver.solve_problem(problem)
             u[off] = result.u
         if tight:
@@ -361,8 +384,9 @@ def test_a_posture_level_takes_the_general_routes_step(rng, tight, diagonal):
             N, W = scipy.linalg.null_space(A0), np.diag(weights)
             expected = np.linalg.pinv(A0) @ b0
             expected += N @ np.linalg.lstsq(W @ N, b1 - W @ expected, rcond=None)[0]
-            np.testing.assert_allclose(u[0.0], expected, rtol=0,
-                                       atol=1e-10 * np.abs(expected).max())  # fmt: skip
+            np.testing.assert_allclose(
+                u[0.0], expected, rtol=0, atol=1e-10 * np.abs(expected).max()
+            )
 
 
 class _Box(Limit):
@@ -450,8 +474,11 @@ def test_a_low_weight_regulariser_does_not_pull_the_hands_off(humanoid, w_postur
     more as the posture's weight went down: 3.7e-2 against 3.2e-4 at 1e-5)."""
     state, (L, R), J, v = _hands_problem(humanoid)
     posture = PostureTask(humanoid, kp=1.0, weight=w_posture)
-    posture.set_target(humanoid.joint_positions(
-        humanoid.random_configuration(np.random.default_rng(7), margin=0.2)))  # fmt: skip
+    posture.set_target(
+        humanoid.joint_positions(
+            humanoid.random_configuration(np.random.default_rng(7), margin=0.2)
+        )
+    )
     stack = Stack(humanoid, [Level([L, R, posture])], [])
     p = stack.evaluate(state, DT)
     lstsq = p.to_u(np.linalg.lstsq(p.levels[0].A, p.levels[0].b, rcond=None)[0])
@@ -474,8 +501,9 @@ def test_the_unsaturated_solution_starts_from_zero_when_the_box_excludes_it(huma
         state = humanoid.update(q)
         L, R = hands(humanoid)
         near_targets(humanoid, state, (L, R), rng)
-        stack = Stack(humanoid, [Level([L, R])],
-                      [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+        stack = Stack(
+            humanoid, [Level([L, R])], [JointPositionLimits(humanoid), VelocityLimits(humanoid)]
+        )
         blo, bhi = box(stack, state)
         assert not blo[j] <= 0.0 <= bhi[j]
         J = np.vstack([t.compute(state).J for t in (L, R)])

@@ -51,8 +51,14 @@ def test_a_readme_example_runs_on_its_own_and_prints(index, monkeypatch):
 @pytest.mark.slow
 def test_the_examples_do_what_they_say(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    found = {"quickstart": False, "reach": False, "dmp": False, "recovery": False,
-             "arm angle": False, "collision": False}  # fmt: skip
+    found = {
+        "quickstart": False,
+        "reach": False,
+        "dmp": False,
+        "recovery": False,
+        "arm angle": False,
+        "collision": False,
+    }
     for name, code in NAMED:
         ns, _ = run_block(code, name)
         if "hand.set_target(goal)" in code:  # the quickstart reaches its goal

@@ -38,8 +38,9 @@ def test_a_shipped_robot_loads_with_exact_jacobians(name, rng):
     for _ in range(3):
         q = robot.random_configuration(rng, margin=0.05, base_range=0.5)
         for tool in tools:
-            np.testing.assert_allclose(robot.frame_jacobian(q, tool),
-                                       frame_jacobian_fd(robot, q, tool), atol=1e-6)  # fmt: skip
+            np.testing.assert_allclose(
+                robot.frame_jacobian(q, tool), frame_jacobian_fd(robot, q, tool), atol=1e-6
+            )
     for arm in robot.arms.values():  # the arm chain's joint centres: fixed lengths
         assert 0.2 < arm.upper_arm_length < 0.5 and 0.2 < arm.forearm_length < 0.5
 
@@ -49,7 +50,9 @@ def test_tiago_wheels_below_locked_suspensions_drive_the_base(rng):
     any differential base: equal speeds move it forward at r w, opposite ones turn it."""
     robot = wholebody.load_robot("tiago_dual")
     assert robot.base.type == "differential" and robot.base.wheel_joints == (
-        "wheel_left_joint", "wheel_right_joint")  # fmt: skip
+        "wheel_left_joint",
+        "wheel_right_joint",
+    )
     q = robot.home()
     u = np.zeros(robot.nu)
     u[:2] = 1.0
@@ -57,7 +60,8 @@ def test_tiago_wheels_below_locked_suspensions_drive_the_base(rng):
     assert x == pytest.approx(0.1 * 0.0985) and y == pytest.approx(0.0) and yaw == 0.0
     u[:2] = -1.0, 1.0
     assert robot.base_pose(robot.integrate(q, u, 0.1))[2] == pytest.approx(
-        0.1 * 2 * 0.0985 / 0.4044)  # fmt: skip
+        0.1 * 2 * 0.0985 / 0.4044
+    )
 
 
 def test_panda_fingers_move_together():

@@ -39,10 +39,14 @@ def goal_poses(robot, index: int) -> list[np.ndarray]:
 
 def worst_error(robot, q, goal) -> tuple[float, float]:
     state = robot.update(q)
-    pos = max(np.linalg.norm(state.pose(robot.frame(f))[:3, 3] - T[:3, 3])
-              for f, T in zip(HANDS, goal, strict=True))  # fmt: skip
-    ang = max(np.linalg.norm(pin.log3(state.pose(robot.frame(f))[:3, :3].T @ T[:3, :3]))
-              for f, T in zip(HANDS, goal, strict=True))  # fmt: skip
+    pos = max(
+        np.linalg.norm(state.pose(robot.frame(f))[:3, 3] - T[:3, 3])
+        for f, T in zip(HANDS, goal, strict=True)
+    )
+    ang = max(
+        np.linalg.norm(pin.log3(state.pose(robot.frame(f))[:3, :3].T @ T[:3, :3]))
+        for f, T in zip(HANDS, goal, strict=True)
+    )
     return pos, ang
 
 
@@ -76,8 +80,10 @@ def test_a_reach_stuck_in_a_local_minimum_converges_after_a_retreat(humanoid, ba
     goal = goal_poses(humanoid, 1)
     plain, q_plain = reach(humanoid, backend, goal, recovery=False, duration=6.0)
     final = worst_error(humanoid, q_plain, goal)[0]
-    at_3s = max(np.linalg.norm(plain.frame_positions[f][299] - T[:3, 3])
-                for f, T in zip(HANDS, goal, strict=True))  # fmt: skip
+    at_3s = max(
+        np.linalg.norm(plain.frame_positions[f][299] - T[:3, 3])
+        for f, T in zip(HANDS, goal, strict=True)
+    )
     assert final > 0.1 and final > 0.9 * at_3s, (final, at_3s)
     log, q = reach(humanoid, backend, goal, recovery=True)
     pos, ang = worst_error(humanoid, q, goal)
@@ -116,8 +122,9 @@ def test_no_retreat_while_the_tasks_progress(humanoid, backend):
             goal[:3, 3] += [0.15, 0.0, 0.2]
             refs[hand] = MinimumJerkTrajectory(start, goal, 1.5)
         watch = StallRecovery(humanoid, stack) if recovery else None
-        ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, references=refs,
-                          recovery=watch)  # fmt: skip
+        ctrl = Controller(
+            humanoid, stack, BACKENDS[backend](), dt=DT, references=refs, recovery=watch
+        )
         runs.append(ctrl.run(q0, 2.0))
     assert runs[1].meta["retreats"] == []
     np.testing.assert_array_equal(runs[0].u, runs[1].u)
@@ -131,16 +138,18 @@ def test_a_retreat_keeps_the_levels_above_the_watched_tasks(humanoid, backend):
     the joints go to the ready posture as far as the chain lets them."""
     left, right = (FrameTask(humanoid, f, kp=20.0) for f in HANDS)
     chain = RelativeFrameTask(humanoid, "left_tool", "right_tool", kp=20.0, name="chain")
-    stack = Stack(humanoid, [Level([chain]), Level([left, right])],
-                  [JointPositionLimits(humanoid), VelocityLimits(humanoid)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [Level([chain]), Level([left, right])],
+        [JointPositionLimits(humanoid), VelocityLimits(humanoid)],
+    )
     q = humanoid.home()
     state = humanoid.update(q)
     for hand in (left, right):  # both hands 30 cm up: consistent with the chain
         T = state.pose(hand.frame).copy()
         T[2, 3] += 0.3
         hand.set_target(T)
-    watch = StallRecovery(humanoid, stack, horizon=1e-9, min_rate=1e9, window=0.05,
-                          max_retreats=1)  # fmt: skip
+    watch = StallRecovery(humanoid, stack, horizon=1e-9, min_rate=1e9, window=0.05, max_retreats=1)
     assert watch.retreat_stack.levels[0] is stack.levels[0]
     solver = BACKENDS[backend]()
     nb = len(humanoid.base.actuators)
@@ -163,8 +172,14 @@ def test_a_retreat_keeps_the_levels_above_the_watched_tasks(humanoid, backend):
 def test_bad_arguments_are_named(humanoid):
     hands = [FrameTask(humanoid, f) for f in HANDS]
     stack = paper_stack(humanoid, hands)
-    for kwargs in ({"horizon": 0.0}, {"window": float("nan")}, {"min_error": -1.0},
-                   {"max_retreats": 1.5}, {"gain": "fast"}, {"max_lag": float("nan")}):  # fmt: skip
+    for kwargs in (
+        {"horizon": 0.0},
+        {"window": float("nan")},
+        {"min_error": -1.0},
+        {"max_retreats": 1.5},
+        {"gain": "fast"},
+        {"max_lag": float("nan")},
+    ):
         with pytest.raises(DimensionError):
             StallRecovery(humanoid, stack, **kwargs)
     with pytest.raises(DimensionError):
@@ -175,12 +190,15 @@ def test_bad_arguments_are_named(humanoid):
         StallRecovery(humanoid, stack, posture="ready")
     other = paper_stack(humanoid, [FrameTask(humanoid, "left_tool")])
     with pytest.raises(WholebodyError, match="controller's stack"):
-        Controller(humanoid, other, ProjectionSolver(), dt=DT,
-                   recovery=StallRecovery(humanoid, stack))  # fmt: skip
+        Controller(
+            humanoid, other, ProjectionSolver(), dt=DT, recovery=StallRecovery(humanoid, stack)
+        )
     ready = StallRecovery(humanoid, stack, posture={"left_elbow_flexion": 1.0}).ready
     assert ready[humanoid.index("left_elbow_flexion")] == 1.0
-    np.testing.assert_array_equal(StallRecovery(humanoid, stack, posture="home").ready,
-                                  humanoid.joint_positions(humanoid.home()))  # fmt: skip
+    np.testing.assert_array_equal(
+        StallRecovery(humanoid, stack, posture="home").ready,
+        humanoid.joint_positions(humanoid.home()),
+    )
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -227,8 +245,10 @@ def test_a_reference_the_hands_lag_behind_is_not_a_stall(humanoid, backend):
     refs = rising(humanoid, q0, hands)
     ctrl = Controller(humanoid, stack, BACKENDS[backend](), dt=DT, references=refs)
     log = ctrl.run(q0, 2.0)
-    lag = max(np.linalg.norm(log.frame_positions[h.name][25] - refs[h].sample(0.25).position)
-              for h in hands)  # fmt: skip
+    lag = max(
+        np.linalg.norm(log.frame_positions[h.name][25] - refs[h].sample(0.25).position)
+        for h in hands
+    )
     assert lag > 0.05  # unmet and far behind at mid-reference
     assert log.meta["retreats"] == []
     for hand in hands:
@@ -281,14 +301,21 @@ def test_hands_that_lose_a_moving_reference_retreat_before_it_stops(humanoid):
     for max_lag in (0.5, float("inf")):
         hands = [FrameTask(humanoid, f) for f in HANDS]
         stack = paper_stack(humanoid, hands, acceleration=True)
-        refs = {h: MinimumJerkTrajectory(humanoid.frame_pose(q0, h.frame), T, 3.0)
-                for h, T in zip(hands, goal, strict=True)}  # fmt: skip
+        refs = {
+            h: MinimumJerkTrajectory(humanoid.frame_pose(q0, h.frame), T, 3.0)
+            for h, T in zip(hands, goal, strict=True)
+        }
         watch = StallRecovery(humanoid, stack, max_lag=max_lag)
-        ctrl = Controller(humanoid, stack, ProjectionSolver(), dt=DT, references=refs,
-                          recovery=watch)  # fmt: skip
+        ctrl = Controller(
+            humanoid, stack, ProjectionSolver(), dt=DT, references=refs, recovery=watch
+        )
         log = ctrl.run(q0, 6.0)
-        outcomes.append((log.meta["retreats"][0][0], worst_error(humanoid,
-                         np.asarray(log.meta["final_q"]), goal)[0]))  # fmt: skip
+        outcomes.append(
+            (
+                log.meta["retreats"][0][0],
+                worst_error(humanoid, np.asarray(log.meta["final_q"]), goal)[0],
+            )
+        )
     (early, met), (late, missed) = outcomes
     assert early < 3.0 < late
     assert met < 1e-3 < missed

@@ -17,8 +17,9 @@ from wholebody.robot.urdf import resolve_package
 from wholebody.tasks import ArmPotentialEnergy
 
 
-def humanoid_copy(tmp_path: Path, toml: dict[str, str] | None = None,
-                  urdf: dict[str, str] | None = None) -> wholebody.Robot:  # fmt: skip
+def humanoid_copy(
+    tmp_path: Path, toml: dict[str, str] | None = None, urdf: dict[str, str] | None = None
+) -> wholebody.Robot:
     """The bundled humanoid with text replacements in its robot.toml and URDF."""
     dst = tmp_path / "h"
     shutil.copytree(robots_dir() / "mobile_humanoid", dst)
@@ -31,9 +32,10 @@ def humanoid_copy(tmp_path: Path, toml: dict[str, str] | None = None,
     return wholebody.load_robot(dst)
 
 
-MIMIC = {'<joint name="right_wrist_rotation" type="revolute">':
-         '<joint name="right_wrist_rotation" type="revolute">'
-         '<mimic joint="right_wrist_flexion" multiplier="-0.5" offset="0.1"/>'}  # fmt: skip
+MIMIC = {
+    '<joint name="right_wrist_rotation" type="revolute">': '<joint name="right_wrist_rotation" type="revolute">'  # noqa: E501
+    '<mimic joint="right_wrist_flexion" multiplier="-0.5" offset="0.1"/>'
+}
 NO_ROTATION = {'"right_wrist_flexion", "right_wrist_rotation",': '"right_wrist_flexion",'}
 
 
@@ -41,10 +43,16 @@ def test_a_mimic_joint_moves_with_its_leader(tmp_path, humanoid, rng):
     robot = humanoid_copy(tmp_path, NO_ROTATION, MIMIC)
     assert robot.nu == humanoid.nu - 1 and "right_wrist_rotation" not in robot.actuated_joints
     k = robot.index("right_wrist_flexion")
-    lead, follow = (robot.model.joints[robot.model.getJointId(n)].idx_q
-                    for n in ("right_wrist_flexion", "right_wrist_rotation"))  # fmt: skip
-    for q in (robot.neutral(), robot.home(), robot.random_configuration(rng),
-              robot.configuration({"right_wrist_flexion": 0.4})):  # fmt: skip
+    lead, follow = (
+        robot.model.joints[robot.model.getJointId(n)].idx_q
+        for n in ("right_wrist_flexion", "right_wrist_rotation")
+    )
+    for q in (
+        robot.neutral(),
+        robot.home(),
+        robot.random_configuration(rng),
+        robot.configuration({"right_wrist_flexion": 0.4}),
+    ):
         assert q[follow] == pytest.approx(-0.5 * q[lead] + 0.1)
     q = robot.random_configuration(rng, margin=0.1)
     u = np.zeros(robot.nu)
@@ -64,35 +72,42 @@ def test_a_mimic_joint_moves_with_its_leader(tmp_path, humanoid, rng):
 
 def test_a_fixed_joint_with_a_mimic_and_a_transmission_are_ignored(tmp_path, humanoid):
     fixed = '<joint name="head_mount" type="fixed">'
-    robot = humanoid_copy(tmp_path, urdf={
-        fixed: fixed + '<mimic joint="waist_yaw"/>',
-        "</robot>": '<transmission name="t"><joint name="waist_yaw"><hardwareInterface>x'
-                    "</hardwareInterface></joint></transmission></robot>",
-    })  # fmt: skip
+    robot = humanoid_copy(
+        tmp_path,
+        urdf={
+            fixed: fixed + '<mimic joint="waist_yaw"/>',
+            "</robot>": '<transmission name="t"><joint name="waist_yaw"><hardwareInterface>x'
+            "</hardwareInterface></joint></transmission></robot>",
+        },
+    )
     assert robot.actuated_joints == humanoid.actuated_joints
 
 
 def test_locked_joints_leave_u_and_hold_their_position(tmp_path, humanoid, rng):
-    robot = humanoid_copy(tmp_path, {
-        '"right_wrist_flexion", "right_wrist_rotation",': "",
-        '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",':
-            '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",'
+    robot = humanoid_copy(
+        tmp_path,
+        {
+            '"right_wrist_flexion", "right_wrist_rotation",': "",
+            '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",': '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",'  # noqa: E501
             '"right_forearm_rotation",',  # (moved, so that the group stays valid)
-        '"right_shoulder_rotation", "right_elbow_flexion", "right_forearm_rotation",':
-            '"right_shoulder_rotation", "right_elbow_flexion",',
-        "[home]": '[locked]\n"right_wrist_*" = 0.3\n\n[home]',
-    })  # fmt: skip
+            '"right_shoulder_rotation", "right_elbow_flexion", "right_forearm_rotation",': '"right_shoulder_rotation", "right_elbow_flexion",',  # noqa: E501
+            "[home]": '[locked]\n"right_wrist_*" = 0.3\n\n[home]',
+        },
+    )
     assert robot.locked == {"right_wrist_flexion": 0.3, "right_wrist_rotation": 0.3}
     assert robot.nu == humanoid.nu - 2 and robot.model.nv == humanoid.model.nv - 2
     # the same kinematics as the full robot with those joints at 0.3
-    q_full = humanoid.configuration({"right_wrist_flexion": 0.3, "right_wrist_rotation": 0.3,
-                                     "right_elbow_flexion": 1.1})  # fmt: skip
+    q_full = humanoid.configuration(
+        {"right_wrist_flexion": 0.3, "right_wrist_rotation": 0.3, "right_elbow_flexion": 1.1}
+    )
     q = robot.configuration({"right_elbow_flexion": 1.1})
-    np.testing.assert_allclose(robot.frame_pose(q, "right_tool"),
-                               humanoid.frame_pose(q_full, "right_tool"), atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        robot.frame_pose(q, "right_tool"), humanoid.frame_pose(q_full, "right_tool"), atol=1e-12
+    )
     q = robot.random_configuration(rng)
-    np.testing.assert_allclose(robot.frame_jacobian(q, "right_tool"),
-                               frame_jacobian_fd(robot, q, "right_tool"), atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        robot.frame_jacobian(q, "right_tool"), frame_jacobian_fd(robot, q, "right_tool"), atol=1e-6
+    )
     assert "locked: 2 joints" in robot.summary()
 
 
@@ -102,26 +117,35 @@ def test_a_locked_group_goes_with_its_joints(tmp_path, humanoid):
 
 
 def test_declared_frames_are_frames(tmp_path, humanoid, rng):
-    robot = humanoid_copy(tmp_path, {"[home]": (
-        '[frames.grip]\nparent = "right_tool"\nxyz = [0.05, 0.0, 0.02]\nrpy = [0.0, 0.0, 1.0]\n'
-        '\n[frames.shoulder_mark]\nparent = "right_shoulder_flexion"\nxyz = [0.0, 0.1, 0.0]\n'
-        "\n[home]")})  # fmt: skip
+    robot = humanoid_copy(
+        tmp_path,
+        {
+            "[home]": (
+                '[frames.grip]\nparent = "right_tool"\nxyz = [0.05, 0.0, 0.02]\nrpy = [0.0, 0.0, 1.0]\n'  # noqa: E501
+                '\n[frames.shoulder_mark]\nparent = "right_shoulder_flexion"\nxyz = [0.0, 0.1, 0.0]\n'  # noqa: E501
+                "\n[home]"
+            )
+        },
+    )
     q = robot.random_configuration(rng)
     T_tool, T = robot.frame_pose(q, "right_tool"), robot.frame_pose(q, "grip")
     local = np.linalg.inv(T_tool) @ T
     np.testing.assert_allclose(local[:3, 3], [0.05, 0.0, 0.02], atol=1e-12)
-    np.testing.assert_allclose(local[:2, :2], [[np.cos(1), -np.sin(1)], [np.sin(1), np.cos(1)]],
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        local[:2, :2], [[np.cos(1), -np.sin(1)], [np.sin(1), np.cos(1)]], atol=1e-12
+    )
     for name in ("grip", "shoulder_mark"):
-        np.testing.assert_allclose(robot.frame_jacobian(q, name),
-                                   frame_jacobian_fd(robot, q, name), atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            robot.frame_jacobian(q, name), frame_jacobian_fd(robot, q, name), atol=1e-6
+        )
 
 
 def test_an_arm_segment_over_two_links_adds_their_gravity(tmp_path, humanoid, rng):
     """The forearm of the left arm made of the forearm and the wrist link: the energy is the
     one-link energy plus g m h of the wrist link, its gradient matches finite differences."""
-    robot = humanoid_copy(tmp_path, {'forearm = "left_forearm"':
-                                     'forearm = ["left_forearm", "left_wrist"]'})  # fmt: skip
+    robot = humanoid_copy(
+        tmp_path, {'forearm = "left_forearm"': 'forearm = ["left_forearm", "left_wrist"]'}
+    )
     assert [b.name for b in robot.arm("left").forearm_bodies] == ["left_forearm", "left_wrist"]
     one = ArmPotentialEnergy(humanoid, "left", 0.1)
     two = ArmPotentialEnergy(robot, "left", 0.1)

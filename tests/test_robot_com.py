@@ -17,20 +17,19 @@ from wholebody.robot.urdf import example_robot_data_share
 
 LOCK_RIGHT_WRIST = {
     '"right_wrist_flexion", "right_wrist_rotation",': "",
-    '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",':
-        '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",'
-        '"right_forearm_rotation",',
-    '"right_shoulder_rotation", "right_elbow_flexion", "right_forearm_rotation",':
-        '"right_shoulder_rotation", "right_elbow_flexion",',
+    '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",': '"right_clavicle", "right_shoulder_flexion", "right_shoulder_abduction",'  # noqa: E501
+    '"right_forearm_rotation",',
+    '"right_shoulder_rotation", "right_elbow_flexion", "right_forearm_rotation",': '"right_shoulder_rotation", "right_elbow_flexion",',  # noqa: E501
     "[home]": '[locked]\n"right_wrist_*" = 0.3\n\n[home]',
-}  # fmt: skip
+}
 """The humanoid's right wrist locked at 0.3 rad (test_robot_building's edit)."""
 
 
 def com_jacobian_fd(robot: wholebody.Robot, q: np.ndarray) -> np.ndarray:
     """3 x nu central differences of the whole-body centre of mass along each ``u``."""
-    return np.stack([gradient_fd(robot, q, lambda x, i=i: robot.com_position(x)[i])
-                     for i in range(3)])  # fmt: skip
+    return np.stack(
+        [gradient_fd(robot, q, lambda x, i=i: robot.com_position(x)[i]) for i in range(3)]
+    )
 
 
 def link_mean(robot: wholebody.Robot, state) -> tuple[float, np.ndarray, np.ndarray]:
@@ -117,8 +116,7 @@ def test_locked_joints_keep_their_mass(tmp_path, humanoid, rng):
 def test_a_mimic_joint_moves_the_com_with_its_leader(tmp_path, rng):
     robot = humanoid_copy(tmp_path, NO_ROTATION, MIMIC)
     q = robot.random_configuration(rng)
-    np.testing.assert_allclose(robot.update(q).com_jacobian(), com_jacobian_fd(robot, q),
-                               atol=1e-7)  # fmt: skip
+    np.testing.assert_allclose(robot.update(q).com_jacobian(), com_jacobian_fd(robot, q), atol=1e-7)
 
 
 def test_the_com_is_cached_per_state(humanoid, rng):

@@ -534,8 +534,12 @@ AXLE_BEHIND = [
     ('<origin xyz="0 0.2 0.1"/>', '<origin xyz="-0.3 0.2 0.1"/>'),
     ('<origin xyz="0 -0.2 0.1"/>', '<origin xyz="-0.3 -0.2 0.1"/>'),
 ]
-RIGHT_AXIS_REVERSED = [('<origin xyz="0 -0.2 0.1"/><axis xyz="0 1 0"/>',
-                        '<origin xyz="0 -0.2 0.1"/><axis xyz="0 -1 0"/>')]  # fmt: skip
+RIGHT_AXIS_REVERSED = [
+    (
+        '<origin xyz="0 -0.2 0.1"/><axis xyz="0 1 0"/>',
+        '<origin xyz="0 -0.2 0.1"/><axis xyz="0 -1 0"/>',
+    )
+]
 
 
 @pytest.mark.parametrize(
@@ -586,8 +590,11 @@ def test_a_mecanum_wheel_axis_reversed_in_the_urdf_reverses_its_speed(tmp_path, 
 def endless_wrist(tmp_path: Path) -> wholebody.Robot:
     """The torso with its left wrist roll made a continuous joint (no limits)."""
     d = copy_robot(tmp_path, "dual_arm_torso")
-    edit(d / "robot.urdf", '<joint name="left_wrist_roll" type="revolute">',
-         '<joint name="left_wrist_roll" type="continuous">')  # fmt: skip
+    edit(
+        d / "robot.urdf",
+        '<joint name="left_wrist_roll" type="revolute">',
+        '<joint name="left_wrist_roll" type="continuous">',
+    )
     return wholebody.load_robot(d)
 
 
@@ -733,8 +740,11 @@ def test_a_robot_with_unbounded_joint_limits_loads_and_samples_finite_configurat
     """Limits of +-1e308 are no limits: loading (which checks the arm lengths at random arm
     postures) overflowed in random_configuration."""
     d = copy_robot(tmp_path, "dual_arm_torso")
-    edit(d / "robot.urdf", '<limit lower="-1.0" upper="3.0" effort="20.0" velocity="2.0"/>',
-         '<limit lower="-1e308" upper="1e308" effort="20.0" velocity="2.0"/>')  # fmt: skip
+    edit(
+        d / "robot.urdf",
+        '<limit lower="-1.0" upper="3.0" effort="20.0" velocity="2.0"/>',
+        '<limit lower="-1e308" upper="1e308" effort="20.0" velocity="2.0"/>',
+    )
     robot = wholebody.load_robot(d)
     q = robot.random_configuration(np.random.default_rng(0))
     assert np.all(np.isfinite(q))
@@ -745,7 +755,10 @@ def test_a_robot_with_unbounded_joint_limits_loads_and_samples_finite_configurat
 def test_an_arm_group_with_a_joint_of_the_other_arm_names_that_joint(tmp_path):
     d = copy_robot(tmp_path, "dual_arm_torso")
     edit(d / "robot.toml", '"left_shoulder_yaw", "left_elbow",', '"left_shoulder_yaw",')
-    edit(d / "robot.toml", '"right_shoulder_yaw", "right_elbow",',
-         '"right_shoulder_yaw", "right_elbow", "left_elbow",')  # fmt: skip
+    edit(
+        d / "robot.toml",
+        '"right_shoulder_yaw", "right_elbow",',
+        '"right_shoulder_yaw", "right_elbow", "left_elbow",',
+    )
     with pytest.raises(ConfigError, match=r"\[arms.right.group\].*: 'left_elbow'$"):
         wholebody.load_robot(d)

@@ -57,8 +57,9 @@ def test_a_wheel_declared_revolute_without_limits_is_made_continuous(tmp_path):
 
 def test_limits_are_overridden_where_given_and_the_urdfs_kept_elsewhere(tmp_path):
     d = copy_robot(tmp_path)
-    append(d / "robot.toml", "[joints.left_elbow_flexion]\nupper = 1.5\nvelocity = 0.5\n"
-           "effort = 7.5\n")  # fmt: skip
+    append(
+        d / "robot.toml", "[joints.left_elbow_flexion]\nupper = 1.5\nvelocity = 0.5\neffort = 7.5\n"
+    )
     robot, shipped = wholebody.load_robot(d), wholebody.load_robot("mobile_humanoid")
     k = robot.index("left_elbow_flexion")
     lower, upper = robot.position_limits
@@ -73,25 +74,49 @@ def test_limits_are_overridden_where_given_and_the_urdfs_kept_elsewhere(tmp_path
 @pytest.mark.parametrize(
     ("table", "key", "words"),
     [
-        ("[joints.left_elbow_flexon]\nupper = 1.0\n", "joints.left_elbow_flexon",
-         "matches no joint of robot.urdf (did you mean 'left_elbow_flexion'"),
-        ('[joints.left_tool_joint]\ntype = "continuous"\n', "joints.left_tool_joint",
-         "is fixed in the URDF"),
-        ("[joints.left_elbow_flexion]\nvelocity = -1.0\n", "joints.left_elbow_flexion.velocity",
-         "expected a number > 0"),
-        ("[joints.left_elbow_flexion]\nlower = 1.0\nupper = 0.5\n", "joints.left_elbow_flexion",
-         "lower = 1 must be below upper = 0.5"),
-        ("[joints.left_elbow_flexion]\nlower = 3.0\n", "joints.left_elbow_flexion",
-         "would have the range [3, 2.53]"),
-        ('[joints.left_elbow_flexion]\ntype = "continuous"\nupper = 1.0\n',
-         "joints.left_elbow_flexion", "a continuous joint turns without position limits"),
-        ('[joints.left_elbow_flexion]\ntype = "ball"\n', "joints.left_elbow_flexion.type",
-         "expected one of"),
-        ("[joints.left_elbow_flexion]\nlimit = 1.0\n", "joints.left_elbow_flexion.limit",
-         "unknown key"),
+        (
+            "[joints.left_elbow_flexon]\nupper = 1.0\n",
+            "joints.left_elbow_flexon",
+            "matches no joint of robot.urdf (did you mean 'left_elbow_flexion'",
+        ),
+        (
+            '[joints.left_tool_joint]\ntype = "continuous"\n',
+            "joints.left_tool_joint",
+            "is fixed in the URDF",
+        ),
+        (
+            "[joints.left_elbow_flexion]\nvelocity = -1.0\n",
+            "joints.left_elbow_flexion.velocity",
+            "expected a number > 0",
+        ),
+        (
+            "[joints.left_elbow_flexion]\nlower = 1.0\nupper = 0.5\n",
+            "joints.left_elbow_flexion",
+            "lower = 1 must be below upper = 0.5",
+        ),
+        (
+            "[joints.left_elbow_flexion]\nlower = 3.0\n",
+            "joints.left_elbow_flexion",
+            "would have the range [3, 2.53]",
+        ),
+        (
+            '[joints.left_elbow_flexion]\ntype = "continuous"\nupper = 1.0\n',
+            "joints.left_elbow_flexion",
+            "a continuous joint turns without position limits",
+        ),
+        (
+            '[joints.left_elbow_flexion]\ntype = "ball"\n',
+            "joints.left_elbow_flexion.type",
+            "expected one of",
+        ),
+        (
+            "[joints.left_elbow_flexion]\nlimit = 1.0\n",
+            "joints.left_elbow_flexion.limit",
+            "unknown key",
+        ),
         ("[joints.left_elbow_flexion]\n", "joints.left_elbow_flexion", "expected a table of"),
     ],
-)  # fmt: skip
+)
 def test_bad_joint_overrides_are_named(tmp_path, table, key, words):
     d = copy_robot(tmp_path)
     append(d / "robot.toml", table)
@@ -111,10 +136,11 @@ def raised(tmp_path: Path, name: str, base: str) -> wholebody.Robot:
     return wholebody.load_robot(d)
 
 
-@pytest.mark.parametrize(("name", "base"), [("mobile_humanoid", 'type = "mecanum"'),
-                                            ("dual_arm_torso", 'type = "fixed"')])  # fmt: skip
-def test_the_base_height_raises_every_frame_shape_and_the_centre_of_mass(tmp_path, rng, name,
-                                                                         base):  # fmt: skip
+@pytest.mark.parametrize(
+    ("name", "base"),
+    [("mobile_humanoid", 'type = "mecanum"'), ("dual_arm_torso", 'type = "fixed"')],
+)
+def test_the_base_height_raises_every_frame_shape_and_the_centre_of_mass(tmp_path, rng, name, base):
     """At any configuration every frame, the centre of mass and every drawn and collision
     shape are HEIGHT higher, and the Jacobians are the same."""
     robot, ground = raised(tmp_path, name, base), wholebody.load_robot(name)
@@ -122,10 +148,12 @@ def test_the_base_height_raises_every_frame_shape_and_the_centre_of_mass(tmp_pat
     for q in (robot.home(), robot.random_configuration(rng)):
         a, b = robot.update(q), ground.update(q)
         for f in (robot.urdf.root, *(arm.tool.name for arm in robot.arms.values())):
-            np.testing.assert_allclose(a.position(robot.frame(f)),
-                                       b.position(ground.frame(f)) + up, atol=1e-12)  # fmt: skip
-            np.testing.assert_allclose(a.jacobian(robot.frame(f)), b.jacobian(ground.frame(f)),
-                                       atol=1e-12)  # fmt: skip
+            np.testing.assert_allclose(
+                a.position(robot.frame(f)), b.position(ground.frame(f)) + up, atol=1e-12
+            )
+            np.testing.assert_allclose(
+                a.jacobian(robot.frame(f)), b.jacobian(ground.frame(f)), atol=1e-12
+            )
         np.testing.assert_allclose(robot.com_position(q), ground.com_position(q) + up, atol=1e-12)
         for kind in ("visual", "collision"):
             (ga, _), (gb, _) = robot.geometry(kind), ground.geometry(kind)
@@ -146,8 +174,7 @@ def test_the_base_height_moves_the_collision_distances_with_the_robot(tmp_path):
     def nearest(r: wholebody.Robot, z: float) -> float:
         pose = np.eye(4)
         pose[:3, 3] = (0.6, -0.2, 0.9 + z)
-        model = CollisionModel(r, [Obstacle("ball", "sphere", (0.05,), pose)],
-                               self_collision=False)  # fmt: skip
+        model = CollisionModel(r, [Obstacle("ball", "sphere", (0.05,), pose)], self_collision=False)
         return min(p.distance for p in model.distances(r.update(r.home())))
 
     assert nearest(robot, HEIGHT) == pytest.approx(nearest(ground, 0.0), abs=1e-9)

@@ -68,22 +68,22 @@ class Robot:
         reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.node.create_subscription(JointState, "/joint_states", self.states.append, reliable)
         self.node.create_subscription(Odometry, "/odom", self._on_odom, 10)
-        self.node.create_subscription(JointState, "/wholebody/command", self.commands.append,
-                                      reliable)  # fmt: skip
-        self.node.create_subscription(DiagnosticArray, "/wholebody/status",
-                                      self.status.append, 100)  # fmt: skip
+        self.node.create_subscription(
+            JointState, "/wholebody/command", self.commands.append, reliable
+        )
+        self.node.create_subscription(DiagnosticArray, "/wholebody/status", self.status.append, 100)
         self.target = self.node.create_publisher(PoseStamped, f"/wholebody/{frame}/target", 10)
 
     def _on_odom(self, msg: Odometry) -> None:
         self.odom = msg
 
     def start(self, command: str, *args: str) -> None:
-        cmd = [sys.executable, "-m", "wholebody", command, self.name, "--rate", f"{RATE:g}",
-               *args]  # fmt: skip
+        cmd = [sys.executable, "-m", "wholebody", command, self.name, "--rate", f"{RATE:g}", *args]
         log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (closed in close)
         self.logs[command] = log
-        self.procs[command] = subprocess.Popen(cmd, env=self.env, stdout=log,
-                                               stderr=subprocess.STDOUT)  # fmt: skip
+        self.procs[command] = subprocess.Popen(
+            cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT
+        )
 
     def spin_until(self, done: Callable[[], bool], timeout: float, what: str) -> None:
         end = time.monotonic() + timeout
@@ -157,9 +157,12 @@ class Robot:
 
 @pytest.fixture(scope="module")
 def env() -> dict[str, str]:
-    return {**os.environ, "ROS_DOMAIN_ID": str(DOMAIN), "ROS_AUTOMATIC_DISCOVERY_RANGE":
-            "LOCALHOST", "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get(
-                "PYTHONPATH", "")])}  # fmt: skip
+    return {
+        **os.environ,
+        "ROS_DOMAIN_ID": str(DOMAIN),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]),
+    }
 
 
 @pytest.fixture
@@ -171,9 +174,16 @@ def robot_pair(request, env) -> Iterator[Robot]:
     try:
         pair.start("ros-sim", "--sim", sim)
         pair.start("ros")
-        pair.spin_until(lambda: pair.status and pair.states and pair.target.get_subscription_count()
-                        and (pair.odom or not pair.robot.base.mobile), READY,
-                        "first status and joint state")  # fmt: skip
+        pair.spin_until(
+            lambda: (
+                pair.status
+                and pair.states
+                and pair.target.get_subscription_count()
+                and (pair.odom or not pair.robot.base.mobile)
+            ),
+            READY,
+            "first status and joint state",
+        )
         yield pair
     finally:
         pair.close()
@@ -222,8 +232,11 @@ def test_node_reaches_refuses_nan_and_stops_on_stale_state(robot_pair: Robot) ->
     bad = goal.copy()
     bad[0, 3] = math.nan
     pair.send(bad)
-    pair.spin_until(lambda: "not finite" in pair.last_status()[2]["last refusal"], 5.0,
-                    "status reporting the NaN target")  # fmt: skip
+    pair.spin_until(
+        lambda: "not finite" in pair.last_status()[2]["last refusal"],
+        5.0,
+        "status reporting the NaN target",
+    )
     level, _, values = pair.last_status()
     assert level != 0 and values["refused inputs"] == "1"  # WARN (STALE on a loaded machine)
     pair.spin_for(0.2)

@@ -44,7 +44,10 @@ def scenario(tmp_path: Path, text: str, start: str | None = None) -> Path:
 def test_a_phase_lasts_a_whole_number_of_steps(tmp_path):
     """0.025 s at 100 Hz: the phase and its reference last 2 steps, so the next phase starts
     where the reference ended and each step is counted in its own phase."""
-    path = scenario(tmp_path, LEFT + """
+    path = scenario(
+        tmp_path,
+        LEFT
+        + """
 [[phases]]
 name = "one"
 duration = 0.025
@@ -60,7 +63,8 @@ duration = 0.025
 planner = "hold"
 [phases.hands.left]
 planner = "hold"
-""")  # fmt: skip
+""",
+    )
     log = run_scenario(load_scenario(path)).log
     assert log.meta["phases"] == {"one": [0.0, 0.02], "two": [0.02, 0.04]}
     assert log.phase_mask("one").tolist() == [True, True, False, False]
@@ -71,7 +75,9 @@ planner = "hold"
 
 def test_a_carried_object_stays_where_it_is_left(tmp_path):
     # the object is at the right hand of the neutral posture
-    path = scenario(tmp_path, """
+    path = scenario(
+        tmp_path,
+        """
 [[objects]]
 name = "obj"
 kind = "sphere"
@@ -90,7 +96,9 @@ duration = 0.1
 [phases.hands.right]
 planner = "min_jerk"
 goal = [0.1, -0.47, 0.4]
-""", start='"neutral"')  # fmt: skip
+""",
+        start='"neutral"',
+    )
     run = run_scenario(load_scenario(path))
     poses, log = run.object_poses["obj"], run.log
     carry, leave = log.phase_mask("carry"), log.phase_mask("leave")
@@ -107,7 +115,9 @@ def test_the_straight_shape_does_not_need_times_from_zero(tmp_path):
     demo = Path(__file__).resolve().parents[1] / "tasks" / "demos" / "reach_demo.npz"
     with np.load(demo) as z:
         np.savez(tmp_path / "late.npz", times=z["times"] + 10.0, positions=z["positions"])
-    path = scenario(tmp_path, """
+    path = scenario(
+        tmp_path,
+        """
 [planner]
 demo = "late.npz"
 [[phases]]
@@ -117,7 +127,8 @@ duration = 1.0
 planner = "dmp"
 shape = "straight"
 goal = [0.3, -0.45, 0.5]
-""")  # fmt: skip
+""",
+    )
     log = run_scenario(load_scenario(path)).log
     ref = log.reference_positions["right"]
     start, goal = ref[0], np.array([0.3, -0.45, 0.5])
@@ -163,13 +174,16 @@ def test_inconsistent_phases_are_rejected(tmp_path, text, parts):
 
 
 def test_a_log_with_numpy_metadata_round_trips(tmp_path):
-    path = scenario(tmp_path, """
+    path = scenario(
+        tmp_path,
+        """
 [[phases]]
 name = "p"
 duration = 0.02
 [phases.hands.right]
 planner = "hold"
-""")  # fmt: skip
+""",
+    )
     log = run_scenario(load_scenario(path)).log
     log.meta["trial"] = np.int64(3)
     log.meta["gain"] = np.float32(0.5)
@@ -183,13 +197,16 @@ def test_outputs_follow_the_robots_own_groups(tmp_path):
     and the comparison table has no waist column (it read nan)."""
     from wholebody.scenarios import outputs, plots
 
-    text = HEAD.replace("mobile_humanoid", "dual_arm_torso") + """
+    text = (
+        HEAD.replace("mobile_humanoid", "dual_arm_torso")
+        + """
 [[phases]]
 name = "hold"
 duration = 0.03
 [phases.hands.right]
 planner = "hold"
-"""  # fmt: skip
+"""
+    )
     path = tmp_path / "torso.toml"
     path.write_text(text)
     run = run_scenario(load_scenario(path))
@@ -217,8 +234,9 @@ def with_start(tmp_path: Path, start: str | None) -> Path:
 def home_joints(robot) -> dict[str, float]:
     """The home posture's joints by name (the base's actuators left out)."""
     base = len(robot.base.actuators)
-    return dict(zip(robot.actuated_joints[base:], robot.joint_positions(robot.home())[base:],
-                    strict=True))  # fmt: skip
+    return dict(
+        zip(robot.actuated_joints[base:], robot.joint_positions(robot.home())[base:], strict=True)
+    )
 
 
 @pytest.mark.parametrize(
@@ -227,12 +245,15 @@ def home_joints(robot) -> dict[str, float]:
         (None, lambda robot: robot.home()),
         ('"home"', lambda robot: robot.home()),
         ('"neutral"', lambda robot: robot.neutral()),
-        ("{ left_elbow_flexion = 0.8, waist_yaw = -0.2 }",
-         lambda robot: robot.configuration({**home_joints(robot), "left_elbow_flexion": 0.8,
-                                            "waist_yaw": -0.2})),
+        (
+            "{ left_elbow_flexion = 0.8, waist_yaw = -0.2 }",
+            lambda robot: robot.configuration(
+                {**home_joints(robot), "left_elbow_flexion": 0.8, "waist_yaw": -0.2}
+            ),
+        ),
     ],
     ids=["default", "home", "neutral", "table"],
-)  # fmt: skip
+)
 def test_a_scenario_starts_at_its_start_posture(humanoid, tmp_path, start, expected):
     """The first logged configuration is the start posture: home by default; a table moves
     the named joints from home."""
@@ -248,16 +269,27 @@ def test_a_scenario_starts_at_its_start_posture(humanoid, tmp_path, start, expec
         ("3", ["[scenario.start]", '"home", "neutral" or a table', "got 3"], "load"),
         ('"crouch"', ["[scenario.start]", "'crouch'", "home, neutral"], "load"),
         ('{ waist_yaw = "left" }', ["[scenario.start.waist_yaw]", "expected a number"], "load"),
-        ("{ waist_yw = 0.1 }", ["[scenario.start.waist_yw]", "unknown joint", "waist_yaw"],
-         "run"),
-        ("{ left_elbow_flexion = 3.0 }", ["[scenario.start.left_elbow_flexion]",
-                                          "outside the joint's limits"], "run"),
-        ("{ wheel_front_left = 1.0 }", ["[scenario.start.wheel_front_left]", "base actuator"],
-         "run"),
+        ("{ waist_yw = 0.1 }", ["[scenario.start.waist_yw]", "unknown joint", "waist_yaw"], "run"),
+        (
+            "{ left_elbow_flexion = 3.0 }",
+            ["[scenario.start.left_elbow_flexion]", "outside the joint's limits"],
+            "run",
+        ),
+        (
+            "{ wheel_front_left = 1.0 }",
+            ["[scenario.start.wheel_front_left]", "base actuator"],
+            "run",
+        ),
     ],
-    ids=["wrong type", "unknown posture", "not a number", "unknown joint", "out of limits",
-         "a wheel"],
-)  # fmt: skip
+    ids=[
+        "wrong type",
+        "unknown posture",
+        "not a number",
+        "unknown joint",
+        "out of limits",
+        "a wheel",
+    ],
+)
 def test_a_bad_start_is_refused_by_name(tmp_path, start, parts, when):
     path = with_start(tmp_path, start)
     with pytest.raises(ConfigError) as info:

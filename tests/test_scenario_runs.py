@@ -19,8 +19,12 @@ from wholebody.solvers.unmet import UnmetCause
 
 pytestmark = pytest.mark.slow
 
-SCENARIOS = ["reach_generalisation", "obstacle_avoidance", "independent_dual_arm",
-             "coordinated_carry"]  # fmt: skip
+SCENARIOS = [
+    "reach_generalisation",
+    "obstacle_avoidance",
+    "independent_dual_arm",
+    "coordinated_carry",
+]
 SHAPED = ["projection", "hqp"]
 MM = 1e-3
 

@@ -72,9 +72,13 @@ def test_the_noise_is_bounded_uniform_and_seeded(humanoid):
 
 
 def test_bad_sensor_and_latency_settings_are_named(humanoid):
-    for kwargs, part in (({"noise": -1e-4}, "noise"), ({"noise": float("nan")}, "noise"),
-                         ({"delay": 1.5}, "delay"), ({"delay": True}, "delay"),
-                         ({"seed": -1}, "seed")):  # fmt: skip
+    for kwargs, part in (
+        ({"noise": -1e-4}, "noise"),
+        ({"noise": float("nan")}, "noise"),
+        ({"delay": 1.5}, "delay"),
+        ({"delay": True}, "delay"),
+        ({"seed": -1}, "seed"),
+    ):
         with pytest.raises(ConfigError, match=f"sensor {part}"):
             JointSensor(**kwargs)
     assert JointSensor().exact and not JointSensor(delay=1).exact
@@ -111,8 +115,15 @@ def _reach(robot, plant=None, latency: int = 0) -> Controller:
     goal = start.copy()
     goal[:3, 3] += (0.25, -0.1, 0.15)
     stack = paper_stack(robot, [hand], stiffness=0.1)
-    return Controller(robot, stack, ProjectionSolver(), dt=0.01, plant=plant, latency=latency,
-                      references={hand: MinimumJerkTrajectory(start, goal, 0.8)})  # fmt: skip
+    return Controller(
+        robot,
+        stack,
+        ProjectionSolver(),
+        dt=0.01,
+        plant=plant,
+        latency=latency,
+        references={hand: MinimumJerkTrajectory(start, goal, 0.8)},
+    )
 
 
 @pytest.mark.parametrize("delay", [1, 3])
@@ -178,8 +189,12 @@ def test_a_physics_carry_with_noise_and_delay_still_tracks():
     run = run_scenario(spec, sim="mujoco", sensor=JointSensor(1e-4, 1))
     m = run.metrics
     assert m["stopped"] is None
-    assert m["sensor"] == {"noise_rad_or_m": 1e-4, "delay_periods": 1, "seed": 0,
-                           "latency_compensated_periods": 1}  # fmt: skip
+    assert m["sensor"] == {
+        "noise_rad_or_m": 1e-4,
+        "delay_periods": 1,
+        "seed": 0,
+        "latency_compensated_periods": 1,
+    }
     assert max(m["true_max_tracking_error_m"].values()) <= 5 * MM, m["true_max_tracking_error_m"]
     assert m["true_closed_chain_error_max_m"] <= 0.5 * MM
     assert run.physics["configuration"].shape == run.log.q.shape
@@ -191,6 +206,19 @@ def test_the_cli_takes_a_sensor_only_with_physics(tmp_path, capsys):
 
     assert main(["run", "coordinated_carry", "--sensor-delay", "1", "--out", str(tmp_path)]) == 2
     assert "add --sim mujoco" in capsys.readouterr().err
-    assert main(["run", "coordinated_carry", "--sim", "mujoco", "--sensor-noise", "-1",
-                 "--out", str(tmp_path)]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "run",
+                "coordinated_carry",
+                "--sim",
+                "mujoco",
+                "--sensor-noise",
+                "-1",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 2
+    )
     assert "sensor noise must be a finite number >= 0" in capsys.readouterr().err

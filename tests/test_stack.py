@@ -96,8 +96,9 @@ def test_hqp_reports_a_violated_inequality_below_a_level_that_used_all_freedom(h
     and must be reported, not dropped."""
     state = humanoid.update(humanoid.home())
     left, right = holding(humanoid, state, "left_tool"), holding(humanoid, state, "right_tool")
-    above = FrameHalfSpace(humanoid, "left_tool", [0.0, 0.0, 1.0],
-                           state.position(left.frame)[2] + 0.2)  # fmt: skip
+    above = FrameHalfSpace(
+        humanoid, "left_tool", [0.0, 0.0, 1.0], state.position(left.frame)[2] + 0.2
+    )
     energy = Level([ArmPotentialEnergy(humanoid, "left", 0.1)])
     stack = Stack(humanoid, [[left, right], energy, [above]], limits(humanoid))
     solver = HierarchicalQPSolver()
@@ -146,10 +147,12 @@ def test_added_and_replaced_levels_are_laid_out_and_named(humanoid, solver):
     solver().solve(stack, state, DT)
     stack.levels[1] = Level([PostureTask(humanoid, name="p2")])
     stack.levels.append(Level([holding(humanoid, state, "right_tool")]))
-    assert [lv.name for lv in stack.evaluate(state, DT).levels] == ["level 0", "level 1",
-                                                                    "level 2"]  # fmt: skip
-    assert set(solver().solve(stack, state, DT).task_residuals) == {left.name, "p2",
-                                                                   "right_tool_task"}  # fmt: skip
+    assert [lv.name for lv in stack.evaluate(state, DT).levels] == ["level 0", "level 1", "level 2"]
+    assert set(solver().solve(stack, state, DT).task_residuals) == {
+        left.name,
+        "p2",
+        "right_tool_task",
+    }
 
 
 def test_objective_weight_and_task_weights_are_checked(humanoid):
@@ -170,8 +173,15 @@ def test_a_non_finite_task_leaves_the_other_tasks_residuals_alone(bad):
     # one product sums every task's squares: a NaN or inf row must not spill into the others
     A = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
     b = np.array([1.0, 1.0, bad])
-    level = LevelProblem("level", A, b, np.zeros((0, 2)), np.zeros(0), np.zeros(0),
-                         {"good": slice(0, 2), "bad": slice(2, 3)})  # fmt: skip
+    level = LevelProblem(
+        "level",
+        A,
+        b,
+        np.zeros((0, 2)),
+        np.zeros(0),
+        np.zeros(0),
+        {"good": slice(0, 2), "bad": slice(2, 3)},
+    )
     x = np.array([0.5, -0.5])
     problem = StackProblem([level], -np.ones(2), np.ones(2), np.ones(2), {})
     with np.errstate(over="ignore", invalid="ignore"):
@@ -212,8 +222,11 @@ def test_anti_windup_stops_only_the_integrals_of_the_tasks_a_bound_limits(humano
     its integral stays frozen at 0. (One flag for all, ``result.limit_hit``, froze both.)"""
     q = humanoid.home()
     right, left = two_hands(humanoid, q)
-    stack = Stack(humanoid, [Level([right], name="right"), Level([left], name="left")],
-                  [PinnedJoint(humanoid, "left_elbow_flexion"), *limits(humanoid)])  # fmt: skip
+    stack = Stack(
+        humanoid,
+        [Level([right], name="right"), Level([left], name="left")],
+        [PinnedJoint(humanoid, "left_elbow_flexion"), *limits(humanoid)],
+    )
     elbow = humanoid.index("left_elbow_flexion")
     s = solver()
     for _ in range(20):
@@ -258,8 +271,7 @@ def test_a_task_is_saturated_when_its_level_is_scaled_or_it_is_unmet(humanoid):
     other = humanoid.update(q)  # not evaluated: the rows are computed
     for joint, expected in (("waist_yaw", True), ("left_wrist_rotation", False)):
         active = dataclasses.replace(result, active_bounds=np.array([humanoid.index(joint)]))
-        assert stack.saturated_tasks(other, active) == {"right_tool": expected,
-                                                        "left_tool": True}  # fmt: skip
+        assert stack.saturated_tasks(other, active) == {"right_tool": expected, "left_tool": True}
 
 
 def test_the_status_has_one_meaning_for_both_backends(humanoid):
@@ -270,8 +282,11 @@ def test_the_status_has_one_meaning_for_both_backends(humanoid):
     alone keep the posture from its target: OK for both. With a bound active that costs no
     level anything: BOUNDS_ACTIVE for both."""
     elbow = humanoid.index("left_elbow_flexion")
-    home = dict(zip(humanoid.actuated_joints[4:], humanoid.joint_positions(humanoid.home())[4:],
-                    strict=True))  # fmt: skip
+    home = dict(
+        zip(
+            humanoid.actuated_joints[4:], humanoid.joint_positions(humanoid.home())[4:], strict=True
+        )
+    )
     q = humanoid.configuration({**home, "left_elbow_flexion": humanoid.position_limits[1][elbow]})
     state = humanoid.update(q)
     hands = [holding(humanoid, state, frame) for frame in ("left_tool", "right_tool")]
@@ -281,8 +296,9 @@ def test_the_status_has_one_meaning_for_both_backends(humanoid):
 
     def statuses(target, constraints):
         posture.set_target(target)
-        stack = Stack(humanoid, [Level(hands, name="hands"), Level([posture], name="posture")],
-                      constraints)  # fmt: skip
+        stack = Stack(
+            humanoid, [Level(hands, name="hands"), Level([posture], name="posture")], constraints
+        )
         results = [solver().solve(stack, state, DT) for solver in SOLVERS]
         for r in results:
             assert not any(level == "hands" for level, _ in r.infeasible)  # the hands are met

@@ -76,8 +76,9 @@ def assert_settles(log, stall, settled):
 # ---------------------------------------------------------------------- the metric
 def test_u_reversals_counts_the_steps_where_a_velocity_changes_sign():
     small = 0.5 * REVERSAL_THRESHOLD
-    u = np.array([[1.0, 0.0], [-1.0, 0.0], [-1.0, small], [1.0, -small], [1.0, -small],
-                  [-2.0, 3.0]])  # fmt: skip
+    u = np.array(
+        [[1.0, 0.0], [-1.0, 0.0], [-1.0, small], [1.0, -small], [1.0, -small], [-2.0, 3.0]]
+    )
     assert u_reversals(u) == 3  # steps 1, 3 and 5 (5: two joints at once)
     assert u_reversals(u, threshold=1.5) == 0  # (|u| of step 4 is 1 on the first joint)
     assert u_reversals(np.zeros((0, 3))) == 0
@@ -120,10 +121,15 @@ def test_tiagos_stalled_hand_settles(engine):
     """TIAGo++'s wrists: the exact cascade cycles at their velocity limits (2.35 rad/s)."""
     tiago = wb.load_robot("tiago_dual")
     run = {
-        mu: stalled_run(tiago, wb.HierarchicalQPSolver(engine, stall_damping=mu),
-                        rotation=-1.0, axis=(0.0, 0.0, 1.0), duration=3.0)[0]
+        mu: stalled_run(
+            tiago,
+            wb.HierarchicalQPSolver(engine, stall_damping=mu),
+            rotation=-1.0,
+            axis=(0.0, 0.0, 1.0),
+            duration=3.0,
+        )[0]
         for mu in (0.0, STALL_DAMPING)
-    }  # fmt: skip
+    }
     assert u_reversals(run[0.0].u[window(run[0.0], 2.0)]) > 90
     assert_settles(run[STALL_DAMPING], stall=1.0, settled=2.0)
     assert np.abs(run[STALL_DAMPING].u[-1]).max() < 1e-2
@@ -155,8 +161,9 @@ def test_the_first_level_is_never_damped(humanoid):
     logs = {}
     for mu in (0.0, STALL_DAMPING):
         solver = wb.HierarchicalQPSolver(stall_damping=mu)
-        stack = wb.Stack(humanoid, [[hand]], [wb.JointPositionLimits(humanoid),
-                                              wb.VelocityLimits(humanoid)])  # fmt: skip
+        stack = wb.Stack(
+            humanoid, [[hand]], [wb.JointPositionLimits(humanoid), wb.VelocityLimits(humanoid)]
+        )
         controller = wb.Controller(humanoid, stack, solver, dt=DT, recovery=False)
         logs[mu] = controller.run(q0, 0.5)
         assert controller.result.infeasible and not solver.levels[0].damped

@@ -146,15 +146,20 @@ def test_backend_engine_and_robot_axes_are_checked(tmp_path):
         ('key = "engine"\nvalues = ["daqp"]', "is for the hqp backend"),
         ('key = "robot"\nvalues = ["mobile_humanoid", "no_such_robot"]', "no_such_robot"),
         ('key = "planner.n_basis"\nuniform = [10, 60]', "planner.n_basis"),
-        ('key = "scenario.backend"\nvalues = ["hqp"]\n[[axes]]\nkey = "backend"\n'
-         'values = ["hqp"]', "varied by two axes"),
+        (
+            'key = "scenario.backend"\nvalues = ["hqp"]\n[[axes]]\nkey = "backend"\n'
+            'values = ["hqp"]',
+            "varied by two axes",
+        ),
         ('key = "planner.stiffness"\nvalues = [100.0, 100.0]', "repeated"),
-    ]  # fmt: skip
+    ]
     for axis, message in bad:
         with pytest.raises(ConfigError, match=message):
             load_campaign(_campaign(tmp_path, CAMPAIGN + f"\n[[axes]]\n{axis}\n"))
-    text = CAMPAIGN.replace('key = "hands.right.kp"\nuniform = [10.0, 30.0]',
-                            'key = "planner.stiffness"\nvalues = [900.0]')  # fmt: skip
+    text = CAMPAIGN.replace(
+        'key = "hands.right.kp"\nuniform = [10.0, 30.0]',
+        'key = "planner.stiffness"\nvalues = [900.0]',
+    )
     with pytest.raises(ConfigError, match="no random axis"):
         load_campaign(_campaign(tmp_path, text))
 
@@ -215,10 +220,20 @@ def test_a_killed_sweep_restarted_loses_and_repeats_nothing(tmp_path):
     one file."""
     path = _campaign(tmp_path, CAMPAIGN.replace("samples = 2", "samples = 4"))
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "wholebody", "sweep", str(path), "--out", str(out),
-               "--workers", "1"]  # fmt: skip
-    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)  # fmt: skip
+    command = [
+        sys.executable,
+        "-m",
+        "wholebody",
+        "sweep",
+        str(path),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+    ]
+    proc = subprocess.Popen(
+        command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     deadline = time.time() + 240
     while len(list((out / "cases").glob("case_*.json"))) < 2 and time.time() < deadline:
         time.sleep(0.05)
@@ -247,8 +262,9 @@ def test_a_case_over_the_time_limit_is_stopped_and_the_sweep_goes_on(tmp_path, c
     assert stopped["status"] == "timeout" and "0.1 s" in stopped["error"]
     assert stopped["wall_s"] < 0.5 * full["wall_s"], (stopped["wall_s"], full["wall_s"])
     out = tmp_path / "out"
-    code = main(["sweep", str(campaign.path), "--out", str(out), "--workers", "1",
-                 "--timeout", "0.1"])  # fmt: skip
+    code = main(
+        ["sweep", str(campaign.path), "--out", str(out), "--workers", "1", "--timeout", "0.1"]
+    )
     assert code == 1, capsys.readouterr().err  # (every case failed)
     results = [json.loads(p.read_text()) for p in sorted((out / "cases").glob("case_*.json"))]
     assert [r["status"] for r in results] == ["timeout"] * 4
@@ -326,12 +342,26 @@ def test_the_same_campaign_on_a_local_ray_head_gives_the_same_table(tmp_path, mo
     port = _free_port()
     monkeypatch.setenv("RAY_AUTH_MODE", "disabled")  # the head's and this driver's alike
     env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
-    subprocess.run([ray_cli, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}",
-                    "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats"],
-                   check=True, capture_output=True, env=env, timeout=180)  # fmt: skip
+    subprocess.run(
+        [
+            ray_cli,
+            "start",
+            "--head",
+            "--node-ip-address=127.0.0.1",
+            f"--port={port}",
+            "--num-cpus=2",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=180,
+    )
     try:
-        remote = run_sweep(campaign, tmp_path / "ray", ray=True, address=f"127.0.0.1:{port}",
-                           progress=False)  # fmt: skip
+        remote = run_sweep(
+            campaign, tmp_path / "ray", ray=True, address=f"127.0.0.1:{port}", progress=False
+        )
     finally:
         subprocess.run([ray_cli, "stop", "--force"], capture_output=True, env=env, timeout=120)
     assert remote.failed == 0 and len(remote.rows) == 4

@@ -81,8 +81,7 @@ def test_the_module_map_gives_each_wheel_its_velocity_and_inverts(centauro, rng)
         phi = [m.heading + m.sign * a for m, a in zip(centauro.swerve, angles, strict=True)]
         rolled = (speeds * 0.124)[:, None] * np.column_stack([np.cos(phi), np.sin(phi)])
         np.testing.assert_allclose(rolled, _wheel_velocities(centauro, twist), atol=1e-8)
-        np.testing.assert_allclose(module_twist(centauro.swerve, angles, speeds), twist,
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(module_twist(centauro.swerve, angles, speeds), twist, atol=1e-12)
 
 
 def test_a_reversed_twist_flips_the_wheels_not_the_modules(centauro):
@@ -102,8 +101,11 @@ def test_a_steering_limit_is_kept_or_refused():
     angles, speeds = module_commands([narrow], (math.cos(1.745), math.sin(1.745), 0.0), [-0.4])
     assert angles[0] == pytest.approx(1.745) and speeds[0] == pytest.approx(10.0)
     with pytest.raises(DimensionError, match="no steering angle"):  # -2.6 and 0.54 outside
-        module_commands([SwerveModule("s", "d", 0, 0, 0.1, 1.0, 0.0, -0.5, 0.5)],
-                        (math.cos(-2.6), math.sin(-2.6), 0.0), [0.0])  # fmt: skip
+        module_commands(
+            [SwerveModule("s", "d", 0, 0, 0.1, 1.0, 0.0, -0.5, 0.5)],
+            (math.cos(-2.6), math.sin(-2.6), 0.0),
+            [0.0],
+        )
 
 
 @pytest.mark.parametrize(
@@ -143,8 +145,11 @@ def test_the_swerve_base_drives_a_reach(centauro, solver):
     goal = centauro.frame_pose(q0, "ball1_tip").copy()
     goal[:3, 3] += [0.8, 0.3, 0.0]
     hand.set_target(goal)
-    stack = Stack(centauro, [[hand], [PostureTask(centauro)]],
-                  [JointPositionLimits(centauro), VelocityLimits(centauro)])  # fmt: skip
+    stack = Stack(
+        centauro,
+        [[hand], [PostureTask(centauro)]],
+        [JointPositionLimits(centauro), VelocityLimits(centauro)],
+    )
     log = wholebody.Controller(centauro, stack, solver(), dt=0.02).run(q0, 6.0)
     q = log.q[-1]
     assert np.linalg.norm(centauro.frame_pose(q, "ball1_tip")[:3, 3] - goal[:3, 3]) < 1e-3
@@ -155,8 +160,7 @@ def test_the_swerve_base_drives_a_reach(centauro, solver):
     angles = np.zeros(4)
     for u in log.u:
         angles, speeds = module_commands(centauro.swerve, u[:3], angles)
-        np.testing.assert_allclose(module_twist(centauro.swerve, angles, speeds), u[:3],
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(module_twist(centauro.swerve, angles, speeds), u[:3], atol=1e-12)
 
 
 def test_the_swerve_base_drives_under_physics(centauro):

@@ -89,8 +89,9 @@ def test_relative_frame_task_jacobian_is_the_exact_error_rate(humanoid, rng):
 @pytest.mark.parametrize("axes", [None, "right_elbow_centre"])
 def test_relative_position_task_jacobian_is_the_exact_error_rate(humanoid, rng, axes):
     """b relative to a in a third frame's axes (its rotation counts: the [r]x w_c term)."""
-    task = RelativePositionTask(humanoid, "right_shoulder_centre", "right_wrist_centre",
-                                axes=axes, kp=0.0)  # fmt: skip
+    task = RelativePositionTask(
+        humanoid, "right_shoulder_centre", "right_wrist_centre", axes=axes, kp=0.0
+    )
     assert task.dim == 3
     for q in configurations(humanoid, rng):
         task.set_target(random_target(rng))

@@ -31,8 +31,9 @@ def test_a_target_out_of_reach_is_unreachable_not_a_failure(torso, backend, tmp_
     then the arm is stretched towards it and no velocity brings it closer (unreachable). No
     step is a failure, and the causes survive the log's round trip."""
     q0 = torso.home()
-    stack = Stack(torso, [Level([_hand(torso, q0, 5.0, kp=5.0)], name="hand")],
-                  [VelocityLimits(torso)])  # fmt: skip
+    stack = Stack(
+        torso, [Level([_hand(torso, q0, 5.0, kp=5.0)], name="hand")], [VelocityLimits(torso)]
+    )
     log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 4.0)
     log = RunLog.load(log.save(tmp_path / "run.npz"))
     m = summary(log)
@@ -70,8 +71,11 @@ def test_a_joint_asked_past_its_position_limit_is_a_joint_limit(torso, backend):
     q0 = torso.home()
     upper = torso.position_limits[1]
     posture = PostureTask(torso, target=np.where(np.isfinite(upper), upper + 0.3, 0.0), kp=1.0)
-    stack = Stack(torso, [Level([posture], name="posture")],
-                  [JointPositionLimits(torso), VelocityLimits(torso)])  # fmt: skip
+    stack = Stack(
+        torso,
+        [Level([posture], name="posture")],
+        [JointPositionLimits(torso), VelocityLimits(torso)],
+    )
     log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 4.0)
     m = summary(log)
     causes = log.unmet["posture"]
@@ -95,8 +99,11 @@ def test_a_hand_held_off_by_an_inequality_above_it_is_held_by_design(torso, back
     pose = torso.frame_pose(q0, "left_tool")
     pose[2, 3] -= 0.2
     hand.set_target(pose)
-    stack = Stack(torso, [Level([table], name="table"), Level([hand], name="hand")],
-                  [JointPositionLimits(torso), VelocityLimits(torso)])  # fmt: skip
+    stack = Stack(
+        torso,
+        [Level([table], name="table"), Level([hand], name="hand")],
+        [JointPositionLimits(torso), VelocityLimits(torso)],
+    )
     log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 3.0)
     m = summary(log)
     causes = log.unmet["left_tool"]
@@ -117,8 +124,11 @@ def test_a_posture_under_the_hand_unmet_is_not_a_failure(torso, backend):
 
     q0 = torso.home()
     posture = PostureTask(torso, target=torso.joint_positions(q0) + 1.0, kp=50.0)
-    stack = Stack(torso, [Level([_hand(torso, q0, 0.0)], name="hand"),
-                          Level([posture], name="posture")], [VelocityLimits(torso)])  # fmt: skip
+    stack = Stack(
+        torso,
+        [Level([_hand(torso, q0, 0.0)], name="hand"), Level([posture], name="posture")],
+        [VelocityLimits(torso)],
+    )
     log = Controller(torso, stack, backend(), dt=0.01, recovery=False).run(q0, 0.5)
     m = summary(log)
     assert np.any(log.status == SolverStatus.INFEASIBLE)
@@ -162,11 +172,15 @@ def test_the_summary_says_where_a_hand_ends_against_its_goal():
     stated); within both it "reached"."""
     from wholebody.cli import _goal_words
 
-    m = {"final_error": {
-        "right": {"position_m": 0.0115, "rotation_rad": 0.02, "reached": False},
-        "left": {"position_m": 0.0002, "rotation_rad": 0.001, "reached": True}}}  # fmt: skip
-    assert _goal_words(m) == ("right ends 11.5 mm / 0.020 rad from its goal, left reached "
-                              "(tolerance 1 mm / 0.01 rad)")  # fmt: skip
+    m = {
+        "final_error": {
+            "right": {"position_m": 0.0115, "rotation_rad": 0.02, "reached": False},
+            "left": {"position_m": 0.0002, "rotation_rad": 0.001, "reached": True},
+        }
+    }
+    assert _goal_words(m) == (
+        "right ends 11.5 mm / 0.020 rad from its goal, left reached (tolerance 1 mm / 0.01 rad)"
+    )
     assert _goal_words({"final_error": {}}) == ""
 
 

@@ -57,8 +57,10 @@ def test_a_mistyped_file_in_an_installed_package_is_told_from_a_missing_package(
         wholebody.load_robot(d)
 
 
-INERTIAL = ('<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" '
-            'ixz="0" iyz="0"/></inertial>')  # fmt: skip
+INERTIAL = (
+    '<inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" '
+    'ixz="0" iyz="0"/></inertial>'
+)
 MIMIC_URDF = f"""<?xml version="1.0"?>
 <robot name="gripper">
   <link name="base">{INERTIAL}</link>
@@ -78,8 +80,9 @@ def small_robot(tmp_path: Path, urdf: str, toml: str = "") -> Path:
     d = tmp_path / "small"
     d.mkdir(exist_ok=True)
     (d / "robot.urdf").write_text(urdf)
-    (d / "robot.toml").write_text(f'format = 1\n[robot]\nname = "small"\nurdf = "robot.urdf"\n'
-                                  f"{toml}")  # fmt: skip
+    (d / "robot.toml").write_text(
+        f'format = 1\n[robot]\nname = "small"\nurdf = "robot.urdf"\n{toml}'
+    )
     return d
 
 
@@ -119,17 +122,22 @@ def test_a_wheel_radius_two_percent_off_its_cylinder_is_refused(tmp_path):
 def prism_stl(radius: float, width: float, sides: int = 32) -> str:
     """An ASCII STL of a regular prism about the y axis: its vertices at ``radius`` from it
     (m), ``width`` wide."""
-    ring = [(radius * math.cos(2 * math.pi * k / sides), radius * math.sin(2 * math.pi * k / sides))
-            for k in range(sides)]  # fmt: skip
+    ring = [
+        (radius * math.cos(2 * math.pi * k / sides), radius * math.sin(2 * math.pi * k / sides))
+        for k in range(sides)
+    ]
     facets = []
     for k in range(sides):
         (x0, z0), (x1, z1) = ring[k], ring[(k + 1) % sides]
         a, b = (x0, -width / 2, z0), (x1, -width / 2, z1)
         c, e = (x1, width / 2, z1), (x0, width / 2, z0)
         facets += [(a, b, c), (a, c, e), ((0, -width / 2, 0), b, a), ((0, width / 2, 0), e, c)]
-    body = "".join("facet normal 0 0 0\n outer loop\n" + "".join(
-        f"  vertex {x:.9f} {y:.9f} {z:.9f}\n" for x, y, z in f) + " endloop\nendfacet\n"
-        for f in facets)  # fmt: skip
+    body = "".join(
+        "facet normal 0 0 0\n outer loop\n"
+        + "".join(f"  vertex {x:.9f} {y:.9f} {z:.9f}\n" for x, y, z in f)
+        + " endloop\nendfacet\n"
+        for f in facets
+    )
     return f"solid wheel\n{body}endsolid wheel\n"
 
 

@@ -122,11 +122,22 @@ def test_replay_animation_and_props(scene, monkeypatch):
 
 def _screenshot(url: str, tmp_path: Path) -> np.ndarray:
     out = tmp_path / "shot.png"
-    cmd = [CHROMIUM, "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-           "--enable-unsafe-swiftshader", "--disable-background-networking",
-           "--disable-component-update", "--disable-sync", "--no-first-run",
-           f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={out}",
-           "--window-size=800,600", "--virtual-time-budget=15000", url]  # fmt: skip
+    cmd = [
+        CHROMIUM,
+        "--headless=new",
+        "--no-sandbox",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--screenshot={out}",
+        "--window-size=800,600",
+        "--virtual-time-budget=15000",
+        url,
+    ]
     subprocess.run(cmd, capture_output=True, timeout=240, check=False)
     assert out.is_file(), "chromium wrote no screenshot"
     import matplotlib.image
@@ -175,8 +186,14 @@ def test_missing_meshes_are_left_out_and_said_in_one_line(tmp_path, capsys):
     text = urdf.read_text()
     old = '<geometry><cylinder radius="0.08" length="0.05"/></geometry><material name="rubber"/>'
     assert old in text
-    urdf.write_text(text.replace(old, '<geometry><mesh filename="package://nowhere/wheel.stl"/>'
-                                      '</geometry><material name="rubber"/>', 1))  # fmt: skip
+    urdf.write_text(
+        text.replace(
+            old,
+            '<geometry><mesh filename="package://nowhere/wheel.stl"/>'
+            '</geometry><material name="rubber"/>',
+            1,
+        )
+    )
     robot = wholebody.load_robot(dst)
     visual, note = robot.geometry("visual")
     assert "1 meshes not drawn" in note and "package_dirs" in note
@@ -201,8 +218,9 @@ def test_meshcat_does_not_print_its_url(scene, capsys):
     assert "You can open the visualizer" not in out and scene.url not in out
 
 
-def _in_view(points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg: float,
-             aspect: float) -> np.ndarray:  # fmt: skip
+def _in_view(
+    points: np.ndarray, eye: np.ndarray, target: np.ndarray, fov_deg: float, aspect: float
+) -> np.ndarray:
     """Whether each point is inside the view of a camera at ``eye`` looking at ``target``
     (z up), vertical field of view ``fov_deg``, width / height ``aspect``."""
     forward = (target - eye) / np.linalg.norm(target - eye)
@@ -225,8 +243,9 @@ def test_the_camera_frames_a_seven_metre_drive():
     from wholebody.viz.scene import CAMERA_FOV_DEG, camera_view
 
     lo, hi = np.array([-2.0, -7.3, 0.0]), np.array([2.0, 0.6, 1.6])
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])  # fmt: skip
+    corners = np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
     target, offset = camera_view(corners)
     assert _in_view(corners, target + offset, target, CAMERA_FOV_DEG, 4 / 3).all()
     assert _in_view(corners, target + offset, target, CAMERA_FOV_DEG, 1.0).all()  # square page
@@ -253,8 +272,11 @@ def test_frame_moves_the_scene_under_the_camera(scene, monkeypatch):
     scene.frame(points)
     target, offset = camera_view(points)
     np.testing.assert_allclose(scene.target, target)
-    moved = {c["path"]: np.array(c["matrix"]).reshape(4, 4).T for c in sent
-             if c["type"] == "set_transform"}  # fmt: skip
+    moved = {
+        c["path"]: np.array(c["matrix"]).reshape(4, 4).T
+        for c in sent
+        if c["type"] == "set_transform"
+    }
     for root in ("/meshcat", "/Grid", "/Axes"):
         np.testing.assert_allclose(moved[root][:3, 3], -target)
         np.testing.assert_allclose(moved[root][:3, :3], np.eye(3))
@@ -264,8 +286,9 @@ def test_frame_moves_the_scene_under_the_camera(scene, monkeypatch):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed (.ci/run "
-                    "installs it)")  # fmt: skip
+@pytest.mark.skipif(
+    CHROMIUM is None, reason="Debian's chromium is not installed (.ci/run installs it)"
+)
 def test_the_replay_page_opens_without_a_server_and_frames_the_run(tmp_path):
     """The page saved by save_html draws the robot from a file, the server gone; framed on
     the robot and a marker 7 m to its right, both are in view (the default camera shows no
@@ -304,8 +327,9 @@ def test_the_closest_pairs_are_drawn_live_and_in_the_replay(scene, monkeypatch, 
     from wholebody.scenarios.visual import LiveView, show_run
 
     drawn = []
-    monkeypatch.setattr(type(scene), "closest_pairs",
-                        lambda self, pairs, **kw: drawn.append((list(pairs), kw)))  # fmt: skip
+    monkeypatch.setattr(
+        type(scene), "closest_pairs", lambda self, pairs, **kw: drawn.append((list(pairs), kw))
+    )
     spec = load_scenario(tasks_dir() / "reach_under_shelf.toml")
     live = LiveView(scene, spec.dt, realtime=False, collision=collision_model(spec, scene.robot))
     run = run_scenario(spec, on_step=live, duration_scale=1.0)
@@ -316,4 +340,5 @@ def test_the_closest_pairs_are_drawn_live_and_in_the_replay(scene, monkeypatch, 
     ((pairs, kw),) = drawn
     assert [p.name for p in pairs] == [run.metrics["min_collision_pair"]]
     assert kw["safety"] == 0.01 and pairs[0].distance == pytest.approx(
-        run.metrics["min_collision_distance_m"])  # fmt: skip
+        run.metrics["min_collision_distance_m"]
+    )

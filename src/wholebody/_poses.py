@@ -28,9 +28,13 @@ def check_pose(pose: object, what: str) -> np.ndarray:
     if defect == POSE_NON_FINITE:
         raise DimensionError(f"{what}: expected a finite 4x4 pose (it holds NaN or inf)")
     if defect == POSE_LAST_ROW:
-        raise DimensionError(f"{what}: the last row of a 4x4 pose must be [0, 0, 0, 1], got "
-                             f"{T[3].tolist()} (a transposed matrix?)")  # fmt: skip
+        raise DimensionError(
+            f"{what}: the last row of a 4x4 pose must be [0, 0, 0, 1], got "
+            f"{T[3].tolist()} (a transposed matrix?)"
+        )
     if defect:
-        raise DimensionError(f"{what}: the rotation part is not a rotation matrix "
-                             f"(|R^T R - I| > {ROTATION_TOL:g} or det < 0)")  # fmt: skip
+        raise DimensionError(
+            f"{what}: the rotation part is not a rotation matrix "
+            f"(|R^T R - I| > {ROTATION_TOL:g} or det < 0)"
+        )
     return T

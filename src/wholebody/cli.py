@@ -54,9 +54,14 @@ def _frame_kinds(robot) -> dict[str, list[str]]:
 
 def _wrapped(label: str, names: list[str]) -> str:
     """``label`` then the comma-separated ``names``, wrapped at 100 columns."""
-    return textwrap.fill(", ".join(names), width=100, initial_indent=f"  {label}: ",
-                         subsequent_indent="    ", break_on_hyphens=False,
-                         break_long_words=False)  # fmt: skip
+    return textwrap.fill(
+        ", ".join(names),
+        width=100,
+        initial_indent=f"  {label}: ",
+        subsequent_indent="    ",
+        break_on_hyphens=False,
+        break_long_words=False,
+    )
 
 
 def info_argument(robot) -> str:
@@ -160,8 +165,13 @@ def _start_viewer(spec):
     cs = spec.collision
     if cs is None:
         return scene, LiveView(scene, spec.dt)
-    return scene, LiveView(scene, spec.dt, collision=collision_model(spec, scene.robot),
-                           influence=cs.influence, safety=cs.safety)  # fmt: skip
+    return scene, LiveView(
+        scene,
+        spec.dt,
+        collision=collision_model(spec, scene.robot),
+        influence=cs.influence,
+        safety=cs.safety,
+    )
 
 
 def _replay(scene, run, out: Path, hold: bool) -> None:
@@ -173,8 +183,10 @@ def _replay(scene, run, out: Path, hold: bool) -> None:
     page = scene.save_html(out / "replay.html")
     print(f"  replay            {page} (a standalone page: open it in a browser, no server)")
     if hold:
-        print(f"MeshCat at {scene.url} replays the run (the page's Animations controls replay "
-              "it); press Enter here to close the viewer and exit")  # fmt: skip
+        print(
+            f"MeshCat at {scene.url} replays the run (the page's Animations controls replay "
+            "it); press Enter here to close the viewer and exit"
+        )
         try:
             input()
         except (EOFError, KeyboardInterrupt):  # Ctrl-C or Ctrl-D leave the viewer too
@@ -183,8 +195,15 @@ def _replay(scene, run, out: Path, hold: bool) -> None:
         print("no terminal to wait on: the MeshCat server is closed; open the replay page")
 
 
-def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool,
-             sim: str = "kinematic", sensor=None) -> int:  # fmt: skip
+def _run_one(
+    path: Path,
+    backend: str | None,
+    viz: bool,
+    out: Path,
+    hold: bool,
+    sim: str = "kinematic",
+    sensor=None,
+) -> int:
     """Run a scenario, write its outputs, report it; 1 if a physics run was stopped."""
     from wholebody.scenarios import load_scenario, run_scenario
     from wholebody.scenarios.outputs import write_run
@@ -192,9 +211,15 @@ def _run_one(path: Path, backend: str | None, viz: bool, out: Path, hold: bool,
     spec = load_scenario(path)
     scene, live = _start_viewer(spec) if viz else (None, None)
     try:
-        run = run_scenario(spec, backend=backend, progress=True, on_step=live, sim=sim,
-                           on_objects=live.update_objects if live else None,
-                           sensor=sensor)  # fmt: skip
+        run = run_scenario(
+            spec,
+            backend=backend,
+            progress=True,
+            on_step=live,
+            sim=sim,
+            on_objects=live.update_objects if live else None,
+            sensor=sensor,
+        )
         files = write_run(run, out)
         _report_run(run, files)
         if scene is not None:
@@ -217,25 +242,35 @@ def _overshoot(m: dict) -> str:
 
 def _report_physics(m: dict) -> None:
     """A physics run's summary lines: torque peaks, saturation, grasps, contacts, speed."""
-    peaks = ", ".join(f"{g} {v:.0f} N m ({100 * m['torque_peak_fraction'][g]:.0f} %)"
-                      for g, v in m["torque_peak_nm"].items())  # fmt: skip
+    peaks = ", ".join(
+        f"{g} {v:.0f} N m ({100 * m['torque_peak_fraction'][g]:.0f} %)"
+        for g, v in m["torque_peak_nm"].items()
+    )
     print(f"  physics (MuJoCo)  {m['real_time_factor']:.1f}x real time; peak torque {peaks}")
     if "sensor" in m:
         s = m["sensor"]
-        hands = ", ".join(f"{h} {1e3 * m['true_mean_tracking_error_m'][h]:.3f} / {1e3 * v:.3f}"
-                          for h, v in m["true_max_tracking_error_m"].items())  # fmt: skip
-        print(f"  sensor: noise {s['noise_rad_or_m']:g} rad or m, delay {s['delay_periods']} "
-              f"periods ({s['latency_compensated_periods']} compensated); true hand error "
-              f"mean / max (mm) {hands}; true closed chain <= "
-              f"{1e3 * m['true_closed_chain_error_max_m']:.3f} mm")  # fmt: skip
+        hands = ", ".join(
+            f"{h} {1e3 * m['true_mean_tracking_error_m'][h]:.3f} / {1e3 * v:.3f}"
+            for h, v in m["true_max_tracking_error_m"].items()
+        )
+        print(
+            f"  sensor: noise {s['noise_rad_or_m']:g} rad or m, delay {s['delay_periods']} "
+            f"periods ({s['latency_compensated_periods']} compensated); true hand error "
+            f"mean / max (mm) {hands}; true closed chain <= "
+            f"{1e3 * m['true_closed_chain_error_max_m']:.3f} mm"
+        )
     if m["torque_saturated"]:
         worst = sorted(m["torque_saturated"].items(), key=lambda x: -x[1])[:3]
-        print("  at the torque limit: " + ", ".join(f"{j} {100 * f:.1f} % of steps"
-                                                   for j, f in worst))  # fmt: skip
+        print(
+            "  at the torque limit: " + ", ".join(f"{j} {100 * f:.1f} % of steps" for j, f in worst)
+        )
     for obj, hands in m["grasp_force_peak_n"].items():
         squeeze = m["squeeze_force_n"].get(obj)
-        extra = (f"; squeeze peak {squeeze['peak']:.1f} N, mean {squeeze['mean']:.1f} N"
-                 if squeeze else "")  # fmt: skip
+        extra = (
+            f"; squeeze peak {squeeze['peak']:.1f} N, mean {squeeze['mean']:.1f} N"
+            if squeeze
+            else ""
+        )
         grips = ", ".join(f"{h} {f:.1f} N" for h, f in hands.items())
         print(f"  grasp of {obj}: peak force {grips}{extra}")
     for c in m["contacts"][:5]:
@@ -278,8 +313,10 @@ def _goal_words(m: dict) -> str:
             continue
         rot = "" if e["rotation_rad"] is None else f" / {e['rotation_rad']:.3f} rad"
         words.append(f"{task} ends {e['position_m'] * 1e3:.1f} mm{rot} from its goal")
-    return (", ".join(words) + f" (tolerance {GOAL_TOLERANCE_M * 1e3:g} mm / "
-            f"{GOAL_TOLERANCE_RAD:g} rad)")  # fmt: skip
+    return (
+        ", ".join(words) + f" (tolerance {GOAL_TOLERANCE_M * 1e3:g} mm / "
+        f"{GOAL_TOLERANCE_RAD:g} rad)"
+    )
 
 
 def _report_run(run, files: dict[str, Path]) -> None:
@@ -304,8 +341,10 @@ def _report_run(run, files: dict[str, Path]) -> None:
     if m.get("collision_pairs"):
         print(f"  collision: {m['collision_pairs']}")
     if m.get("min_collision_distance_m") is not None:
-        print(f"  closest pair {m['min_collision_pair']}: {m['min_collision_distance_m'] * 1e3:.2f}"
-              f" mm at {m['min_collision_time_s']:.2f} s")  # fmt: skip
+        print(
+            f"  closest pair {m['min_collision_pair']}: {m['min_collision_distance_m'] * 1e3:.2f}"
+            f" mm at {m['min_collision_time_s']:.2f} s"
+        )
         for entry in m["collision_limited"]:
             print(f"  {entry['pair']} held {entry['task']} back for {entry['steps']} steps")
     if m.get("sim") == "mujoco":
@@ -329,17 +368,31 @@ def _output_dir(out: Path) -> Path:
 def _run(args: argparse.Namespace) -> int:
     path = _scenario_path(args.scenario)
     out = _output_dir(Path(args.out) if args.out else Path("runs") / path.stem)
-    return _run_one(path, args.backend, args.viz, out, hold=args.viz and sys.stdin.isatty(),
-                    sim=args.sim, sensor=_sensor(args))  # fmt: skip
+    return _run_one(
+        path,
+        args.backend,
+        args.viz,
+        out,
+        hold=args.viz and sys.stdin.isatty(),
+        sim=args.sim,
+        sensor=_sensor(args),
+    )
 
 
 def _demo(args: argparse.Namespace) -> int:
     if not args.viz:
-        print("running the demo headless: figures and logs only (add --viz for the live "
-              "MeshCat viewer and a replay page)")  # fmt: skip
+        print(
+            "running the demo headless: figures and logs only (add --viz for the live "
+            "MeshCat viewer and a replay page)"
+        )
     out = _output_dir(Path(args.out) if args.out else Path("runs") / "demo")
-    return _run_one(_scenario_path("coordinated_carry"), None, args.viz, out,
-                    hold=args.viz and sys.stdin.isatty())  # fmt: skip
+    return _run_one(
+        _scenario_path("coordinated_carry"),
+        None,
+        args.viz,
+        out,
+        hold=args.viz and sys.stdin.isatty(),
+    )
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -359,8 +412,9 @@ def _compare(args: argparse.Namespace) -> int:
     try:
         for backend in args.backends:  # each run's log, metrics, figures kept as it ends
             print(f"running {spec.name} with {backend} ...")
-            run = run_scenario(spec, backend=backend, progress=True, sim=args.sim,
-                               sensor=_sensor(args))  # fmt: skip
+            run = run_scenario(
+                spec, backend=backend, progress=True, sim=args.sim, sensor=_sensor(args)
+            )
             write_run(run, out / backend, figures=False)
             runs.append(run)
             write_figures(run, out / backend)
@@ -369,8 +423,11 @@ def _compare(args: argparse.Namespace) -> int:
         if runs:
             write_comparison(runs, out)
         done = ", ".join(r.backend for r in runs) or "none"
-        print(f"wholebody: interrupted: not run: {', '.join(missing)}; finished: {done} "
-              f"(their logs, metrics and comparison are in {out})", file=sys.stderr)  # fmt: skip
+        print(
+            f"wholebody: interrupted: not run: {', '.join(missing)}; finished: {done} "
+            f"(their logs, metrics and comparison are in {out})",
+            file=sys.stderr,
+        )
         return 130
     files = write_comparison(runs, out)
     print(comparison_markdown(comparison(runs), spec.title or spec.name))
@@ -399,19 +456,38 @@ def _scenario_help(what: str) -> str:
 
 
 def _add_sim_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sim", choices=("kinematic", "mujoco"), default="kinematic",
-                        help="kinematic: the commands integrated exactly (default); mujoco: "
-                        "physics in the loop (the sim extra): joint servos with torque "
-                        "limits, objects with mass, grasps as welds")  # fmt: skip
-    parser.add_argument("--sensor-noise", type=float, default=0.0, metavar="A",
-                        help="with --sim mujoco: uniform noise of half-width A on every "
-                        "encoder the controller reads (rad, m for a prismatic joint; "
-                        "default 0)")  # fmt: skip
-    parser.add_argument("--sensor-delay", type=int, default=0, metavar="N",
-                        help="with --sim mujoco: the controller sees the state measured N "
-                        "control periods ago (default 0)")  # fmt: skip
-    parser.add_argument("--sensor-seed", type=int, default=0, metavar="S",
-                        help="seed of the sensor noise (default 0)")  # fmt: skip
+    parser.add_argument(
+        "--sim",
+        choices=("kinematic", "mujoco"),
+        default="kinematic",
+        help="kinematic: the commands integrated exactly (default); mujoco: "
+        "physics in the loop (the sim extra): joint servos with torque "
+        "limits, objects with mass, grasps as welds",
+    )
+    parser.add_argument(
+        "--sensor-noise",
+        type=float,
+        default=0.0,
+        metavar="A",
+        help="with --sim mujoco: uniform noise of half-width A on every "
+        "encoder the controller reads (rad, m for a prismatic joint; "
+        "default 0)",
+    )
+    parser.add_argument(
+        "--sensor-delay",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --sim mujoco: the controller sees the state measured N "
+        "control periods ago (default 0)",
+    )
+    parser.add_argument(
+        "--sensor-seed",
+        type=int,
+        default=0,
+        metavar="S",
+        help="seed of the sensor noise (default 0)",
+    )
 
 
 def _sensor(args: argparse.Namespace):
@@ -423,8 +499,10 @@ def _sensor(args: argparse.Namespace):
     if sensor.exact:
         return None
     if args.sim != "mujoco":
-        raise ConfigError("--sensor-noise and --sensor-delay model what a physics run's "
-                          "controller reads: add --sim mujoco")  # fmt: skip
+        raise ConfigError(
+            "--sensor-noise and --sensor-delay model what a physics run's "
+            "controller reads: add --sim mujoco"
+        )
     return sensor
 
 
@@ -432,12 +510,16 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
     """``run``, ``compare`` and ``demo``."""
     run = sub.add_parser("run", help="run a scenario file (or a bundled scenario's name)")
     run.add_argument("scenario", metavar="SCENARIO", help=_scenario_help("what to run"))
-    run.add_argument("--backend", choices=BACKENDS, default=None,
-                     help="override the scenario's backend")  # fmt: skip
-    run.add_argument("--viz", action="store_true",
-                     help="draw the run live in MeshCat (localhost), then write replay.html "
-                     "(a standalone replay) and, on a terminal, keep the viewer open until "
-                     "Enter")  # fmt: skip
+    run.add_argument(
+        "--backend", choices=BACKENDS, default=None, help="override the scenario's backend"
+    )
+    run.add_argument(
+        "--viz",
+        action="store_true",
+        help="draw the run live in MeshCat (localhost), then write replay.html "
+        "(a standalone replay) and, on a terminal, keep the viewer open until "
+        "Enter",
+    )
     run.add_argument("--out", default=None, help="output directory (default runs/NAME)")
     _add_sim_option(run)
     run.set_defaults(func=_run)
@@ -446,11 +528,16 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
         help="the paper's Table 2 for a scenario: pseudo-inverse vs projection vs hierarchical QP",
     )
     compare.add_argument("scenario", metavar="SCENARIO", help=_scenario_help("what to run"))
-    compare.add_argument("--out", default=None, help="output directory (default "
-                         "runs/NAME_comparison; each backend's run, metrics and figures in "
-                         "its BACKEND/ subdirectory)")  # fmt: skip
-    compare.add_argument("--backends", nargs="+", default=["pinv", "projection", "hqp"],
-                         choices=BACKENDS)  # fmt: skip
+    compare.add_argument(
+        "--out",
+        default=None,
+        help="output directory (default "
+        "runs/NAME_comparison; each backend's run, metrics and figures in "
+        "its BACKEND/ subdirectory)",
+    )
+    compare.add_argument(
+        "--backends", nargs="+", default=["pinv", "projection", "hqp"], choices=BACKENDS
+    )
     _add_sim_option(compare)
     compare.set_defaults(func=_compare)
     demo = sub.add_parser(
@@ -458,36 +545,65 @@ def _add_scenario_commands(sub: argparse._SubParsersAction) -> None:
         help="the coordinated dual-arm carry: headless (figures and logs), live in MeshCat "
         "with --viz",
     )
-    demo.add_argument("--viz", action="store_true",
-                      help="draw it live in MeshCat and write replay.html; on a terminal the "
-                      "viewer stays open until Enter")  # fmt: skip
+    demo.add_argument(
+        "--viz",
+        action="store_true",
+        help="draw it live in MeshCat and write replay.html; on a terminal the "
+        "viewer stays open until Enter",
+    )
     demo.add_argument("--out", default=None, help="output directory (default runs/demo)")
     demo.set_defaults(func=_demo)
 
 
 def _add_sweep_command(sub: argparse._SubParsersAction) -> None:
     """``sweep``: a campaign's cases on local processes or Ray."""
-    sweep = sub.add_parser("sweep", help="run a campaign (a scenario with keys varied) on "
-                           "every core, or on a Ray cluster with --ray")  # fmt: skip
-    sweep.add_argument("campaign", metavar="CAMPAIGN", help="a campaign file (TOML) or a "
-                       "bundled one's name: carry_weights, panda_targets")  # fmt: skip
-    sweep.add_argument("--out", required=True, help="directory of the results: one file per "
-                       "case, results.csv, best.md, plots; a sweep started again on it runs "
-                       "only the missing cases")  # fmt: skip
-    sweep.add_argument("--workers", type=int, default=None,
-                       help="local processes (default: every core)")  # fmt: skip
-    sweep.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
-                       help="run the cases as Ray tasks: on the cluster at ADDRESS "
-                       "(HOST:PORT), or without it on a local Ray instance")  # fmt: skip
-    sweep.add_argument("--ray-public", action="store_true",
-                       help="let the local Ray instance listen on the network, as Ray "
-                       "chooses (by default it is kept on 127.0.0.1, or refused): anyone "
-                       "who reaches this host can then submit work to it")  # fmt: skip
-    sweep.add_argument("--timeout", type=float, default=None, metavar="S",
-                       help="stop a case after S seconds of wall time and record it as "
-                       "'timeout' (default: no limit)")  # fmt: skip
-    sweep.add_argument("--retry-failed", action="store_true",
-                       help="run the cases that failed before again")  # fmt: skip
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a campaign (a scenario with keys varied) on "
+        "every core, or on a Ray cluster with --ray",
+    )
+    sweep.add_argument(
+        "campaign",
+        metavar="CAMPAIGN",
+        help="a campaign file (TOML) or a bundled one's name: carry_weights, panda_targets",
+    )
+    sweep.add_argument(
+        "--out",
+        required=True,
+        help="directory of the results: one file per "
+        "case, results.csv, best.md, plots; a sweep started again on it runs "
+        "only the missing cases",
+    )
+    sweep.add_argument(
+        "--workers", type=int, default=None, help="local processes (default: every core)"
+    )
+    sweep.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ADDRESS",
+        help="run the cases as Ray tasks: on the cluster at ADDRESS "
+        "(HOST:PORT), or without it on a local Ray instance",
+    )
+    sweep.add_argument(
+        "--ray-public",
+        action="store_true",
+        help="let the local Ray instance listen on the network, as Ray "
+        "chooses (by default it is kept on 127.0.0.1, or refused): anyone "
+        "who reaches this host can then submit work to it",
+    )
+    sweep.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop a case after S seconds of wall time and record it as "
+        "'timeout' (default: no limit)",
+    )
+    sweep.add_argument(
+        "--retry-failed", action="store_true", help="run the cases that failed before again"
+    )
     sweep.set_defaults(func=_sweep)
 
 
@@ -507,28 +623,50 @@ def _rate(text: str) -> float:
 
 def _add_ros_commands(sub: argparse._SubParsersAction) -> None:
     """``ros`` (the controller as a ROS 2 node) and ``ros-sim`` (a simulated robot)."""
-    ros = sub.add_parser("ros", help="run the controller as a ROS 2 node (the ros extra): "
-                         "joint states and targets in, velocity commands out")  # fmt: skip
+    ros = sub.add_parser(
+        "ros",
+        help="run the controller as a ROS 2 node (the ros extra): "
+        "joint states and targets in, velocity commands out",
+    )
     ros.add_argument("robot", metavar="ROBOT", help="bundled name, directory or robot.toml")
-    ros.add_argument("--task", action="extend", nargs="+", default=None, metavar="FRAME",
-                     help="the frames to control (default: the arms' tool "
-                     "frames); its target topic is /wholebody/FRAME/target")  # fmt: skip
-    ros.add_argument("--stack", default=None, metavar="FILE",
-                     help="run a scenario file's [stack] and hands instead of the default "
-                     "stack (frame tasks, a posture, the limits)")  # fmt: skip
+    ros.add_argument(
+        "--task",
+        action="extend",
+        nargs="+",
+        default=None,
+        metavar="FRAME",
+        help="the frames to control (default: the arms' tool "
+        "frames); its target topic is /wholebody/FRAME/target",
+    )
+    ros.add_argument(
+        "--stack",
+        default=None,
+        metavar="FILE",
+        help="run a scenario file's [stack] and hands instead of the default "
+        "stack (frame tasks, a posture, the limits)",
+    )
     ros.add_argument("--backend", choices=ROS_BACKENDS, default="projection")
-    ros.add_argument("--rate", type=_rate, default=100.0, metavar="HZ",
-                     help="control rate (default 100 Hz)")  # fmt: skip
+    ros.add_argument(
+        "--rate", type=_rate, default=100.0, metavar="HZ", help="control rate (default 100 Hz)"
+    )
     ros.set_defaults(func=_ros)
-    sim = sub.add_parser("ros-sim", help="a simulated robot on ROS 2 (the ros extra): "
-                         "publishes /joint_states (and /odom), integrates the "
-                         "commands")  # fmt: skip
+    sim = sub.add_parser(
+        "ros-sim",
+        help="a simulated robot on ROS 2 (the ros extra): "
+        "publishes /joint_states (and /odom), integrates the "
+        "commands",
+    )
     sim.add_argument("robot", metavar="ROBOT", help="bundled name, directory or robot.toml")
-    sim.add_argument("--sim", choices=("kinematic", "mujoco"), default="kinematic",
-                     help="kinematic: the commands integrated exactly (default); mujoco: "
-                     "physics with joint servos (the sim extra)")  # fmt: skip
-    sim.add_argument("--rate", type=_rate, default=100.0, metavar="HZ",
-                     help="state rate (default 100 Hz)")  # fmt: skip
+    sim.add_argument(
+        "--sim",
+        choices=("kinematic", "mujoco"),
+        default="kinematic",
+        help="kinematic: the commands integrated exactly (default); mujoco: "
+        "physics with joint servos (the sim extra)",
+    )
+    sim.add_argument(
+        "--rate", type=_rate, default=100.0, metavar="HZ", help="state rate (default 100 Hz)"
+    )
     sim.set_defaults(func=_ros_sim)
 
 
@@ -579,13 +717,23 @@ def _sweep(args: argparse.Namespace) -> int:
     out = _output_dir(Path(args.out))
     signal.signal(signal.SIGTERM, _terminated)  # a scheduler's stop: as a Ctrl-C
     try:
-        result = run_sweep(campaign, out, workers=args.workers, ray=args.ray is not None,
-                           address=args.ray or None, retry_failed=args.retry_failed,
-                           ray_public=args.ray_public, timeout=args.timeout)  # fmt: skip
+        result = run_sweep(
+            campaign,
+            out,
+            workers=args.workers,
+            ray=args.ray is not None,
+            address=args.ray or None,
+            retry_failed=args.retry_failed,
+            ray_public=args.ray_public,
+            timeout=args.timeout,
+        )
     except KeyboardInterrupt:
         done = len(list((out / "cases").glob("case_*.json")))
-        print(f"wholebody: interrupted: {done} finished cases are in {out / 'cases'} (and "
-              f"results.csv); the same command runs the others", file=sys.stderr)  # fmt: skip
+        print(
+            f"wholebody: interrupted: {done} finished cases are in {out / 'cases'} (and "
+            f"results.csv); the same command runs the others",
+            file=sys.stderr,
+        )
         return 130
     print(
         f"{campaign.name}: {result.cases} cases, {result.found} found finished in {out}, "
@@ -599,23 +747,35 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _add_humanlike_command(sub: argparse._SubParsersAction) -> None:
     """``humanlike evaluate``: the motion test on people."""
-    hl = sub.add_parser("humanlike", help="the motion test on people: the robot's arm angle "
-                        "against recorded persons'")  # fmt: skip
+    hl = sub.add_parser(
+        "humanlike",
+        help="the motion test on people: the robot's arm angle against recorded persons'",
+    )
     hsub = hl.add_subparsers(dest="humanlike_command", required=True, metavar="COMMAND")
-    ev = hsub.add_parser("evaluate", help="drive the robot's wrist along recorded wrist paths "
-                         "with each controller; compare arm angles frame by frame")  # fmt: skip
-    ev.add_argument("--recordings", default=None,
-                    help="a directory of recordings (CSV or NPZ, the shipped format); default "
-                    "the bundled real ones")  # fmt: skip
+    ev = hsub.add_parser(
+        "evaluate",
+        help="drive the robot's wrist along recorded wrist paths "
+        "with each controller; compare arm angles frame by frame",
+    )
+    ev.add_argument(
+        "--recordings",
+        default=None,
+        help="a directory of recordings (CSV or NPZ, the shipped format); default "
+        "the bundled real ones",
+    )
     ev.add_argument("--out", required=True, help="output directory (humanlike.json, .png)")
-    ev.add_argument("--participants", default=None,
-                    help="comma-separated participants to keep (default: all)")  # fmt: skip
+    ev.add_argument(
+        "--participants", default=None, help="comma-separated participants to keep (default: all)"
+    )
     ev.add_argument("--robot", default="mobile_humanoid")
     ev.add_argument("--every", type=int, default=1, help="every N-th trial (default all)")
-    ev.add_argument("--held-out", action="store_true",
-                    help="pull each participant's trials towards an arm-angle network trained "
-                    "without them (one per participant, on every recording of --recordings; "
-                    "needs the learn extra), not the shipped one")  # fmt: skip
+    ev.add_argument(
+        "--held-out",
+        action="store_true",
+        help="pull each participant's trials towards an arm-angle network trained "
+        "without them (one per participant, on every recording of --recordings; "
+        "needs the learn extra), not the shipped one",
+    )
     ev.set_defaults(func=_humanlike_evaluate)
 
 
@@ -644,26 +804,36 @@ def _humanlike_evaluate(args: argparse.Namespace) -> int:
     if args.held_out:  # trained on every recording but the participant's own
         models = held_out_arm_angle_models(every, only=sorted({r.participant for r in recs}))
     else:
-        print("arm-angle model: the shipped one, trained on the bundled participants "
-              "(in-sample for them; --held-out for a test on people it never saw)")  # fmt: skip
+        print(
+            "arm-angle model: the shipped one, trained on the bundled participants "
+            "(in-sample for them; --held-out for a test on people it never saw)"
+        )
     robot = load_robot(args.robot)
     scores = evaluate(robot, recs, CONTROLLERS, arm_angle_model=models)
-    meta = {"robot": robot.name, "trials": [r.name for r in recs],
-            "participants": sorted({r.participant for r in recs}),
-            "arm_angle_model": "held out (one per participant)" if args.held_out
-            else "shipped"}  # fmt: skip
+    meta = {
+        "robot": robot.name,
+        "trials": [r.name for r in recs],
+        "participants": sorted({r.participant for r in recs}),
+        "arm_angle_model": "held out (one per participant)" if args.held_out else "shipped",
+    }
     written = write_report(scores, Path(args.out), meta)
     print(f"{len(recs)} trials of {len(meta['participants'])} participants on {robot.name}")
     people = meta["participants"]
-    print(f"  {'arm angle rms (deg)':<19}{'all':>6}{'95 % (people)':>15}"
-          + "".join(f"{p:>8}" for p in people))  # fmt: skip
+    print(
+        f"  {'arm angle rms (deg)':<19}{'all':>6}{'95 % (people)':>15}"
+        + "".join(f"{p:>8}" for p in people)
+    )
     for name, sc in scores.items():
         by, (lo, hi) = sc.alpha_rms_deg_by_participant, sc.alpha_rms_deg_interval
-        print(f"  {name:<19}{sc.alpha_rms_deg:6.1f}{f'[{lo:.1f}, {hi:.1f}]':>15}"
-              + "".join(f"{by[p]:8.1f}" for p in people))  # fmt: skip
+        print(
+            f"  {name:<19}{sc.alpha_rms_deg:6.1f}{f'[{lo:.1f}, {hi:.1f}]':>15}"
+            + "".join(f"{by[p]:8.1f}" for p in people)
+        )
     for name, sc in scores.items():
-        print(f"  {name:<19}waist travel {sc.waist_travel_rad:.2f} rad, wrist error median "
-              f"{sc.wrist_error_median_mm:.2f} mm, max {sc.wrist_error_mm:.1f} mm")  # fmt: skip
+        print(
+            f"  {name:<19}waist travel {sc.waist_travel_rad:.2f} rad, wrist error median "
+            f"{sc.wrist_error_median_mm:.2f} mm, max {sc.wrist_error_mm:.1f} mm"
+        )
     for what, path in written.items():
         print(f"  {what:<5} {path}")
     return 0
@@ -677,17 +847,23 @@ def build_parser(stiffness: bool = True) -> argparse.ArgumentParser:
         description="Whole-body control of highly redundant mobile humanoids.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    info = sub.add_parser("info", help="describe a robot (bundled name, directory or "
-                          "robot.toml): groups, arms, tool frames and frames")  # fmt: skip
+    info = sub.add_parser(
+        "info",
+        help="describe a robot (bundled name, directory or "
+        "robot.toml): groups, arms, tool frames and frames",
+    )
     info.add_argument("robot", nargs="?", default="mobile_humanoid")
     info.add_argument("--list", action="store_true", help="list the bundled robots")
     info.add_argument(
         "--frames", action="store_true", help="list every frame a task can name (and joints)"
     )
-    info.add_argument("--suggest-frames", action="store_true",
-                      help="for arms whose shoulder, elbow or wrist frames are not joint "
-                      "centres: [frames] entries placing them there, to paste into "
-                      "robot.toml")  # fmt: skip
+    info.add_argument(
+        "--suggest-frames",
+        action="store_true",
+        help="for arms whose shoulder, elbow or wrist frames are not joint "
+        "centres: [frames] entries placing them there, to paste into "
+        "robot.toml",
+    )
     info.set_defaults(func=_info)
     _add_scenario_commands(sub)
     _add_sweep_command(sub)

@@ -56,8 +56,9 @@ class FileFormat:
     def upgrade(self, version: int) -> str:
         """What changed since ``version`` and what to edit, ending with the key to add."""
         steps = [f"format {v}: {self.changes[v]}" for v in range(version + 1, self.current + 1)]
-        return "; ".join(steps) + (f". Then put `{self.line}` at the top of the file, before "
-                                   "its first table")  # fmt: skip
+        return "; ".join(steps) + (
+            f". Then put `{self.line}` at the top of the file, before its first table"
+        )
 
 
 SCENARIO = FileFormat(
@@ -106,22 +107,37 @@ def check_format(r: TomlReader, data: Mapping[str, Any], fmt: FileFormat) -> Non
         edit), newer (written for a newer wholebody), or not a whole number.
     """
     if FORMAT_KEY not in data:
-        written = (f"format {fmt.unnumbered}, which had no key" if fmt.unnumbered else
-                   "before the formats were numbered")  # fmt: skip
-        raise _fail(r, f"missing key: a {fmt.kind} file without it was written for {written}; "
-                    f"this wholebody reads format {fmt.current}. What changed since: "
-                    f"{fmt.upgrade(fmt.unnumbered)}")  # fmt: skip
+        written = (
+            f"format {fmt.unnumbered}, which had no key"
+            if fmt.unnumbered
+            else "before the formats were numbered"
+        )
+        raise _fail(
+            r,
+            f"missing key: a {fmt.kind} file without it was written for {written}; "
+            f"this wholebody reads format {fmt.current}. What changed since: "
+            f"{fmt.upgrade(fmt.unnumbered)}",
+        )
     version = data[FORMAT_KEY]
     if isinstance(version, bool) or not isinstance(version, int) or version < 1:
-        raise _fail(r, f"expected the {fmt.kind} format as a whole number >= 1 (`{fmt.line}`), "
-                    f"got {version!r}")  # fmt: skip
+        raise _fail(
+            r,
+            f"expected the {fmt.kind} format as a whole number >= 1 (`{fmt.line}`), "
+            f"got {version!r}",
+        )
     if version > fmt.current:
-        raise _fail(r, f"format = {version}: written for a newer wholebody (this one reads "
-                    f"{fmt.kind} format {fmt.current}); update wholebody")  # fmt: skip
+        raise _fail(
+            r,
+            f"format = {version}: written for a newer wholebody (this one reads "
+            f"{fmt.kind} format {fmt.current}); update wholebody",
+        )
     if version < fmt.current:
-        raise _fail(r, f"format = {version}: written for format {version}; this wholebody "
-                    f"reads format {fmt.current}. What changed since: "
-                    f"{fmt.upgrade(version)}")  # fmt: skip
+        raise _fail(
+            r,
+            f"format = {version}: written for format {version}; this wholebody "
+            f"reads format {fmt.current}. What changed since: "
+            f"{fmt.upgrade(version)}",
+        )
 
 
 def _fail(r: TomlReader, message: str) -> ConfigError:

@@ -116,23 +116,27 @@ def paper_objectives(
     tools. ``arm_angle_model``: the human arm angle the pull aims at (default: the shipped
     model, :func:`wholebody.arm.default_arm_angle_model`)."""
     if weights.spring not in SPRINGS:
-        raise DimensionError(f"PaperWeights.spring must be one of {', '.join(SPRINGS)}, got "
-                             f"{weights.spring!r}")  # fmt: skip
+        raise DimensionError(
+            f"PaperWeights.spring must be one of {', '.join(SPRINGS)}, got {weights.spring!r}"
+        )
     k = default_stiffness(robot) if stiffness is None else stiffness
     objectives: list[Objective] = []
     for arm in robot.arms:
         paper = weights.spring == "paper"
-        objectives.append(ArmPotentialEnergy(robot, arm, k if paper else 0.0,
-                                             weight=weights.energy))  # fmt: skip
+        objectives.append(
+            ArmPotentialEnergy(robot, arm, k if paper else 0.0, weight=weights.energy)
+        )
         if weights.spring == "signed":
             objectives.append(ArmAngleSpring(robot, arm, k, signed=True, weight=weights.energy))
     if not (math.isfinite(weights.human_arm_angle) and weights.human_arm_angle >= 0):
-        raise DimensionError(f"PaperWeights.human_arm_angle must be a weight >= 0, got "
-                             f"{weights.human_arm_angle}")  # fmt: skip
+        raise DimensionError(
+            f"PaperWeights.human_arm_angle must be a weight >= 0, got {weights.human_arm_angle}"
+        )
     if weights.human_arm_angle:
         model = _arm_angle_model(arm_angle_model)
-        objectives += [HumanArmAngle(robot, arm, model, weight=weights.human_arm_angle)
-                       for arm in robot.arms]  # fmt: skip
+        objectives += [
+            HumanArmAngle(robot, arm, model, weight=weights.human_arm_angle) for arm in robot.arms
+        ]
     # h1 acts on the joints with position limits: continuous joints (wheels, an endless
     # wrist) have no range to stay inside
     arm_groups = [a.group.name for a in robot.arms.values() if a.group is not None]

@@ -43,8 +43,9 @@ def _directions(robot: Robot, q: np.ndarray, eps: float):
         yield k, robot.integrate(q, u, eps), robot.integrate(q, u, -eps)
 
 
-def jacobian_fd(robot: Robot, q: np.ndarray, f: Callable[[RobotState], np.ndarray],
-                eps: float = 1e-6) -> np.ndarray:  # fmt: skip
+def jacobian_fd(
+    robot: Robot, q: np.ndarray, f: Callable[[RobotState], np.ndarray], eps: float = 1e-6
+) -> np.ndarray:
     """``m x nu`` Jacobian of a vector quantity ``f(state)`` (m,) of the configuration."""
     cols = []
     for _, qp, qm in _directions(robot, q, eps):
@@ -65,8 +66,9 @@ def frame_jacobian_fd(robot: Robot, q: np.ndarray, frame: str, eps: float = 1e-6
     return J
 
 
-def gradient_fd(robot: Robot, q: np.ndarray, f: Callable[[np.ndarray], float],
-                eps: float = 1e-6) -> np.ndarray:  # fmt: skip
+def gradient_fd(
+    robot: Robot, q: np.ndarray, f: Callable[[np.ndarray], float], eps: float = 1e-6
+) -> np.ndarray:
     """Gradient of a scalar ``f(q)`` in actuated coordinates (the convention of
     :class:`~wholebody.tasks.ObjectiveValue`)."""
     g = np.zeros(robot.nu)
@@ -75,8 +77,9 @@ def gradient_fd(robot: Robot, q: np.ndarray, f: Callable[[np.ndarray], float],
     return g
 
 
-def assert_objective_gradient(objective: Objective, robot: Robot, q: np.ndarray,
-                              atol: float = 1e-6, eps: float = 1e-6) -> None:  # fmt: skip
+def assert_objective_gradient(
+    objective: Objective, robot: Robot, q: np.ndarray, atol: float = 1e-6, eps: float = 1e-6
+) -> None:
     """An objective's analytic gradient at ``q`` equals the central differences of its value
     (AssertionError naming the worst entry otherwise)."""
     analytic = np.asarray(objective.evaluate(robot.update(q)).gradient, dtype=float)
@@ -84,9 +87,14 @@ def assert_objective_gradient(objective: Objective, robot: Robot, q: np.ndarray,
     _assert_close(f"objective {objective.name!r}: gradient", analytic, numeric, atol, robot)
 
 
-def assert_task_jacobian(task, robot: Robot, q: np.ndarray,
-                         quantity: Callable[[RobotState], np.ndarray], atol: float = 1e-6,
-                         eps: float = 1e-6) -> None:  # fmt: skip
+def assert_task_jacobian(
+    task,
+    robot: Robot,
+    q: np.ndarray,
+    quantity: Callable[[RobotState], np.ndarray],
+    atol: float = 1e-6,
+    eps: float = 1e-6,
+) -> None:
     """A task's rows ``J`` at ``q`` are the Jacobian of ``quantity(state)`` (the vector the
     task moves, e.g. a frame position), by central differences."""
     analytic = np.asarray(task.compute(robot.update(q)).J, dtype=float)
@@ -94,15 +102,19 @@ def assert_task_jacobian(task, robot: Robot, q: np.ndarray,
     _assert_close(f"task {task.name!r}: rows J", analytic, numeric, atol, robot)
 
 
-def _assert_close(what: str, analytic: np.ndarray, numeric: np.ndarray, atol: float,
-                  robot: Robot) -> None:  # fmt: skip
+def _assert_close(
+    what: str, analytic: np.ndarray, numeric: np.ndarray, atol: float, robot: Robot
+) -> None:
     if analytic.shape != numeric.shape:
-        raise AssertionError(f"{what} has shape {analytic.shape}, finite differences "
-                             f"{numeric.shape}")  # fmt: skip
+        raise AssertionError(
+            f"{what} has shape {analytic.shape}, finite differences {numeric.shape}"
+        )
     err = np.abs(analytic - numeric)
     if err.size and err.max() > atol:
         index = np.unravel_index(int(np.argmax(err)), err.shape)
         joint = robot.actuated_joints[index[-1]]
-        raise AssertionError(f"{what} differs from finite differences by {err.max():.3g} "
-                             f"(> {atol:g}) at {index} (u entry {joint!r}): analytic "
-                             f"{analytic[index]:.6g}, numeric {numeric[index]:.6g}")  # fmt: skip
+        raise AssertionError(
+            f"{what} differs from finite differences by {err.max():.3g} "
+            f"(> {atol:g}) at {index} (u entry {joint!r}): analytic "
+            f"{analytic[index]:.6g}, numeric {numeric[index]:.6g}"
+        )

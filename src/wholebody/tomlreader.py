@@ -31,8 +31,10 @@ def load_toml(path: Path, what: str) -> dict[str, Any]:
         raise ConfigError(f"{path}: cannot read {what} ({exc.strerror})") from exc
     except UnicodeDecodeError as exc:
         byte = exc.object[exc.start]
-        raise ConfigError(f"{path}: {what} is not UTF-8 text (TOML must be): byte {byte:#04x} "
-                          f"at offset {exc.start}") from None  # fmt: skip
+        raise ConfigError(
+            f"{path}: {what} is not UTF-8 text (TOML must be): byte {byte:#04x} "
+            f"at offset {exc.start}"
+        ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

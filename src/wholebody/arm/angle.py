@@ -50,8 +50,7 @@ def arm_angle(S: np.ndarray, E: np.ndarray, W: np.ndarray, side: float) -> np.nd
 
     ``side`` is +1 for a left arm, -1 for a right arm.
     """
-    *_, x, y = _components(np.asarray(S, float), np.asarray(E, float), np.asarray(W, float),
-                           side)  # fmt: skip
+    *_, x, y = _components(np.asarray(S, float), np.asarray(E, float), np.asarray(W, float), side)
     return np.arctan2(y, x)
 
 
@@ -80,8 +79,7 @@ class ArmAngle:
         return (self.x * self.dy - self.y * self.dx) / self.rho2
 
 
-def arm_angle_with_gradient(S: np.ndarray, E: np.ndarray, W: np.ndarray,
-                            side: float) -> ArmAngle:  # fmt: skip
+def arm_angle_with_gradient(S: np.ndarray, E: np.ndarray, W: np.ndarray, side: float) -> ArmAngle:
     """Arm angle of one arm (positions (3,)) with the gradients of its components.
 
     With ``g = (0, 0, -1)``, ``u x g = (-u_y, u_x, 0)`` and ``g x a = (a_y, -a_x, 0)``, so::
@@ -95,6 +93,12 @@ def arm_angle_with_gradient(S: np.ndarray, E: np.ndarray, W: np.ndarray,
     arm energy runs in the control loop).
     """
     dx, dy = np.empty(9), np.empty(9)
-    alpha, x, y = arm_angle_terms(np.array(S, dtype=float), np.array(E, dtype=float),
-                                  np.array(W, dtype=float), float(side), dx, dy)  # fmt: skip
+    alpha, x, y = arm_angle_terms(
+        np.array(S, dtype=float),
+        np.array(E, dtype=float),
+        np.array(W, dtype=float),
+        float(side),
+        dx,
+        dy,
+    )
     return ArmAngle(float(alpha), float(x), float(y), dx.reshape(3, 3), dy.reshape(3, 3))

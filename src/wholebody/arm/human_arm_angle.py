@@ -75,8 +75,9 @@ def normalised_wrist(wrist: np.ndarray, upper_arm: float, forearm: float) -> np.
     arms of any size."""
     reach = float(upper_arm) + float(forearm)
     if not (math.isfinite(reach) and upper_arm > 0 and forearm > 0):
-        raise DimensionError(f"normalised_wrist: the arm's lengths must be > 0 m, got "
-                             f"{upper_arm} and {forearm}")  # fmt: skip
+        raise DimensionError(
+            f"normalised_wrist: the arm's lengths must be > 0 m, got {upper_arm} and {forearm}"
+        )
     return np.asarray(wrist, dtype=float) / reach
 
 
@@ -131,8 +132,10 @@ class ConstantArmAngle(HumanArmAngleModel):
         return np.full(np.shape(P)[:-1], self.alpha)
 
     def __repr__(self) -> str:
-        return (f"ConstantArmAngle({math.degrees(self.alpha):.1f} deg, spread "
-                f"{math.degrees(self.spread):.1f} deg)")  # fmt: skip
+        return (
+            f"ConstantArmAngle({math.degrees(self.alpha):.1f} deg, spread "
+            f"{math.degrees(self.spread):.1f} deg)"
+        )
 
 
 class NetworkArmAngle(mlp.TanhNetwork, HumanArmAngleModel):
@@ -183,19 +186,30 @@ class NetworkArmAngle(mlp.TanhNetwork, HumanArmAngleModel):
         self.spread = _spread(spread, "spread", who)
         self.spread_between = _spread(spread_between, "spread_between", who)
         self.spread_within = _spread(spread_within, "spread_within", who)
-        box = [None if v is None else mlp.vector3(v, n, who)
-               for v, n in ((input_low, "input_low"), (input_high, "input_high"))]  # fmt: skip
+        box = [
+            None if v is None else mlp.vector3(v, n, who)
+            for v, n in ((input_low, "input_low"), (input_high, "input_high"))
+        ]
         self.input_low, self.input_high = box
-        numbers = [*self.weights, *self.biases, self.x_mean, self.x_scale,
-                   np.array([self.alpha_mean, self.alpha_scale])]  # fmt: skip
+        numbers = [
+            *self.weights,
+            *self.biases,
+            self.x_mean,
+            self.x_scale,
+            np.array([self.alpha_mean, self.alpha_scale]),
+        ]
         numbers += [v for v in box if v is not None]
         if not all(np.isfinite(a).all() for a in numbers):
             raise DimensionError(f"{who}: weights, biases and normalisations must be finite")
         self.meta = dict(meta or {})
         self._layers, self._w_out, self._b_out = mlp.fold(
-            self.weights, self.biases, self.x_mean, self.x_scale, self.alpha_mean,
+            self.weights,
+            self.biases,
+            self.x_mean,
+            self.x_scale,
+            self.alpha_mean,
             self.alpha_scale,
-        )  # fmt: skip
+        )
         self._wT = [W.T.copy() for W, _ in self._layers]
 
     # ----------------------------------------------------------------- inference
@@ -215,18 +229,30 @@ class NetworkArmAngle(mlp.TanhNetwork, HumanArmAngleModel):
         return alpha, mlp.backward(self._wT, hs, self._w_out)
 
     def __repr__(self) -> str:
-        return (f"NetworkArmAngle(hidden={self.hidden_sizes}, tanh, spread "
-                f"{math.degrees(self.spread):.1f} deg)")  # fmt: skip
+        return (
+            f"NetworkArmAngle(hidden={self.hidden_sizes}, tanh, spread "
+            f"{math.degrees(self.spread):.1f} deg)"
+        )
 
     # ----------------------------------------------------------------- file
     def save(self, path: str | Path) -> Path:
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it)."""
         numbers = ("alpha_mean", "alpha_scale", "spread", "spread_between", "spread_within")
-        own = {"x_mean": self.x_mean, "x_scale": self.x_scale,
-               **{k: np.array(getattr(self, k)) for k in numbers}}  # fmt: skip
-        return mlp.write_network(path, FORMAT, self.weights, self.biases, own,
-                                 (self.input_low, self.input_high), self.meta)  # fmt: skip
+        own = {
+            "x_mean": self.x_mean,
+            "x_scale": self.x_scale,
+            **{k: np.array(getattr(self, k)) for k in numbers},
+        }
+        return mlp.write_network(
+            path,
+            FORMAT,
+            self.weights,
+            self.biases,
+            own,
+            (self.input_low, self.input_high),
+            self.meta,
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkArmAngle:
@@ -243,8 +269,16 @@ class NetworkArmAngle(mlp.TanhNetwork, HumanArmAngleModel):
     @classmethod
     def _read(cls, path: Path, z: dict[str, np.ndarray]) -> NetworkArmAngle:
         """The network in an open file (:meth:`load`)."""
-        need = ("format", "n_layers", "activation", "x_mean", "x_scale", "alpha_mean",
-                "alpha_scale", "spread")  # fmt: skip
+        need = (
+            "format",
+            "n_layers",
+            "activation",
+            "x_mean",
+            "x_scale",
+            "alpha_mean",
+            "alpha_scale",
+            "spread",
+        )
         mlp.check_header(path, z, need, FORMAT)
         weights, biases = mlp.read_layers(path, z)
         try:
@@ -275,6 +309,8 @@ def default_arm_angle_model() -> NetworkArmAngle:
     """The shipped network of people's arm angle (its data card: the README beside it)."""
     path = arm_angle_model_path()
     if not path.is_file():
-        raise DataError(f"{path}: no arm-angle network there; train one with `wholebody "
-                        f"stiffness armangle fit --out {path}`")  # fmt: skip
+        raise DataError(
+            f"{path}: no arm-angle network there; train one with `wholebody "
+            f"stiffness armangle fit --out {path}`"
+        )
     return NetworkArmAngle.load(path)

@@ -103,15 +103,19 @@ def check_layers(
     """Weights ``(out, in)`` and biases ``(out,)`` as float arrays, chained from ``n_in``
     inputs to 1 output through at least one hidden layer; DimensionError otherwise."""
     if len(weights) != len(biases) or len(weights) < 2:
-        raise DimensionError(f"{who}: need matching weights and biases for at least one "
-                             "hidden layer and the output layer")  # fmt: skip
+        raise DimensionError(
+            f"{who}: need matching weights and biases for at least one "
+            "hidden layer and the output layer"
+        )
     Ws = [np.array(w, dtype=float) for w in weights]
     bs = [np.array(b, dtype=float).reshape(-1) for b in biases]
     fan_in = n_in
     for i, (w, b) in enumerate(zip(Ws, bs, strict=True)):
         if w.ndim != 2 or w.shape[1] != fan_in or b.shape != (w.shape[0],):
-            raise DimensionError(f"{who}: layer {i}: weight {w.shape} and bias {b.shape} do "
-                                 f"not fit an input of {fan_in}")  # fmt: skip
+            raise DimensionError(
+                f"{who}: layer {i}: weight {w.shape} and bias {b.shape} do "
+                f"not fit an input of {fan_in}"
+            )
         fan_in = w.shape[0]
     if fan_in != 1:
         raise DimensionError(f"{who}: the output layer must have 1 unit")
@@ -220,9 +224,13 @@ def write_network(
     "tanh", the layers, the network's own ``arrays``, the training box ``input_low`` /
     ``input_high`` when both are given and ``meta`` as JSON. Returns the file written
     (``.npz`` appended to a name without it, as numpy does)."""
-    out = {"format": np.array(fmt), "activation": np.array("tanh"), **arrays,
-           "meta": np.array(json.dumps(meta, sort_keys=True)),
-           **layer_arrays(weights, biases)}  # fmt: skip
+    out = {
+        "format": np.array(fmt),
+        "activation": np.array("tanh"),
+        **arrays,
+        "meta": np.array(json.dumps(meta, sort_keys=True)),
+        **layer_arrays(weights, biases),
+    }
     if box[0] is not None and box[1] is not None:  # else: no range stored
         out["input_low"], out["input_high"] = box
     return write_npz(npz_path(path), out, compress=False)

@@ -90,14 +90,20 @@ class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
         if not (np.all(self.x_scale > 0) and self.k_scale > 0 and self.floor_beta > 0):
             raise DimensionError("NetworkStiffness: x_scale, k_scale and floor_beta must be > 0")
         self.input_low = None if input_low is None else mlp.vector3(input_low, "input_low", who)
-        self.input_high = (None if input_high is None
-                           else mlp.vector3(input_high, "input_high", who))  # fmt: skip
-        numbers = [*self.weights, *self.biases, self.x_mean, self.x_scale,
-                   np.array([self.k_mean, self.k_scale, self.floor_beta])]  # fmt: skip
+        self.input_high = None if input_high is None else mlp.vector3(input_high, "input_high", who)
+        numbers = [
+            *self.weights,
+            *self.biases,
+            self.x_mean,
+            self.x_scale,
+            np.array([self.k_mean, self.k_scale, self.floor_beta]),
+        ]
         numbers += [v for v in (self.input_low, self.input_high) if v is not None]
         if not all(np.isfinite(a).all() for a in numbers):
-            raise DimensionError("NetworkStiffness: weights, biases and normalisations must be "
-                                 "finite (a NaN here makes every control step fail)")  # fmt: skip
+            raise DimensionError(
+                "NetworkStiffness: weights, biases and normalisations must be "
+                "finite (a NaN here makes every control step fail)"
+            )
         self.meta = dict(meta or {})
         # the normalisations folded into the first and last layers for the control loop
         self._layers, self._w_out, self._b_out = mlp.fold(
@@ -129,8 +135,9 @@ class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
         """
         h = np.asarray(wrist, dtype=float)
         if h.shape != (3,):
-            raise DimensionError(f"stiffness network: the wrist position is a (3,) array (m), "
-                                 f"got shape {h.shape}")  # fmt: skip
+            raise DimensionError(
+                f"stiffness network: the wrist position is a (3,) array (m), got shape {h.shape}"
+            )
         hs = mlp.forward_states(self._layers, h)
         r = float(self._w_out @ hs[-1]) + self._b_out
         br = self.floor_beta * r
@@ -168,10 +175,20 @@ class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it, as numpy does)."""
         numbers = ("k_mean", "k_scale", "floor_beta")
-        own = {"x_mean": self.x_mean, "x_scale": self.x_scale,
-               **{k: np.array(getattr(self, k)) for k in numbers}}  # fmt: skip
-        return mlp.write_network(path, FORMAT, self.weights, self.biases, own,
-                                 (self.input_low, self.input_high), self.meta)  # fmt: skip
+        own = {
+            "x_mean": self.x_mean,
+            "x_scale": self.x_scale,
+            **{k: np.array(getattr(self, k)) for k in numbers},
+        }
+        return mlp.write_network(
+            path,
+            FORMAT,
+            self.weights,
+            self.biases,
+            own,
+            (self.input_low, self.input_high),
+            self.meta,
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkStiffness:
@@ -187,14 +204,31 @@ class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
     @classmethod
     def _read(cls, path: Path, z: dict[str, np.ndarray]) -> NetworkStiffness:
         """The network in an open file (:meth:`load`)."""
-        need = ("format", "n_layers", "activation", "x_mean", "x_scale", "k_mean", "k_scale",
-                "floor_beta")  # fmt: skip
+        need = (
+            "format",
+            "n_layers",
+            "activation",
+            "x_mean",
+            "x_scale",
+            "k_mean",
+            "k_scale",
+            "floor_beta",
+        )
         mlp.check_header(path, z, need, FORMAT)
         weights, biases = mlp.read_layers(path, z)
         try:
-            return cls(weights, biases, z["x_mean"], z["x_scale"], z["k_mean"], z["k_scale"],
-                       z["floor_beta"], z.get("input_low"), z.get("input_high"),
-                       mlp.read_meta(path, z))  # fmt: skip
+            return cls(
+                weights,
+                biases,
+                z["x_mean"],
+                z["x_scale"],
+                z["k_mean"],
+                z["k_scale"],
+                z["floor_beta"],
+                z.get("input_low"),
+                z.get("input_high"),
+                mlp.read_meta(path, z),
+            )
         except DimensionError as exc:
             raise DataError(f"{path}: {exc}") from None
 
@@ -218,6 +252,8 @@ def default_stiffness(robot: object | str = "mobile_humanoid") -> NetworkStiffne
     path = stiffness_path(robot)
     name = robot if isinstance(robot, str) else str(getattr(robot, "name", ""))
     if not path.is_file():
-        raise DataError(f"{path}: robot {name!r} has no trained stiffness network there; train "
-                        f"one with `wholebody stiffness fit --out {path}`")  # fmt: skip
+        raise DataError(
+            f"{path}: robot {name!r} has no trained stiffness network there; train "
+            f"one with `wholebody stiffness fit --out {path}`"
+        )
     return NetworkStiffness.load(path)

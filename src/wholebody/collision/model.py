@@ -86,21 +86,30 @@ class Obstacle:
         """The coal shape, checked."""
         counts = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1}
         if self.shape not in counts:
-            raise DimensionError(f"obstacle {self.name!r}: shape must be one of "
-                                 f"{', '.join(SHAPES)}, got {self.shape!r}")  # fmt: skip
+            raise DimensionError(
+                f"obstacle {self.name!r}: shape must be one of "
+                f"{', '.join(SHAPES)}, got {self.shape!r}"
+            )
         size = tuple(float(s) for s in self.size)
         if len(size) != counts[self.shape] or not all(math.isfinite(s) and s > 0 for s in size):
-            raise DimensionError(f"obstacle {self.name!r}: a {self.shape} needs "
-                                 f"{counts[self.shape]} sizes > 0 (m), got "
-                                 f"{self.size!r}")  # fmt: skip
+            raise DimensionError(
+                f"obstacle {self.name!r}: a {self.shape} needs "
+                f"{counts[self.shape]} sizes > 0 (m), got "
+                f"{self.size!r}"
+            )
         pose = np.asarray(self.pose, dtype=float)
-        rigid = (pose.shape == (4, 4) and np.all(np.isfinite(pose))
-                 and np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0))
-                 and np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-9)
-                 and np.linalg.det(pose[:3, :3]) > 0)  # fmt: skip
+        rigid = (
+            pose.shape == (4, 4)
+            and np.all(np.isfinite(pose))
+            and np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0))
+            and np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-9)
+            and np.linalg.det(pose[:3, :3]) > 0
+        )
         if not rigid:
-            raise DimensionError(f"obstacle {self.name!r}: pose must be a rigid 4x4 transform "
-                                 "(a rotation and a translation, last row 0 0 0 1)")  # fmt: skip
+            raise DimensionError(
+                f"obstacle {self.name!r}: pose must be a rigid 4x4 transform "
+                "(a rotation and a translation, last row 0 0 0 1)"
+            )
         if self.shape == "box":
             return coal.Box(*size)
         if self.shape == "sphere":
@@ -151,12 +160,18 @@ class CollisionModel:
         starts: the grasp's contacts).
     """
 
-    def __init__(self, robot: Robot, obstacles: Sequence[Obstacle] = (), *,
-                 safety: float = 0.01, self_collision: bool = True,
-                 exclude: Iterable[Sequence[str]] = (),
-                 shapes: Mapping[str, str] | None = None,
-                 attached: Sequence[tuple[str, Obstacle]] = (),
-                 start: np.ndarray | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        obstacles: Sequence[Obstacle] = (),
+        *,
+        safety: float = 0.01,
+        self_collision: bool = True,
+        exclude: Iterable[Sequence[str]] = (),
+        shapes: Mapping[str, str] | None = None,
+        attached: Sequence[tuple[str, Obstacle]] = (),
+        start: np.ndarray | None = None,
+    ) -> None:
         if not (math.isfinite(safety) and safety >= 0):
             raise DimensionError(f"collision safety distance must be >= 0 m, got {safety}")
         self.robot = robot
@@ -177,16 +192,19 @@ class CollisionModel:
         taken = {o.name for o in self.geometry.geometryObjects}  # carried objects too
         taken |= {f.name for f in robot.model.frames}
         if len(set(names)) != len(names) or taken & set(names):
-            raise DimensionError(f"obstacle names must be unique and not a link's or a "
-                                 f"shape's, got {names}")  # fmt: skip
+            raise DimensionError(
+                f"obstacle names must be unique and not a link's or a shape's, got {names}"
+            )
         if self.n_robot == 0:
-            raise DimensionError(f"robot {robot.name!r} has no collision shapes in its URDF: "
-                                 "nothing to keep apart")  # fmt: skip
+            raise DimensionError(
+                f"robot {robot.name!r} has no collision shapes in its URDF: nothing to keep apart"
+            )
         for obstacle in obstacles:
             shape = obstacle.geometry()
             placement = pin.SE3(np.asarray(obstacle.pose, dtype=float))
-            self.geometry.addGeometryObject(pin.GeometryObject(obstacle.name, 0, 0, placement,
-                                                               shape))  # fmt: skip
+            self.geometry.addGeometryObject(
+                pin.GeometryObject(obstacle.name, 0, 0, placement, shape)
+            )
         self.obstacles = tuple(obstacles)
         self._table = _shape_table(self.geometry, robot, self.n_robot)
         self._request = coal.DistanceRequest()  # for the pairs with a mesh
@@ -197,8 +215,9 @@ class CollisionModel:
         self._base_joints = set(base) | ({1} if robot.config.base.type != "fixed" else set())
         skip = _named_pairs(self, [*settings.exclude, *exclude])
         self.pairs = self._pairs(self_collision, skip)
-        self._contacts(safety, robot.home() if start is None else start,
-                       "home" if start is None else "start")  # fmt: skip
+        self._contacts(
+            safety, robot.home() if start is None else start, "home" if start is None else "start"
+        )
         self._set_pairs()
         self._labels = [(self.pair_name(i, k), self.link(i), self.link(k)) for i, k in self.pairs]
         self.packed, self._coal_pairs = self._pack(self.pairs)
@@ -231,8 +250,15 @@ class CollisionModel:
                     pairs.append((i, k))
         return pairs
 
-    def _skip_reason(self, i: int, k: int, joints: list[int], carried: set[int],
-                     skip: set[frozenset[str]], self_collision: bool) -> str:  # fmt: skip
+    def _skip_reason(
+        self,
+        i: int,
+        k: int,
+        joints: list[int],
+        carried: set[int],
+        skip: set[frozenset[str]],
+        self_collision: bool,
+    ) -> str:
         names = {self.geometry.geometryObjects[i].name, self.link(i)}
         other = {self.geometry.geometryObjects[k].name, self.link(k)}
         if any(frozenset((a, b)) in skip for a in names for b in other):
@@ -380,9 +406,12 @@ class CollisionModel:
         contact, where coal gives none (a warning if ``warn``, once per model)."""
         if warn and not self._warned_meshes:
             self._warned_meshes = True
-            warnings.warn(f"{name}: two meshes in contact have no separating direction; "
-                          "pushing their centres apart (simplify them to capsules in "
-                          "[collision] shapes for an exact one)", stacklevel=3)  # fmt: skip
+            warnings.warn(
+                f"{name}: two meshes in contact have no separating direction; "
+                "pushing their centres apart (simplify them to capsules in "
+                "[collision] shapes for an exact one)",
+                stacklevel=3,
+            )
         gap = b - a
         length = float(np.linalg.norm(gap))
         return gap / length if length > 0 else np.array([0.0, 0.0, 1.0])
@@ -398,8 +427,10 @@ class CollisionModel:
             )
             reasons[key] = reasons.get(key, 0) + 1
         skipped = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items()))
-        return (f"{len(self.pairs)} pairs checked ({self.n_robot} robot shapes, "
-                f"{len(self.obstacles)} obstacles); not checked: {skipped or 'none'}")  # fmt: skip
+        return (
+            f"{len(self.pairs)} pairs checked ({self.n_robot} robot shapes, "
+            f"{len(self.obstacles)} obstacles); not checked: {skipped or 'none'}"
+        )
 
 
 def _result(res: coal.DistanceResult):
@@ -431,12 +462,15 @@ def _named_pairs(model: CollisionModel, pairs: Iterable[Sequence[str]]) -> set[f
     out = set()
     for pair in pairs:
         if len(pair) != 2:
-            raise DimensionError(f"collision exclude: each entry must name two links or "
-                                 f"shapes, got {pair!r}")  # fmt: skip
+            raise DimensionError(
+                f"collision exclude: each entry must name two links or shapes, got {pair!r}"
+            )
         unknown = [n for n in pair if n not in known]
         if unknown:
-            raise DimensionError(f"collision exclude: unknown link or shape {unknown[0]!r}; "
-                                 f"known: {', '.join(sorted(known))}")  # fmt: skip
+            raise DimensionError(
+                f"collision exclude: unknown link or shape {unknown[0]!r}; "
+                f"known: {', '.join(sorted(known))}"
+            )
         out.add(frozenset(pair))
     return out
 
@@ -513,8 +547,9 @@ def _frame_placements(data: pin.Data) -> np.ndarray:
     return out
 
 
-def _simplified(geom: pin.GeometryModel, robot: Robot,
-                shapes: Mapping[str, str]) -> pin.GeometryModel:  # fmt: skip
+def _simplified(
+    geom: pin.GeometryModel, robot: Robot, shapes: Mapping[str, str]
+) -> pin.GeometryModel:
     """``geom`` with the shapes of each link of ``shapes`` replaced by one bounding capsule or
     sphere of them (``[collision] shapes``; link -> ``"capsule"`` or ``"sphere"``; the key
     ``"*"`` for every link not named, ``"urdf"`` to keep a link's own)."""
@@ -529,11 +564,13 @@ def _simplified(geom: pin.GeometryModel, robot: Robot,
             by_link.setdefault(link, []).append(obj)
         else:
             out.addGeometryObject(obj)
-    missing = sorted(set(shapes) - set(by_link) - {"*"} - {k for k, v in shapes.items()
-                                                           if v == "urdf"})  # fmt: skip
+    missing = sorted(
+        set(shapes) - set(by_link) - {"*"} - {k for k, v in shapes.items() if v == "urdf"}
+    )
     if missing:
-        raise DimensionError(f"[collision] shapes: link {missing[0]!r} has no collision shape "
-                             "in the URDF")  # fmt: skip
+        raise DimensionError(
+            f"[collision] shapes: link {missing[0]!r} has no collision shape in the URDF"
+        )
     for link, objs in by_link.items():
         kind = shapes.get(link, default)
         if kind == "capsule":  # one per shape: a capsule around a box and a cylinder is long
@@ -548,8 +585,9 @@ def _capsule_of_cylinder(obj: pin.GeometryObject) -> pin.GeometryObject:
     """The capsule of a cylinder's radius and length: it holds the cylinder."""
     g = obj.geometry
     capsule = coal.Capsule(g.radius, 2.0 * g.halfLength)
-    return pin.GeometryObject(f"{obj.name}_capsule", obj.parentJoint, obj.parentFrame,
-                              obj.placement, capsule)  # fmt: skip
+    return pin.GeometryObject(
+        f"{obj.name}_capsule", obj.parentJoint, obj.parentFrame, obj.placement, capsule
+    )
 
 
 def _hull_points(g: coal.CollisionGeometry, sides: int = 16) -> np.ndarray:
@@ -560,12 +598,14 @@ def _hull_points(g: coal.CollisionGeometry, sides: int = 16) -> np.ndarray:
         r = g.radius / math.cos(math.pi / sides)
         a = np.linspace(0.0, 2.0 * math.pi, sides, endpoint=False)
         ring = np.column_stack([r * np.cos(a), r * np.sin(a)])
-        return np.vstack([np.column_stack([ring, np.full(sides, z)])
-                          for z in (-g.halfLength, g.halfLength)])  # fmt: skip
+        return np.vstack(
+            [np.column_stack([ring, np.full(sides, z)]) for z in (-g.halfLength, g.halfLength)]
+        )
     g.computeLocalAABB()
     lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                     for z in (lo[2], hi[2])])  # fmt: skip
+    return np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
 
 
 def _bounding(name: str, objs: list[pin.GeometryObject], kind: str) -> pin.GeometryObject:
@@ -574,8 +614,10 @@ def _bounding(name: str, objs: list[pin.GeometryObject], kind: str) -> pin.Geome
     ``{name}_{kind}``."""
     if kind == "capsule" and len(objs) == 1 and isinstance(objs[0].geometry, coal.Cylinder):
         return _capsule_of_cylinder(objs[0])
-    corners = [_hull_points(obj.geometry) @ obj.placement.rotation.T + obj.placement.translation
-               for obj in objs]  # fmt: skip
+    corners = [
+        _hull_points(obj.geometry) @ obj.placement.rotation.T + obj.placement.translation
+        for obj in objs
+    ]
     pts = np.vstack(corners)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     centre = (lo + hi) / 2.0
@@ -589,8 +631,9 @@ def _bounding(name: str, objs: list[pin.GeometryObject], kind: str) -> pin.Geome
         radial = np.linalg.norm((pts - centre)[:, others], axis=1)
         radius = float(np.max(radial))
         # the segment reaches every corner within the radius: |z| - sqrt(r^2 - radial^2)
-        reach = np.abs(pts[:, axis] - centre[axis]) - np.sqrt(np.maximum(radius**2 - radial**2,
-                                                                          0.0))  # fmt: skip
+        reach = np.abs(pts[:, axis] - centre[axis]) - np.sqrt(
+            np.maximum(radius**2 - radial**2, 0.0)
+        )
         length = 2.0 * max(float(np.max(reach)), 0.0)
         R = np.eye(3)[:, [others[0], others[1], axis]]  # the capsule's z along the axis
         if np.linalg.det(R) < 0:
@@ -598,7 +641,9 @@ def _bounding(name: str, objs: list[pin.GeometryObject], kind: str) -> pin.Geome
         placement = pin.SE3(R, centre)
         shape = coal.Capsule(radius, length)
     else:
-        raise DimensionError(f"[collision] shapes.{name}: expected \"capsule\" or \"sphere\", "
-                             f"got {kind!r}")  # fmt: skip
-    return pin.GeometryObject(f"{name}_{kind}", first.parentJoint, first.parentFrame, placement,
-                              shape)  # fmt: skip
+        raise DimensionError(
+            f'[collision] shapes.{name}: expected "capsule" or "sphere", got {kind!r}'
+        )
+    return pin.GeometryObject(
+        f"{name}_{kind}", first.parentJoint, first.parentFrame, placement, shape
+    )

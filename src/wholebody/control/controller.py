@@ -203,9 +203,11 @@ class Controller:
             )
         self.plant = plant
         if isinstance(latency, bool) or not isinstance(latency, numbers.Integral) or latency < 0:
-            raise WholebodyError(f"latency must be a whole number >= 0 (control periods by "
-                                 f"which the measured configuration is late), got "
-                                 f"{latency!r}")  # fmt: skip
+            raise WholebodyError(
+                f"latency must be a whole number >= 0 (control periods by "
+                f"which the measured configuration is late), got "
+                f"{latency!r}"
+            )
         self.latency = int(latency)
         self._sent: deque[np.ndarray] = deque(maxlen=self.latency)
         self.threads = _thread_count(threads)
@@ -466,8 +468,12 @@ class Controller:
             names = {t.name for t in self.recovery.watched}
             rows = [k for k, n in enumerate(plan.task_names) if n in names]
             starts = [plan.block_start(t) for t in self.recovery.watched]
-            self._watch = (plan.view(lay.F_PAR), np.array(starts, np.int64),
-                           plan.view(lay.I_INFEASIBLE), np.array(rows, np.int64))  # fmt: skip
+            self._watch = (
+                plan.view(lay.F_PAR),
+                np.array(starts, np.int64),
+                plan.view(lay.I_INFEASIBLE),
+                np.array(rows, np.int64),
+            )
             self._fast = self._fast and min(starts) >= 0
             self._main = plan
 
@@ -515,12 +521,20 @@ class Controller:
         if n < 1:
             raise DimensionError(f"duration {duration} s is shorter than one step of {self.dt} s")
         if self.latency and self.plant is None:
-            raise WholebodyError(f"latency {self.latency}: a run without a plant integrates "
-                                 "exactly, nothing is measured late (give the plant that is "
-                                 "read late)")  # fmt: skip
+            raise WholebodyError(
+                f"latency {self.latency}: a run without a plant integrates "
+                "exactly, nothing is measured late (give the plant that is "
+                "read late)"
+            )
         tracked = [t for t in self.stack.tasks if isinstance(t, FrameTask)]
-        log = _Recorder(robot, self.stack, self.monitors, tracked, n,
-                        float(getattr(self.solver, "tolerance", 1e-6)))  # fmt: skip
+        log = _Recorder(
+            robot,
+            self.stack,
+            self.monitors,
+            tracked,
+            n,
+            float(getattr(self.solver, "tolerance", 1e-6)),
+        )
         self.reset(u0)
         bar = _progress(n, progress)
         with _threads(self.threads), _gc_paused():  # no collection mid-step

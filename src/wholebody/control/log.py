@@ -202,8 +202,9 @@ def _heads(data: dict[str, np.ndarray]) -> set[str]:
 def _meta(path: Path, value: np.ndarray) -> dict:
     """A log's metadata: a JSON object in a 0-d string array."""
     if value.ndim != 0 or value.dtype.kind != "U":
-        raise DataError(f"{path}: key 'meta': expected a 0-d string, got {value.dtype} "
-                        f"{value.shape}")  # fmt: skip
+        raise DataError(
+            f"{path}: key 'meta': expected a 0-d string, got {value.dtype} {value.shape}"
+        )
     try:
         meta = json.loads(str(value))
     except json.JSONDecodeError as exc:
@@ -220,8 +221,9 @@ def _check_lengths(path: Path, data: dict[str, np.ndarray]) -> None:
         raise DataError(f"{path}: key 't': expected shape (T,), got {data['t'].shape}")
     for key, value in data.items():
         if key != "meta" and (value.ndim == 0 or value.shape[0] != n):
-            raise DataError(f"{path}: key {key!r} has {value.shape[0] if value.ndim else 0} "
-                            f"rows, 't' has {n}")  # fmt: skip
+            raise DataError(
+                f"{path}: key {key!r} has {value.shape[0] if value.ndim else 0} rows, 't' has {n}"
+            )
 
 
 def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
@@ -234,8 +236,9 @@ def concatenate(logs: list[RunLog], meta: dict | None = None) -> RunLog:
         raise DataError("nothing to concatenate")
     periods = {log.dt for log in logs}
     if len(periods) > 1:  # the metrics read one dt from the metadata
-        raise DataError(f"cannot concatenate runs with different control periods: dt = "
-                        f"{sorted(periods)} s")  # fmt: skip
+        raise DataError(
+            f"cannot concatenate runs with different control periods: dt = {sorted(periods)} s"
+        )
     t, offset = [], 0.0
     for log in logs:
         t.append(log.t + offset)
@@ -307,5 +310,12 @@ def _merge_causes(logs: list[RunLog]) -> dict[str, np.ndarray] | None:
     if any(log.unmet is None for log in logs):
         return None
     names = list(dict.fromkeys(name for log in logs for name in log.unmet))  # type: ignore[union-attr]
-    return {name: np.concatenate([log.unmet.get(name, np.zeros(len(log), dtype=np.int8))  # type: ignore[union-attr]
-                                  for log in logs]) for name in names}  # fmt: skip
+    return {
+        name: np.concatenate(
+            [
+                log.unmet.get(name, np.zeros(len(log), dtype=np.int8))  # type: ignore[union-attr]
+                for log in logs
+            ]
+        )
+        for name in names
+    }

@@ -179,9 +179,12 @@ def unmet_steps(log: RunLog) -> tuple[dict[str, int], dict[str, dict[str, int]]]
     per_task = {task: np.bincount(c, minlength=len(name)) for task, c in log.unmet.items()}
     return (
         {name[c]: int(n) for c, n in enumerate(steps) if c and n},
-        {t: {name[c]: int(n) for c, n in enumerate(v) if c and n}
-         for t, v in per_task.items() if v[1:].any()},
-    )  # fmt: skip
+        {
+            t: {name[c]: int(n) for c, n in enumerate(v) if c and n}
+            for t, v in per_task.items()
+            if v[1:].any()
+        },
+    )
 
 
 def summary(log: RunLog) -> dict:

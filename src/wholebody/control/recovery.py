@@ -136,22 +136,33 @@ class StallRecovery:
         max_retreat: float = 2.0,
         max_retreats: int = 2,
     ) -> None:
-        for name, value in (("horizon", horizon), ("window", window), ("gain", gain),
-                            ("tolerance", tolerance), ("max_retreat", max_retreat),
-                            ("min_rate", min_rate)):  # fmt: skip
+        for name, value in (
+            ("horizon", horizon),
+            ("window", window),
+            ("gain", gain),
+            ("tolerance", tolerance),
+            ("max_retreat", max_retreat),
+            ("min_rate", min_rate),
+        ):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise DimensionError(f"StallRecovery: {name} must be a finite number > 0, "
-                                     f"got {value!r}")  # fmt: skip
-        if not (isinstance(min_error, (int, float)) and math.isfinite(min_error)
-                and min_error >= 0):  # fmt: skip
-            raise DimensionError(f"StallRecovery: min_error must be finite and >= 0, got "
-                                 f"{min_error!r}")  # fmt: skip
+                raise DimensionError(
+                    f"StallRecovery: {name} must be a finite number > 0, got {value!r}"
+                )
+        if not (
+            isinstance(min_error, (int, float)) and math.isfinite(min_error) and min_error >= 0
+        ):
+            raise DimensionError(
+                f"StallRecovery: min_error must be finite and >= 0, got {min_error!r}"
+            )
         if not (isinstance(max_lag, (int, float)) and max_lag > 0):  # (NaN compares false)
-            raise DimensionError(f"StallRecovery: max_lag must be a number > 0 (inf: never "
-                                 f"while a reference moves), got {max_lag!r}")  # fmt: skip
+            raise DimensionError(
+                f"StallRecovery: max_lag must be a number > 0 (inf: never "
+                f"while a reference moves), got {max_lag!r}"
+            )
         if not (isinstance(max_retreats, int) and max_retreats >= 0):
-            raise DimensionError(f"StallRecovery: max_retreats must be an integer >= 0, got "
-                                 f"{max_retreats!r}")  # fmt: skip
+            raise DimensionError(
+                f"StallRecovery: max_retreats must be an integer >= 0, got {max_retreats!r}"
+            )
         self.robot, self.main = robot, stack
         self.watched = (
             list(tasks)
@@ -159,17 +170,23 @@ class StallRecovery:
             else [t for t in stack.tasks if isinstance(t, FrameTask)]
         )
         if not self.watched:
-            raise WholebodyError("StallRecovery: no task to watch (the stack has no FrameTask; "
-                                 "name the tasks with tasks=)")  # fmt: skip
+            raise WholebodyError(
+                "StallRecovery: no task to watch (the stack has no FrameTask; "
+                "name the tasks with tasks=)"
+            )
         first = _first_level(stack, self.watched)
         self.ready = _ready_posture(robot, posture)
         joints = robot.actuated_joints[len(robot.base.actuators) :]
         self._joints = np.arange(len(robot.base.actuators), robot.nu)
-        self.posture_task = PostureTask(robot, joints, name="retreat_posture", kp=gain,
-                                        target=self.ready[self._joints])  # fmt: skip
-        self.retreat_stack = Stack(robot, [*stack.levels[:first],
-                                           Level([self.posture_task], name="retreat")],
-                                   stack.constraints, metric=stack.metric)  # fmt: skip
+        self.posture_task = PostureTask(
+            robot, joints, name="retreat_posture", kp=gain, target=self.ready[self._joints]
+        )
+        self.retreat_stack = Stack(
+            robot,
+            [*stack.levels[:first], Level([self.posture_task], name="retreat")],
+            stack.constraints,
+            metric=stack.metric,
+        )
         self.horizon, self.window, self.min_error = float(horizon), float(window), min_error
         self.min_rate, self.max_lag = float(min_rate), float(max_lag)
         self.tolerance, self.max_retreat, self.max_retreats = tolerance, max_retreat, max_retreats
@@ -260,17 +277,19 @@ def _first_level(stack: Stack, watched: Sequence[Task]) -> int:
     return found[0]
 
 
-def _ready_posture(robot: Robot,
-                   posture: np.ndarray | Sequence[float] | Mapping[str, float] | str | None,
-                   ) -> np.ndarray:  # fmt: skip
+def _ready_posture(
+    robot: Robot,
+    posture: np.ndarray | Sequence[float] | Mapping[str, float] | str | None,
+) -> np.ndarray:
     """The ready posture as one position per actuated velocity."""
     mid = mid_range_posture(robot)
     if posture is None:
         return mid
     if isinstance(posture, str):
         if posture != "home":
-            raise WholebodyError(f"StallRecovery: posture must be 'home', positions or a "
-                                 f"mapping, got {posture!r}")  # fmt: skip
+            raise WholebodyError(
+                f"StallRecovery: posture must be 'home', positions or a mapping, got {posture!r}"
+            )
         return robot.joint_positions(robot.home())
     if isinstance(posture, Mapping):
         out = mid.copy()
@@ -279,6 +298,8 @@ def _ready_posture(robot: Robot,
         return out
     out = np.asarray(posture, dtype=float)
     if out.shape != (robot.nu,) or not np.isfinite(out).all():
-        raise DimensionError(f"StallRecovery: posture must be {robot.nu} finite positions "
-                             f"(one per actuated velocity), got shape {out.shape}")  # fmt: skip
+        raise DimensionError(
+            f"StallRecovery: posture must be {robot.nu} finite positions "
+            f"(one per actuated velocity), got shape {out.shape}"
+        )
     return out.copy()

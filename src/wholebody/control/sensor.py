@@ -45,16 +45,22 @@ class JointSensor:
 
     def __post_init__(self) -> None:
         noise = self.noise
-        if isinstance(noise, bool) or not isinstance(noise, int | float) or \
-                not math.isfinite(noise) or noise < 0:  # fmt: skip
-            raise ConfigError(f"sensor noise must be a finite number >= 0 (rad or m), got "
-                              f"{noise!r}")  # fmt: skip
+        if (
+            isinstance(noise, bool)
+            or not isinstance(noise, int | float)
+            or not math.isfinite(noise)
+            or noise < 0
+        ):
+            raise ConfigError(
+                f"sensor noise must be a finite number >= 0 (rad or m), got {noise!r}"
+            )
         for name in ("delay", "seed"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 what = "control periods" if name == "delay" else "the noise's seed"
-                raise ConfigError(f"sensor {name} must be a whole number >= 0 ({what}), got "
-                                  f"{value!r}")  # fmt: skip
+                raise ConfigError(
+                    f"sensor {name} must be a whole number >= 0 ({what}), got {value!r}"
+                )
 
     @property
     def exact(self) -> bool:
@@ -79,8 +85,7 @@ class SensorReadout:
         self._robot = robot
         self._rng = np.random.default_rng(sensor.seed)
         q0 = np.array(q0, dtype=float)
-        self._history: deque[np.ndarray] = deque([q0] * (sensor.delay + 1),
-                                                 maxlen=sensor.delay + 1)  # fmt: skip
+        self._history: deque[np.ndarray] = deque([q0] * (sensor.delay + 1), maxlen=sensor.delay + 1)
 
     def read(self, q: np.ndarray) -> np.ndarray:
         """What the controller sees now that the plant is at ``q`` (a new array): the

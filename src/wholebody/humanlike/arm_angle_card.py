@@ -10,8 +10,11 @@ from wholebody.humanlike.arm_angle_data import ArmAngleRecords
 
 __all__ = ["arm_angle_card"]
 
-_LABELS = {"network": "network", "constant": "constant (training mean)",
-           "kim": "Kim et al., CALIBRATED"}  # fmt: skip
+_LABELS = {
+    "network": "network",
+    "constant": "constant (training mean)",
+    "kim": "Kim et al., CALIBRATED",
+}
 
 
 def _ci(row: Mapping[str, float]) -> str:
@@ -102,8 +105,10 @@ def _scores_lines(cv: Mapping) -> list[str]:
         "|---|---|---|---|---|",
     ]
     for p, row in cv["participants"].items():
-        lines.append(f"| {p} | {_ci(row['network'])} | {_ci(row['constant'])} | "
-                     f"{_ci(row['kim'])} | {row['network']['bias_deg']:+.1f} |")  # fmt: skip
+        lines.append(
+            f"| {p} | {_ci(row['network'])} | {_ci(row['constant'])} | "
+            f"{_ci(row['kim'])} | {row['network']['bias_deg']:+.1f} |"
+        )
     s = cv["summary"]
     rows = cv["participants"].values()
     wins = {
@@ -124,8 +129,10 @@ def _scores_lines(cv: Mapping) -> list[str]:
         "|---|---|---|---|---|",
     ]
     for task, t in cv["by_task"].items():
-        lines.append(f"| {task} | {t['network']:.1f} | {t['constant']:.1f} | {t['kim']:.1f} | "
-                     f"{t['alpha_mean_deg']:.1f} +- {t['alpha_sd_deg']:.1f} |")  # fmt: skip
+        lines.append(
+            f"| {task} | {t['network']:.1f} | {t['constant']:.1f} | {t['kim']:.1f} | "
+            f"{t['alpha_mean_deg']:.1f} +- {t['alpha_sd_deg']:.1f} |"
+        )
     return lines
 
 
@@ -133,8 +140,11 @@ def _comparison_lines(comparisons: Mapping[str, Mapping]) -> list[str]:
     if not comparisons:
         return []
     better = [name for name, c in comparisons.items() if c["high"] < 0]
-    verdict = (f"better beyond its interval: {', '.join(better)}" if better
-               else "none is better beyond its interval")  # fmt: skip
+    verdict = (
+        f"better beyond its interval: {', '.join(better)}"
+        if better
+        else "none is better beyond its interval"
+    )
     lines = [
         "",
         "Other settings under the same cross-validation (for information, not a selection: "
@@ -145,8 +155,10 @@ def _comparison_lines(comparisons: Mapping[str, Mapping]) -> list[str]:
         "|---|---|---|",
     ]
     for name, c in comparisons.items():
-        lines.append(f"| {name} | {c['rms_deg']:.1f} | {c['minus_base_deg']:+.2f} "
-                     f"[{c['low']:+.2f}, {c['high']:+.2f}] |")  # fmt: skip
+        lines.append(
+            f"| {name} | {c['rms_deg']:.1f} | {c['minus_base_deg']:+.2f} "
+            f"[{c['low']:+.2f}, {c['high']:+.2f}] |"
+        )
     return lines
 
 
@@ -167,18 +179,23 @@ def _scatter_lines(cv: Mapping, kim_scatter: Mapping[str, Mapping]) -> list[str]
     ]
     for name in ("network", "constant", "kim"):
         r = sc[name]
-        what = {"network": "the network (held out)",
-                "constant": "the constant (held out)",
-                "kim": "Kim et al., CALIBRATED"}[name]  # fmt: skip
-        lines.append(f"| {what} | {r['sd']:.1f} ({r['sd_ddof1']:.1f}) | "
-                     f"{r['sd_corrected']:.1f} |")  # fmt: skip
+        what = {
+            "network": "the network (held out)",
+            "constant": "the constant (held out)",
+            "kim": "Kim et al., CALIBRATED",
+        }[name]
+        lines.append(f"| {what} | {r['sd']:.1f} ({r['sd_ddof1']:.1f}) | {r['sd_corrected']:.1f} |")
     for key, k in kim_scatter.items():
-        what = ("Kim refitted on ADL001, 002, 004-007, 009, 010, 012, forward/across (how "
-                "CALIBRATED was made: the 5.6 deg the stiffness card quotes)"
-                if key == "calibrated_on_forward_across"
-                else "Kim refitted on all 12 participants and 4 tasks (in sample)")  # fmt: skip
-        lines.append(f"| {what}; residual sd {k['residual_sd_deg']:.1f}, {k['frames']} frames "
-                     f"| {k['sd_participant_deg']:.1f} | - |")  # fmt: skip
+        what = (
+            "Kim refitted on ADL001, 002, 004-007, 009, 010, 012, forward/across (how "
+            "CALIBRATED was made: the 5.6 deg the stiffness card quotes)"
+            if key == "calibrated_on_forward_across"
+            else "Kim refitted on all 12 participants and 4 tasks (in sample)"
+        )
+        lines.append(
+            f"| {what}; residual sd {k['residual_sd_deg']:.1f}, {k['frames']} frames "
+            f"| {k['sd_participant_deg']:.1f} | - |"
+        )
     lines += [
         "",
         "So people differ from one another by about "

@@ -32,9 +32,14 @@ __all__ = ["add_arm_angle_parser"]
 def _config(args: argparse.Namespace, **change: object):
     from wholebody.humanlike.arm_angle_fit import ArmAngleConfig
 
-    values = dict(hidden=tuple(args.hidden), epochs=args.epochs, lr=args.lr,
-                  batch_size=args.batch_size, weight_decay=args.weight_decay,
-                  seed=args.seed)  # fmt: skip
+    values = dict(
+        hidden=tuple(args.hidden),
+        epochs=args.epochs,
+        lr=args.lr,
+        batch_size=args.batch_size,
+        weight_decay=args.weight_decay,
+        seed=args.seed,
+    )
     return ArmAngleConfig(**{**values, **change})  # type: ignore[arg-type]
 
 
@@ -52,13 +57,21 @@ def _cross_validate(args: argparse.Namespace, records, config, *, hand: bool = F
     from wholebody.humanlike.arm_angle_scores import cross_validate
 
     if hand:  # the hand direction as three more inputs: torch models, not exported
-        return cross_validate(records, lambda tr: train_predictor(np.hstack([tr.p, tr.hand]),
-                                                                  tr.alpha, config),
-                              features=lambda r: np.hstack([r.p, r.hand]), n_boot=args.bootstrap,
-                              seed=args.seed, progress=not args.quiet)  # fmt: skip
-    return cross_validate(records, lambda tr: train_arm_angle(tr.p, tr.alpha, config).network,
-                          n_boot=args.bootstrap, seed=args.seed,
-                          progress=not args.quiet)  # fmt: skip
+        return cross_validate(
+            records,
+            lambda tr: train_predictor(np.hstack([tr.p, tr.hand]), tr.alpha, config),
+            features=lambda r: np.hstack([r.p, r.hand]),
+            n_boot=args.bootstrap,
+            seed=args.seed,
+            progress=not args.quiet,
+        )
+    return cross_validate(
+        records,
+        lambda tr: train_arm_angle(tr.p, tr.alpha, config).network,
+        n_boot=args.bootstrap,
+        seed=args.seed,
+        progress=not args.quiet,
+    )
 
 
 def _stored(cv: dict) -> dict:
@@ -76,13 +89,17 @@ def _print(cv: dict) -> None:
         print(f"{p:12s} {cell(row['network'])} {cell(row['constant'])} {cell(row['kim'])}")
     s = cv["summary"]
     print(f"{'all':12s} {cell(s['network'])} {cell(s['constant'])} {cell(s['kim'])}")
-    print(f"network - constant {cell(s['network_minus_constant'])}; network - Kim "
-          f"{cell(s['network_minus_kim'])} (participants resampled)")  # fmt: skip
+    print(
+        f"network - constant {cell(s['network_minus_constant'])}; network - Kim "
+        f"{cell(s['network_minus_kim'])} (participants resampled)"
+    )
     sp = cv["spread"]
-    print(f"spread of people about the network: {math.degrees(sp['spread']):.1f} deg (between "
-          f"{math.degrees(sp['between']):.1f}, within {math.degrees(sp['within']):.1f}); "
-          f"between-person sd {cv['scatter_deg']['network']['sd']:.1f} deg; "
-          f"{cv['seconds']:.0f} s")  # fmt: skip
+    print(
+        f"spread of people about the network: {math.degrees(sp['spread']):.1f} deg (between "
+        f"{math.degrees(sp['between']):.1f}, within {math.degrees(sp['within']):.1f}); "
+        f"between-person sd {cv['scatter_deg']['network']['sd']:.1f} deg; "
+        f"{cv['seconds']:.0f} s"
+    )
 
 
 def _score(args: argparse.Namespace) -> int:
@@ -102,18 +119,28 @@ def _comparisons(args: argparse.Namespace, records, cv: dict) -> dict[str, dict]
     """Other settings under the same cross-validation, paired with the shipped ones."""
     from wholebody.humanlike.arm_angle_scores import paired_comparison
 
-    variants = [(f"hidden {','.join(map(str, h))}", _config(args, hidden=tuple(h)), False)
-                for h in args.compare_hidden or ()]  # fmt: skip
+    variants = [
+        (f"hidden {','.join(map(str, h))}", _config(args, hidden=tuple(h)), False)
+        for h in args.compare_hidden or ()
+    ]
     if args.compare_hand:
-        variants.append(("hidden " + ",".join(map(str, args.hidden)) + " + hand direction "
-                         "(fingertip - wrist, 3 more inputs)", _config(args), True))  # fmt: skip
+        variants.append(
+            (
+                "hidden " + ",".join(map(str, args.hidden)) + " + hand direction "
+                "(fingertip - wrist, 3 more inputs)",
+                _config(args),
+                True,
+            )
+        )
     out = {}
     for name, config, hand in variants:
         other = _cross_validate(args, records, config, hand=hand)
         out[name] = paired_comparison(cv, other, records, n_boot=args.bootstrap, seed=args.seed)
-        print(f"{name}: rms {out[name]['rms_deg']:.2f} deg, minus shipped "
-              f"{out[name]['minus_base_deg']:+.2f} [{out[name]['low']:+.2f}, "
-              f"{out[name]['high']:+.2f}]")  # fmt: skip
+        print(
+            f"{name}: rms {out[name]['rms_deg']:.2f} deg, minus shipped "
+            f"{out[name]['minus_base_deg']:+.2f} [{out[name]['low']:+.2f}, "
+            f"{out[name]['high']:+.2f}]"
+        )
     return out
 
 
@@ -128,8 +155,11 @@ def _commands(args: argparse.Namespace) -> list[str]:
     )
     extra = ""
     if args.compare_hidden:
-        extra += " --compare-hidden '" + ";".join(",".join(map(str, h))
-                                                  for h in args.compare_hidden) + "'"  # fmt: skip
+        extra += (
+            " --compare-hidden '"
+            + ";".join(",".join(map(str, h)) for h in args.compare_hidden)
+            + "'"
+        )
     if args.compare_hand:
         extra += " --compare-hand"
     if args.no_kim_scatter:
@@ -157,27 +187,49 @@ def _fit(args: argparse.Namespace) -> int:
     comparisons = _comparisons(args, records, cv)
     kim = {} if args.no_kim_scatter else kim_calibration_scatter(recs, load_participants())
     sp = cv["spread"]
-    meta = {"date": args.date, "data": {"tasks": sorted(records.counts),
-            "participants": records.participants(), "counts": records.counts,
-            "records": len(records)}, "cross_validation": _stored(cv),
-            "comparisons": comparisons, "kim_calibration_scatter": kim}  # fmt: skip
-    result = train_arm_angle(records.p, records.alpha, config,
-                             spread=(sp["spread"], sp["between"], sp["within"]),
-                             meta=meta)  # fmt: skip
+    meta = {
+        "date": args.date,
+        "data": {
+            "tasks": sorted(records.counts),
+            "participants": records.participants(),
+            "counts": records.counts,
+            "records": len(records),
+        },
+        "cross_validation": _stored(cv),
+        "comparisons": comparisons,
+        "kim_calibration_scatter": kim,
+    }
+    result = train_arm_angle(
+        records.p,
+        records.alpha,
+        config,
+        spread=(sp["spread"], sp["between"], sp["within"]),
+        meta=meta,
+    )
     out = result.network.save(args.out)
     print(f"network written to {out} ({result.seconds:.0f} s of training on every participant)")
     if args.card:
-        text = arm_angle_card(result.network, records, cv, date=args.date,
-                              commands=_commands(args), comparisons=comparisons,
-                              kim_scatter=kim)  # fmt: skip
+        text = arm_angle_card(
+            result.network,
+            records,
+            cv,
+            date=args.date,
+            commands=_commands(args),
+            comparisons=comparisons,
+            kim_scatter=kim,
+        )
         write_text(args.card, text)
         print(f"data card written to {args.card}")
     return 0
 
 
 def _options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--recordings", default=None, help="directory of real recordings "
-                   "(default: the bundled data/human_reaching/joint_centres)")  # fmt: skip
+    p.add_argument(
+        "--recordings",
+        default=None,
+        help="directory of real recordings "
+        "(default: the bundled data/human_reaching/joint_centres)",
+    )
     p.add_argument(
         "--tasks",
         type=_names,
@@ -216,8 +268,11 @@ def _options(p: argparse.ArgumentParser) -> None:
 
 def add_arm_angle_parser(subparsers: argparse._SubParsersAction) -> None:
     """Add ``armangle`` with its ``score`` and ``fit`` subcommands."""
-    a = subparsers.add_parser("armangle", help="the arm angle people choose: a network of the "
-                              "normalised wrist, cross-validated by participant")  # fmt: skip
+    a = subparsers.add_parser(
+        "armangle",
+        help="the arm angle people choose: a network of the "
+        "normalised wrist, cross-validated by participant",
+    )
     sub = a.add_subparsers(dest="armangle_command", required=True, metavar="STEP")
     s = sub.add_parser("score", help="leave-one-participant-out scores against the baselines")
     _options(s)
@@ -226,8 +281,9 @@ def add_arm_angle_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     s.add_argument("--out", default=None, help="also write the scores here (JSON)")
     s.set_defaults(func=_score)
-    f = sub.add_parser("fit", help="score, then train on every participant and write the "
-                       "network and its data card")  # fmt: skip
+    f = sub.add_parser(
+        "fit", help="score, then train on every participant and write the network and its data card"
+    )
     _options(f)
     f.add_argument(
         "--compare-hidden",

@@ -41,8 +41,19 @@ from wholebody.humanlike.recordings import Participant, Recording
 
 __all__ = ["ArmAngleRecords", "arm_angle_records", "kim_predictions"]
 
-_ARRAYS = ("p", "alpha", "wrist", "upper_arm", "forearm", "stature", "hand", "time_s",
-           "participant", "task", "trial")  # fmt: skip
+_ARRAYS = (
+    "p",
+    "alpha",
+    "wrist",
+    "upper_arm",
+    "forearm",
+    "stature",
+    "hand",
+    "time_s",
+    "participant",
+    "task",
+    "trial",
+)
 
 
 @dataclass
@@ -93,8 +104,7 @@ class ArmAngleRecords:
 
     def subset(self, mask: np.ndarray) -> ArmAngleRecords:
         """The records ``mask`` (bool or index array) selects."""
-        return ArmAngleRecords(**{k: getattr(self, k)[mask] for k in _ARRAYS},
-                               counts=self.counts)  # fmt: skip
+        return ArmAngleRecords(**{k: getattr(self, k)[mask] for k in _ARRAYS}, counts=self.counts)
 
 
 def _frames(rec: Recording, stature: float) -> dict[str, np.ndarray]:
@@ -160,8 +170,9 @@ def arm_angle_records(
         if (~drop).any():
             trials.append((rec, frames, np.flatnonzero(~drop)))
     if not trials:
-        raise DataError(f"no frame of the {len(recordings)} recording(s) passed the frame "
-                        f"rules: {counts}")  # fmt: skip
+        raise DataError(
+            f"no frame of the {len(recordings)} recording(s) passed the frame rules: {counts}"
+        )
     parts: dict[str, list] = {k: [] for k in _ARRAYS}
     for (rec, frames, keep), q in zip(trials, trial_quotas(len(trials), n_records), strict=True):
         if q == 0:
@@ -189,5 +200,7 @@ def kim_predictions(records: ArmAngleRecords, model: ArmAngleModel) -> np.ndarra
         raise DataError(f"Kim et al.'s model needs the stature of {', '.join(missing)}")
     S = np.zeros_like(records.wrist)
     target = records.stature[:, None] * np.asarray(model.target)
-    return kim_arm_angle(S, records.wrist, records.upper_arm, records.forearm, target,
-                         CANONICAL_SIDE) + model.bias  # fmt: skip
+    return (
+        kim_arm_angle(S, records.wrist, records.upper_arm, records.forearm, target, CANONICAL_SIDE)
+        + model.bias
+    )

@@ -88,8 +88,9 @@ def _module(hidden: Sequence[int], x_mean, x_scale, a_mean: float, a_scale: floa
 def torch_arm_angle_module(net: NetworkArmAngle):
     """A float64 torch module computing exactly ``net``, for checks."""
     torch = _torch()
-    m = _module(net.hidden_sizes, net.x_mean, net.x_scale, net.alpha_mean, net.alpha_scale,
-                torch.float64)  # fmt: skip
+    m = _module(
+        net.hidden_sizes, net.x_mean, net.x_scale, net.alpha_mean, net.alpha_scale, torch.float64
+    )
     with torch.no_grad():
         for layer, W, b in zip([*m.hidden, m.out], net.weights, net.biases, strict=True):
             layer.weight.copy_(torch.as_tensor(W, dtype=torch.float64))
@@ -119,8 +120,9 @@ def _fit(X: np.ndarray, y: np.ndarray, config: ArmAngleConfig):
     X = np.asarray(X, dtype=float)
     y = np.asarray(y, dtype=float).reshape(-1)
     if X.ndim != 2 or len(X) != len(y) or len(y) < 2:
-        raise DataError(f"arm-angle training: need inputs (N, d) and labels (N,), got "
-                        f"{X.shape}, {y.shape}")  # fmt: skip
+        raise DataError(
+            f"arm-angle training: need inputs (N, d) and labels (N,), got {X.shape}, {y.shape}"
+        )
     if not (np.isfinite(X).all() and np.isfinite(y).all()):
         raise DataError("arm-angle training: non-finite inputs or labels")
     torch.manual_seed(config.seed)
@@ -132,8 +134,10 @@ def _fit(X: np.ndarray, y: np.ndarray, config: ArmAngleConfig):
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     Xt, yt = torch.as_tensor(X), torch.as_tensor(y)
     t0 = time.perf_counter()
-    losses = [train_epoch(model, opt, Xt, yt, a_scale, config.batch_size, gen)
-              for _ in range(config.epochs)]  # fmt: skip
+    losses = [
+        train_epoch(model, opt, Xt, yt, a_scale, config.batch_size, gen)
+        for _ in range(config.epochs)
+    ]
     return model, losses, time.perf_counter() - t0
 
 

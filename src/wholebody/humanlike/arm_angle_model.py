@@ -180,8 +180,10 @@ class ArmAngleModel:
         self, S: np.ndarray, W: np.ndarray, upper_arm: float, forearm: float, stature: float
     ) -> np.ndarray:
         """Noise-free arm angle (rad) of canonical-axes postures (..., 3)."""
-        return kim_arm_angle(S, W, upper_arm, forearm, self.target_point(S, stature),
-                             CANONICAL_SIDE) + self.bias  # fmt: skip
+        return (
+            kim_arm_angle(S, W, upper_arm, forearm, self.target_point(S, stature), CANONICAL_SIDE)
+            + self.bias
+        )
 
     def within_trial_noise(self, rng: np.random.Generator, time_s: np.ndarray) -> np.ndarray:
         """One Ornstein-Uhlenbeck path (rad) at the given times (stationary start)."""
@@ -248,8 +250,10 @@ def calibrate(
     groups = []
     for rec in recordings:
         if rec.participant not in participants:
-            raise DataError(f"{rec.path or rec.name}: participant {rec.participant!r} has no "
-                            "stature in the participants table")  # fmt: skip
+            raise DataError(
+                f"{rec.path or rec.name}: participant {rec.participant!r} has no "
+                "stature in the participants table"
+            )
         t, S, E, W = _canonical_frames(rec, every)
         alpha = arm_angle(S, E, W, CANONICAL_SIDE)
         u = (W - S) / np.linalg.norm(W - S, axis=1, keepdims=True)
@@ -337,8 +341,17 @@ def calibrate(
 # The participants CALIBRATED is fitted on: the bundled real ones except those the stiffness
 # network holds out for its scores (wholebody.humanlike.dataset.DEFAULT_TEST_PARTICIPANTS),
 # so that no held-out participant shapes the synthetic training data.
-CALIBRATED_ON = ("ADL001", "ADL002", "ADL004", "ADL005", "ADL006", "ADL007", "ADL009", "ADL010",
-                 "ADL012")  # fmt: skip
+CALIBRATED_ON = (
+    "ADL001",
+    "ADL002",
+    "ADL004",
+    "ADL005",
+    "ADL006",
+    "ADL007",
+    "ADL009",
+    "ADL010",
+    "ADL012",
+)
 
 # The result of calibrate() on the recordings of CALIBRATED_ON (every 5th well-conditioned
 # frame: 12798 frames): measured alpha 5.8 +- 11.6 deg; residual with the head-centre target

@@ -149,12 +149,17 @@ def _participant_rows(
         rows[p] = {}
         for name, r in residuals.items():
             rp = r[idx]
-            value, low, high = cluster_bootstrap(lambda i, rp=rp: _rms(rp[i]), trials,
-                                                 n_boot=n_boot, seed=seed)  # fmt: skip
-            rows[p][name] = {"rms_deg": math.degrees(value), "low": math.degrees(low),
-                             "high": math.degrees(high),
-                             "bias_deg": math.degrees(float(np.mean(rp))),
-                             "records": len(idx), "trials": len(set(trials.tolist()))}  # fmt: skip
+            value, low, high = cluster_bootstrap(
+                lambda i, rp=rp: _rms(rp[i]), trials, n_boot=n_boot, seed=seed
+            )
+            rows[p][name] = {
+                "rms_deg": math.degrees(value),
+                "low": math.degrees(low),
+                "high": math.degrees(high),
+                "bias_deg": math.degrees(float(np.mean(rp))),
+                "records": len(idx),
+                "trials": len(set(trials.tolist())),
+            }
     return rows
 
 
@@ -166,17 +171,25 @@ def _summary(
     who = records.participant
     out: dict[str, dict[str, float]] = {}
     for name, r in residuals.items():
-        value, low, high = cluster_bootstrap(lambda i, r=r: _rms(r[i]), who, n_boot=n_boot,
-                                             seed=seed)  # fmt: skip
-        out[name] = {"rms_deg": math.degrees(value), "low": math.degrees(low),
-                     "high": math.degrees(high)}  # fmt: skip
+        value, low, high = cluster_bootstrap(
+            lambda i, r=r: _rms(r[i]), who, n_boot=n_boot, seed=seed
+        )
+        out[name] = {
+            "rms_deg": math.degrees(value),
+            "low": math.degrees(low),
+            "high": math.degrees(high),
+        }
     net = residuals["network"]
     for name in (n for n in residuals if n != "network"):
         base = residuals[name]
-        value, low, high = cluster_bootstrap(lambda i, b=base: _rms(net[i]) - _rms(b[i]), who,
-                                             n_boot=n_boot, seed=seed)  # fmt: skip
-        out[f"network_minus_{name}"] = {"rms_deg": math.degrees(value), "low": math.degrees(low),
-                                        "high": math.degrees(high)}  # fmt: skip
+        value, low, high = cluster_bootstrap(
+            lambda i, b=base: _rms(net[i]) - _rms(b[i]), who, n_boot=n_boot, seed=seed
+        )
+        out[f"network_minus_{name}"] = {
+            "rms_deg": math.degrees(value),
+            "low": math.degrees(low),
+            "high": math.degrees(high),
+        }
     return out
 
 
@@ -238,11 +251,16 @@ def paired_comparison(
     Why: settings are compared under the same resamples, not by overlapping intervals."""
     rb = wrap(records.alpha - base["predictions"]["network"])
     ro = wrap(records.alpha - other["predictions"]["network"])
-    value, low, high = cluster_bootstrap(lambda i: _rms(ro[i]) - _rms(rb[i]),
-                                         records.participant, n_boot=n_boot, seed=seed)  # fmt: skip
-    return {"rms_deg": math.degrees(_rms(ro)), "base_rms_deg": math.degrees(_rms(rb)),
-            "minus_base_deg": math.degrees(value), "low": math.degrees(low),
-            "high": math.degrees(high)}  # fmt: skip
+    value, low, high = cluster_bootstrap(
+        lambda i: _rms(ro[i]) - _rms(rb[i]), records.participant, n_boot=n_boot, seed=seed
+    )
+    return {
+        "rms_deg": math.degrees(_rms(ro)),
+        "base_rms_deg": math.degrees(_rms(rb)),
+        "minus_base_deg": math.degrees(value),
+        "low": math.degrees(low),
+        "high": math.degrees(high),
+    }
 
 
 def kim_calibration_scatter(
@@ -252,8 +270,9 @@ def kim_calibration_scatter(
     deg), on the recordings it was made from (:data:`CALIBRATED_ON`, forward and across: the
     figure the stiffness card quotes) and on every participant and task here (in sample: the
     calibration sees them all). Each also gives the residual's sd (deg) and the frames."""
-    seated = [r for r in recordings if r.participant in CALIBRATED_ON
-              and r.task in ("forward", "across")]  # fmt: skip
+    seated = [
+        r for r in recordings if r.participant in CALIBRATED_ON and r.task in ("forward", "across")
+    ]
     out = {}
     for key, recs in (("calibrated_on_forward_across", seated), ("all", list(recordings))):
         if not recs:

@@ -113,22 +113,28 @@ def _dataset(args: argparse.Namespace) -> int:
     )
     ds.meta["created"] = datetime.date.today().isoformat()
     ds.meta["dataset_options"] = {  # what a data card needs to rebuild this dataset
-        "robot": str(args.robot), "arm": args.arm, "records": args.records, "seed": args.seed,
-        "synthetic_participants": n_syn, "no_real": bool(args.no_real),
+        "robot": str(args.robot),
+        "arm": args.arm,
+        "records": args.records,
+        "seed": args.seed,
+        "synthetic_participants": n_syn,
+        "no_real": bool(args.no_real),
         "calibrate": bool(args.calibrate),
         "held_out": list(args.held_out) if args.held_out else None,
         "recordings": None if args.recordings is None else str(args.recordings),
         "tasks": list(args.tasks) if args.tasks else None,
-    }  # fmt: skip
+    }
     out = ds.save(args.out)
     print(report.summary())
     if "calibration" in info:
         print(info["calibration"])
     comp = info.get("arm_angle_comparison_deg", {})
     for key, c in comp.items():
-        print(f"arm angle, {key}: start {c['start_mean']:.1f} +- {c['start_sd']:.1f}, end "
-              f"{c['end_mean']:.1f} +- {c['end_sd']:.1f}, all {c['all_mean']:.1f} +- "
-              f"{c['all_sd']:.1f} deg, {100 * c['negative_fraction']:.0f} % negative")  # fmt: skip
+        print(
+            f"arm angle, {key}: start {c['start_mean']:.1f} +- {c['start_sd']:.1f}, end "
+            f"{c['end_mean']:.1f} +- {c['end_sd']:.1f}, all {c['all_mean']:.1f} +- "
+            f"{c['all_sd']:.1f} deg, {100 * c['negative_fraction']:.0f} % negative"
+        )
     if args.synthetic_out:
         print(f"synthetic recordings written to {args.synthetic_out}")
     print(f"{len(ds)} records written to {out}")
@@ -160,8 +166,9 @@ def _fit(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     net = outcome.network
-    net.meta.update({"date": args.date, "dataset": path.name,
-                     "dataset_counts": ds.meta.get("counts", {})})  # fmt: skip
+    net.meta.update(
+        {"date": args.date, "dataset": path.name, "dataset_counts": ds.meta.get("counts", {})}
+    )
     out = net.save(args.out)
     s = outcome.scores
     print(f"held-out participants: {', '.join(outcome.test_participants)}")
@@ -172,16 +179,23 @@ def _fit(args: argparse.Namespace) -> int:
             print(f"{name:8s} R^2 {s[name]['r2']:.4f}  MSE {s[name]['mse']:.5f} (N m/rad)^2{ref}")
     if outcome.paper_protocol:
         for name, v in outcome.paper_protocol.items():
-            print(f"paper protocol (300 random records): {name} R^2 {v['r2']:.4f} MSE "
-                  f"{v['mse']:.5f}")  # fmt: skip
+            print(
+                f"paper protocol (300 random records): {name} R^2 {v['r2']:.4f} MSE {v['mse']:.5f}"
+            )
     _print_per_participant(net.meta.get("scores_real_held_out", {}))
     print(f"training time {outcome.seconds:.0f} s; network written to {out}")
     if args.card:
         tr = net.meta["training"]
         final = replace(config, hidden=tuple(tr["hidden"]), weight_decay=tr["weight_decay"])
         cmds = card_commands(args, ds.meta, path, final)
-        text = data_card(net, ds, date=args.date, commands=cmds, paper_scores=PAPER_SCORES,
-                         arm_angle_spread=_arm_angle_spread())  # fmt: skip
+        text = data_card(
+            net,
+            ds,
+            date=args.date,
+            commands=cmds,
+            paper_scores=PAPER_SCORES,
+            arm_angle_spread=_arm_angle_spread(),
+        )
         write_text(args.card, text)
         print(f"data card written to {args.card}")
     return 0
@@ -190,8 +204,9 @@ def _fit(args: argparse.Namespace) -> int:
 def _print_per_participant(details: dict) -> None:
     """R^2 per real held-out participant with its interval, one line per model."""
     for name, rows in details.get("per_participant", {}).items():
-        cells = "  ".join(f"{g} {v['r2']:.3f} [{v['low']:.3f}, {v['high']:.3f}]"
-                          for g, v in rows.items())  # fmt: skip
+        cells = "  ".join(
+            f"{g} {v['r2']:.3f} [{v['low']:.3f}, {v['high']:.3f}]" for g, v in rows.items()
+        )
         print(f"R^2 per real held-out participant, {name}: {cells}")
 
 
@@ -205,8 +220,10 @@ def _arm_angle_spread() -> dict | None:
         model = default_arm_angle_model()
     except DataError:
         return None
-    return {"between": math.degrees(model.spread_between),
-            "within": math.degrees(model.spread_within)}  # fmt: skip
+    return {
+        "between": math.degrees(model.spread_between),
+        "within": math.degrees(model.spread_within),
+    }
 
 
 def _references(args: argparse.Namespace) -> dict:
@@ -265,8 +282,11 @@ def card_commands(args: argparse.Namespace, meta: dict, dataset: Path, config: o
     cmds = [f"{make} --out {data}"]
     if args.compare_with:
         where = "git show <commit>:robots/<robot>/stiffness.npz > FILE"
-        cmds.insert(0, f"# {args.compare_with}: the network compared with, "
-                    f"{args.compare_label!r} (a shipped one: {where})")  # fmt: skip
+        cmds.insert(
+            0,
+            f"# {args.compare_with}: the network compared with, "
+            f"{args.compare_label!r} (a shipped one: {where})",
+        )
     wd = config.weight_decay  # type: ignore[attr-defined]
     if args.select_hidden or args.select_weight_decay:
         sel = ""
@@ -298,9 +318,20 @@ def _report(args: argparse.Namespace) -> int:
         ds = StiffnessDataset.load(path) if path.is_file() else None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    report: dict = {"model": str(args.model or "default"), "stored": {
-        k: net.meta.get(k) for k in ("scores_held_out_participants", "scores_paper_protocol",
-                                     "svr_params", "split", "training", "date")}}  # fmt: skip
+    report: dict = {
+        "model": str(args.model or "default"),
+        "stored": {
+            k: net.meta.get(k)
+            for k in (
+                "scores_held_out_participants",
+                "scores_paper_protocol",
+                "svr_params",
+                "split",
+                "training",
+                "date",
+            )
+        },
+    }
     test = net.meta.get("split", {}).get("test_participants") or []
     if ds is not None and test:
         sel = np.isin(ds.participant, test)
@@ -336,40 +367,75 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     sub = st.add_subparsers(dest="stiffness_command", required=True, metavar="STEP")
 
-    d = sub.add_parser("dataset", help="label recorded arm motions (real; synthetic on "
-                       "request) for a robot")  # fmt: skip
+    d = sub.add_parser(
+        "dataset", help="label recorded arm motions (real; synthetic on request) for a robot"
+    )
     d.add_argument("--robot", default="mobile_humanoid", help="bundled name, directory or toml")
     d.add_argument("--arm", default="right", help="arm whose lengths and masses label the data")
     d.add_argument("--records", type=_count(1), default=5000, help="about this many records")
     d.add_argument("--seed", type=int, default=0, help="seed of the synthetic data")
-    d.add_argument("--synthetic-participants", type=_count(0), default=0, metavar="N",
-                   help="add the SYNTHETIC reaches of virtual participants SYN01..SYN0N "
-                   "(default 0: real recordings only; at most 6)")  # fmt: skip
-    d.add_argument("--tasks", type=_names, default=None, metavar="NAMES",
-                   help="only these tasks of the real recordings (default: all: "
-                   "forward,across,drinking,combing)")  # fmt: skip
-    d.add_argument("--recordings", default=None, help="directory of real recordings "
-                   "(default: the bundled data/human_reaching/joint_centres)")  # fmt: skip
+    d.add_argument(
+        "--synthetic-participants",
+        type=_count(0),
+        default=0,
+        metavar="N",
+        help="add the SYNTHETIC reaches of virtual participants SYN01..SYN0N "
+        "(default 0: real recordings only; at most 6)",
+    )
+    d.add_argument(
+        "--tasks",
+        type=_names,
+        default=None,
+        metavar="NAMES",
+        help="only these tasks of the real recordings (default: all: "
+        "forward,across,drinking,combing)",
+    )
+    d.add_argument(
+        "--recordings",
+        default=None,
+        help="directory of real recordings "
+        "(default: the bundled data/human_reaching/joint_centres)",
+    )
     d.add_argument("--no-real", action="store_true", help="synthetic data only")
-    d.add_argument("--calibrate", action="store_true",
-                   help="re-fit the arm-angle model on the real recordings of the participants "
-                   "not held out")  # fmt: skip
-    d.add_argument("--held-out", type=_names, default=None, metavar="IDS",
-                   help="participants kept out of the calibration, to be held out when the "
-                   "network is scored (default: fit's default test participants)")  # fmt: skip
-    d.add_argument("--synthetic-out", default=None, metavar="DIR",
-                   help="also write the synthetic recordings there (.npz)")  # fmt: skip
+    d.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="re-fit the arm-angle model on the real recordings of the participants not held out",
+    )
+    d.add_argument(
+        "--held-out",
+        type=_names,
+        default=None,
+        metavar="IDS",
+        help="participants kept out of the calibration, to be held out when the "
+        "network is scored (default: fit's default test participants)",
+    )
+    d.add_argument(
+        "--synthetic-out",
+        default=None,
+        metavar="DIR",
+        help="also write the synthetic recordings there (.npz)",
+    )
     d.add_argument("--out", default="stiffness_dataset.npz", help="dataset file to write")
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     d.set_defaults(func=_dataset)
 
     f = sub.add_parser("fit", help="train the network and the SVR, score held-out participants")
     f.add_argument("--dataset", default=None, help="dataset file (default: the bundled one)")
-    f.add_argument("--test-participants", type=_names, default=None, metavar="IDS",
-                   help="comma-separated held-out participants (default: "
-                   "ADL003,ADL008,ADL011)")  # fmt: skip
-    f.add_argument("--hidden", type=_ints, default=DEFAULT_HIDDEN, metavar="SIZES",
-                   help="hidden layer sizes (default: %(default)s)")  # fmt: skip
+    f.add_argument(
+        "--test-participants",
+        type=_names,
+        default=None,
+        metavar="IDS",
+        help="comma-separated held-out participants (default: ADL003,ADL008,ADL011)",
+    )
+    f.add_argument(
+        "--hidden",
+        type=_ints,
+        default=DEFAULT_HIDDEN,
+        metavar="SIZES",
+        help="hidden layer sizes (default: %(default)s)",
+    )
     f.add_argument(
         "--select-hidden",
         type=lambda t: tuple(_ints(v) for v in t.split(";") if v.strip()),
@@ -403,9 +469,13 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also score the paper's split (300 random records), for comparison",
     )
-    f.add_argument("--compare-with", default=None, metavar="FILE",
-                   help="also score this network (e.g. the one shipped before) on the same "
-                   "held-out records, for the card; it must have held them out too")  # fmt: skip
+    f.add_argument(
+        "--compare-with",
+        default=None,
+        metavar="FILE",
+        help="also score this network (e.g. the one shipped before) on the same "
+        "held-out records, for the card; it must have held them out too",
+    )
     f.add_argument(
         "--compare-label",
         default="previous network",

@@ -63,8 +63,17 @@ __all__ = [
 # out: scores on them measure the generator, not people.
 DEFAULT_TEST_PARTICIPANTS = ("ADL003", "ADL008", "ADL011")
 FORMAT = "wholebody.stiffness_dataset/1"
-_ARRAYS = ("wrist", "k", "alpha", "amplitude", "human_wrist", "time_s", "source", "participant",
-           "trial")  # fmt: skip
+_ARRAYS = (
+    "wrist",
+    "k",
+    "alpha",
+    "amplitude",
+    "human_wrist",
+    "time_s",
+    "source",
+    "participant",
+    "trial",
+)
 
 
 @dataclass
@@ -129,8 +138,9 @@ class StiffnessDataset:
         test = sorted(set(test_participants))
         missing = [p for p in test if p not in set(self.participant.tolist())]
         if missing:
-            raise DataError(f"split: participant(s) {', '.join(missing)} have no record in the "
-                            "dataset")  # fmt: skip
+            raise DataError(
+                f"split: participant(s) {', '.join(missing)} have no record in the dataset"
+            )
         mask = np.isin(self.participant, test)
         if mask.all():
             raise DataError("split: every record belongs to a test participant")
@@ -243,8 +253,10 @@ def build_dataset(
         labelled.append((rec, lab, np.flatnonzero(~drop)))
     trials = [t for t in labelled if len(t[2])]
     if not trials:
-        raise DataError(f"no frame of the {len(labelled)} recording(s) passed the labelling "
-                        f"rules: {report.summary()}")  # fmt: skip
+        raise DataError(
+            f"no frame of the {len(labelled)} recording(s) passed the labelling "
+            f"rules: {report.summary()}"
+        )
     parts: dict[str, list] = {name: [] for name in _ARRAYS}
     for (rec, lab, keep), q in zip(trials, trial_quotas(len(trials), n_records), strict=True):
         if q == 0:

@@ -17,13 +17,19 @@ def regression_scores(y: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
     y = np.asarray(y, dtype=float).reshape(-1)
     y_pred = np.asarray(y_pred, dtype=float).reshape(-1)
     if y.shape != y_pred.shape or len(y) < 2:
-        raise DataError(f"regression_scores: need two equal arrays of >= 2 values, got "
-                        f"{y.shape} and {y_pred.shape}")  # fmt: skip
+        raise DataError(
+            f"regression_scores: need two equal arrays of >= 2 values, got "
+            f"{y.shape} and {y_pred.shape}"
+        )
     res = float(np.sum((y - y_pred) ** 2))
     tot = float(np.sum((y - y.mean()) ** 2))
     mse = res / len(y)
-    return {"r2": 1.0 - res / tot if tot > 0 else float("nan"), "mse": mse,
-            "rmse": float(np.sqrt(mse)), "n": len(y)}  # fmt: skip
+    return {
+        "r2": 1.0 - res / tot if tot > 0 else float("nan"),
+        "mse": mse,
+        "rmse": float(np.sqrt(mse)),
+        "n": len(y),
+    }
 
 
 def cluster_bootstrap(
@@ -45,8 +51,9 @@ def cluster_bootstrap(
     """
     names, inverse = np.unique(np.asarray(clusters), return_inverse=True)
     if len(names) < 2 or n_boot < 1:
-        raise DataError(f"cluster_bootstrap: need >= 2 clusters and n_boot >= 1, got "
-                        f"{len(names)} and {n_boot}")  # fmt: skip
+        raise DataError(
+            f"cluster_bootstrap: need >= 2 clusters and n_boot >= 1, got {len(names)} and {n_boot}"
+        )
     order = np.argsort(inverse, kind="stable")
     members = np.split(order, np.cumsum(np.bincount(inverse))[:-1])
     rng = np.random.default_rng(seed)
@@ -95,6 +102,11 @@ def r2_with_intervals(
             value, low, high = cluster_bootstrap(
                 lambda i, t=t, p=p: r2(t[i], p[i]), clusters[idx], n_boot=n_boot, seed=seed
             )
-            out[name][g] = {"r2": value, "low": low, "high": high,
-                            "mse": float(np.mean((t - p) ** 2)), "n": len(idx)}  # fmt: skip
+            out[name][g] = {
+                "r2": value,
+                "low": low,
+                "high": high,
+                "mse": float(np.mean((t - p) ** 2)),
+                "n": len(idx),
+            }
     return out

@@ -249,13 +249,15 @@ def select_model(
             s = regression_scores(train.k[va], res.network.predict(train.wrist[va]))
             mses.append(s["mse"])
             r2s.append(s["r2"])
-        table.append({
-            "hidden": list(cfg.hidden),  # type: ignore[attr-defined]
-            "weight_decay": float(cfg.weight_decay),  # type: ignore[attr-defined]
-            "cv_mse": float(np.mean(mses)),
-            "cv_mse_se": float(np.std(mses, ddof=1) / np.sqrt(len(mses))),
-            "cv_r2": float(np.mean(r2s)),
-        })  # fmt: skip
+        table.append(
+            {
+                "hidden": list(cfg.hidden),  # type: ignore[attr-defined]
+                "weight_decay": float(cfg.weight_decay),  # type: ignore[attr-defined]
+                "cv_mse": float(np.mean(mses)),
+                "cv_mse_se": float(np.std(mses, ddof=1) / np.sqrt(len(mses))),
+                "cv_r2": float(np.mean(r2s)),
+            }
+        )
     best = min(table, key=lambda r: r["cv_mse"])
     ok = [r for r in table if r["cv_mse"] <= best["cv_mse"] + best["cv_mse_se"]]
     pick = min(ok, key=lambda r: (-r["weight_decay"], _n_parameters(r["hidden"]), r["cv_mse"]))
@@ -268,12 +270,16 @@ def _check_reference(name: str, ref: NetworkStiffness, test: Sequence[str]) -> N
     """A reference network must not have trained on a test participant."""
     held = ref.meta.get("split", {}).get("test_participants")
     if held is None:
-        raise DataError(f"reference network {name!r}: its file does not say which participants "
-                        "it held out, so it may have trained on the test participants")  # fmt: skip
+        raise DataError(
+            f"reference network {name!r}: its file does not say which participants "
+            "it held out, so it may have trained on the test participants"
+        )
     seen = sorted(set(test) - set(held))
     if seen:
-        raise DataError(f"reference network {name!r} trained on test participant(s) "
-                        f"{', '.join(seen)}: they cannot score it")  # fmt: skip
+        raise DataError(
+            f"reference network {name!r} trained on test participant(s) "
+            f"{', '.join(seen)}: they cannot score it"
+        )
 
 
 def _provenance(ref: NetworkStiffness) -> dict:
@@ -310,14 +316,18 @@ def held_out_details(
     for name, members in TASK_GROUPS.items():
         groups[np.isin(tasks, members)] = name
     out = {"bootstrap": {"resamples": n_boot, "seed": seed, "level": 0.95}}
-    for key, labels in (("per_participant", sub.participant), ("by_task", tasks),
-                        ("by_task_group", groups)):  # fmt: skip
+    for key, labels in (
+        ("per_participant", sub.participant),
+        ("by_task", tasks),
+        ("by_task_group", groups),
+    ):
         keep = labels != ""  # records of no task group
         if keep.sum() < 2:
             continue
         kept = {name: p[keep] for name, p in preds.items()}
-        out[key] = r2_with_intervals(sub.k[keep], kept, labels[keep].astype(str), sub.trial[keep],
-                                     n_boot=n_boot, seed=seed)  # fmt: skip
+        out[key] = r2_with_intervals(
+            sub.k[keep], kept, labels[keep].astype(str), sub.trial[keep], n_boot=n_boot, seed=seed
+        )
     return out
 
 
@@ -403,8 +413,9 @@ def fit_and_evaluate(
     if svr:
         from wholebody.humanlike.svr import fit_svr, select_svr
 
-        svr_params, _ = select_svr(train.wrist, train.k, train.participant, grid=svr_grid,
-                                   progress=progress)  # fmt: skip
+        svr_params, _ = select_svr(
+            train.wrist, train.k, train.participant, grid=svr_grid, progress=progress
+        )
         model = fit_svr(train.wrist, train.k, **svr_params)
         scores["svr"] = regression_scores(test.k, model.predict(test.wrist))
         predictions["svr"] = model.predict(test.wrist)
@@ -422,8 +433,9 @@ def fit_and_evaluate(
             m2 = fit_svr(dataset.wrist[tr], dataset.k[tr], **(svr_params or {}))
             paper["svr"] = regression_scores(dataset.k[te], m2.predict(dataset.wrist[te]))
     net.meta["scores_held_out_participants"] = scores
-    net.meta["scores_real_held_out"] = held_out_details(test, predictions, n_boot=n_boot,
-                                                        seed=config.seed)  # type: ignore[attr-defined]  # fmt: skip
+    net.meta["scores_real_held_out"] = held_out_details(
+        test, predictions, n_boot=n_boot, seed=config.seed
+    )  # type: ignore[attr-defined]
     if references:
         net.meta["references"] = {name: _provenance(ref) for name, ref in references.items()}
     if selection is not None:

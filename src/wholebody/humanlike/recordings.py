@@ -211,8 +211,10 @@ def load_participants(path: str | Path | None = None) -> dict[str, Participant]:
                     ) from None
                 if not _STATURE_M[0] <= h <= _STATURE_M[1]:  # (NaN fails too)
                     lo, hi = _STATURE_M
-                    raise DataError(f"{path}: row {r}, column 'height_m': {h} is not a person's "
-                                    f"height in metres ({lo}-{hi} m)")  # fmt: skip
+                    raise DataError(
+                        f"{path}: row {r}, column 'height_m': {h} is not a person's "
+                        f"height in metres ({lo}-{hi} m)"
+                    )
                 out[row["participant"]] = Participant(row["participant"], row["sex"], h)
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
@@ -327,21 +329,28 @@ def _recording(
     M = {k: v * s for k, v in (markers or {}).items() if v is not None}
     notes = [note] if note else []
     side = str(ident["side"])
-    if "sternum" in M and facing == "auto" and _faces_minus_y(M["sternum"], P["shoulder"], side,
-                                                              notes):  # fmt: skip
+    if (
+        "sternum" in M
+        and facing == "auto"
+        and _faces_minus_y(M["sternum"], P["shoulder"], side, notes)
+    ):
         turn = np.array([-1.0, -1.0, 1.0])
         P = {k: v * turn for k, v in P.items()}
         M = {k: v * turn for k, v in M.items()}
-        notes.append("turned 180 deg about z: the sternum lay lateral of the shoulder, "
-                     "so the participant faced -y")  # fmt: skip
+        notes.append(
+            "turned 180 deg about z: the sternum lay lateral of the shoulder, "
+            "so the participant faced -y"
+        )
     for name, v in list(M.items()):  # a Recording's marker is complete or absent
         whole = np.isfinite(v).all(axis=1)
         if whole.all():
             continue
         del M[name]
         if name == "sternum" and facing == "auto" and whole.any():
-            notes.append(f"sternum seen in {int(whole.sum())} of {len(t)} samples: used "
-                         "for the facing check only")  # fmt: skip
+            notes.append(
+                f"sternum seen in {int(whole.sum())} of {len(t)} samples: used "
+                "for the facing check only"
+            )
         elif name != "sternum":
             notes.append(f"{name} seen in {int(whole.sum())} of {len(t)} samples: left out")
     return Recording(
@@ -392,8 +401,9 @@ def load_csv_recording(
         A malformed file; the message names the file, row and column.
     """
     path = Path(path)
-    ident = _identity(path, {"participant": participant, "task": task, "side": side,
-                             "trial": trial})  # fmt: skip
+    ident = _identity(
+        path, {"participant": participant, "task": task, "side": side, "trial": trial}
+    )
     header, body = _csv_rows(path)
     A = _csv_numbers(path, header, body)
     t = A[:, 0]
@@ -528,8 +538,7 @@ def load_npz_recording(
         if bad.size:
             r, c = bad[0]
             col = key if key == "time_s" else f"{key}_{'xyz'[c]}"
-            raise DataError(f"{path}: row {r + 1}, column {col!r}: value {v[r, c]} is not "
-                            "finite")  # fmt: skip
+            raise DataError(f"{path}: row {r + 1}, column {col!r}: value {v[r, c]} is not finite")
     file_units = _npz_str(path, z, "units", None)
     if file_units not in ("m", "mm"):
         raise DataError(f"{path}: key 'units': expected 'm' or 'mm', got {file_units!r}")
@@ -559,8 +568,9 @@ def _npz_marker(path: Path, z: dict[str, np.ndarray], key: str, n: int) -> np.nd
     """An optional marker of an NPZ recording: finite, (n, 3)."""
     v = np.asarray(z[key], dtype=float)
     if v.shape != (n, 3) or not np.isfinite(v).all():
-        raise DataError(f"{path}: key {key!r}: expected finite values of shape ({n}, 3), got "
-                        f"{v.shape}")  # fmt: skip
+        raise DataError(
+            f"{path}: key {key!r}: expected finite values of shape ({n}, 3), got {v.shape}"
+        )
     return v
 
 
@@ -621,8 +631,10 @@ def load_recordings(
     if wanted is not None:
         recs = [r for r in recs if r.task in wanted]
         if not recs:
-            raise DataError(f"no recording of task(s) {', '.join(sorted(wanted))} in {paths} "
-                            f"(the bundled data have {', '.join(TASKS)})")  # fmt: skip
+            raise DataError(
+                f"no recording of task(s) {', '.join(sorted(wanted))} in {paths} "
+                f"(the bundled data have {', '.join(TASKS)})"
+            )
     return recs
 
 

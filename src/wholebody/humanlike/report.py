@@ -50,8 +50,10 @@ def _synthetic_lines(dm: dict) -> list[str]:
     seated reaches (nothing for a dataset of real recordings only)."""
     syn, aam = dm.get("synthetic"), dm.get("arm_angle_model", {})
     if not syn:
-        return ["- No synthetic data (`wholebody stiffness dataset --synthetic-participants N` "
-                "adds them)."]  # fmt: skip
+        return [
+            "- No synthetic data (`wholebody stiffness dataset --synthetic-participants N` "
+            "adds them)."
+        ]
     lines = [
         "- "
         + syn.get("note", "SYNTHETIC: -").replace("SYNTHETIC:", "**SYNTHETIC**:", 1)
@@ -75,9 +77,11 @@ def _synthetic_lines(dm: dict) -> list[str]:
         "|---|---|---|---|---|",
     ]
     cmp_ = dm.get("arm_angle_comparison_deg", {})
-    for key, label in (("real", "real (forward, across)"),
-                       ("synthetic_tabletop", "synthetic tabletop"),
-                       ("synthetic_standing", "synthetic standing")):  # fmt: skip
+    for key, label in (
+        ("real", "real (forward, across)"),
+        ("synthetic_tabletop", "synthetic tabletop"),
+        ("synthetic_standing", "synthetic standing"),
+    ):
         c = cmp_.get(key)
         if c:
             lines.append(
@@ -143,8 +147,12 @@ def _per_participant_lines(m: dict) -> list[str]:
     ]
     for g in groups:
         lines.append(f"| {g} | " + " | ".join(_interval(per[n][g]) for n in names) + " |")
-    rows = [(t, r) for key in ("by_task", "by_task_group")
-            for t, r in _transpose(det.get(key, {})).items() if t != "all"]  # fmt: skip
+    rows = [
+        (t, r)
+        for key in ("by_task", "by_task_group")
+        for t, r in _transpose(det.get(key, {})).items()
+        if t != "all"
+    ]
     if rows:
         lines += [
             "",
@@ -154,9 +162,13 @@ def _per_participant_lines(m: dict) -> list[str]:
             "",
             "| task | records | " + " | ".join(label.get(n, n) for n in names) + " |",
             "|---|---|" + "---|" * len(names),
-            *(f"| {t} | {next(iter(r.values()))['n']} | "
-              + " | ".join(_interval(r[n]) for n in names) + " |" for t, r in rows),
-        ]  # fmt: skip
+            *(
+                f"| {t} | {next(iter(r.values()))['n']} | "
+                + " | ".join(_interval(r[n]) for n in names)
+                + " |"
+                for t, r in rows
+            ),
+        ]
     return lines
 
 
@@ -174,16 +186,23 @@ def _reference_lines(m: dict) -> list[str]:
     lines = []
     for name, r in refs.items():
         tr, split = r.get("training") or {}, r.get("split") or {}
-        data = ", ".join(f"{src} {c.get('records', 0)} records" for src, c in
-                         sorted((r.get("dataset_counts") or {}).items()))  # fmt: skip
+        data = ", ".join(
+            f"{src} {c.get('records', 0)} records"
+            for src, c in sorted((r.get("dataset_counts") or {}).items())
+        )
         lines.append(
             f"- {name}: dated {r.get('date')}, trained on {tr.get('records')} records "
             f"({data}; held out {', '.join(split.get('test_participants', []))}), hidden "
             f"{tuple(tr.get('hidden', []))}, weight decay {tr.get('weight_decay', 0):g}."
         )
     if lines:
-        lines = ["", "Reference networks scored above (they held out the same participants):",
-                 "", *lines, *_verdicts(m, refs)]  # fmt: skip
+        lines = [
+            "",
+            "Reference networks scored above (they held out the same participants):",
+            "",
+            *lines,
+            *_verdicts(m, refs),
+        ]
     return lines
 
 
@@ -286,8 +305,10 @@ def _reading_lines(dm: dict, arm_angle_spread: dict | None) -> list[str]:
             f" deg between participants and {arm_angle_spread['within']:.1f} deg within one"
         )
     else:
-        scatter = (f"about Kim et al.'s calibrated model it scatters by "
-                   f"{sd.get('participant', 0.0):.1f} deg between participants")  # fmt: skip
+        scatter = (
+            f"about Kim et al.'s calibrated model it scatters by "
+            f"{sd.get('participant', 0.0):.1f} deg between participants"
+        )
     return [
         "## Reading the scores",
         "",
@@ -369,13 +390,37 @@ def plot_workspace(
     g = np.linspace(-0.5, 0.5, 121)
     xs = np.linspace(-0.1, 0.55, 121)
     panels = [
-        (axes[0, 0], "sagittal plane y = 0 (x forward, z up)", "x (m)", "z (m)",
-         lambda a, b: np.stack([a, np.zeros_like(a), b], -1), xs, g, (0, 2)),
-        (axes[0, 1], "horizontal plane z = -0.25 m (x forward, y medial)", "x (m)", "y (m)",
-         lambda a, b: np.stack([a, b, np.full_like(a, -0.25)], -1), xs, g, (0, 1)),
-        (axes[1, 0], "horizontal plane z = +0.15 m", "x (m)", "y (m)",
-         lambda a, b: np.stack([a, b, np.full_like(a, 0.15)], -1), xs, g, (0, 1)),
-    ]  # fmt: skip
+        (
+            axes[0, 0],
+            "sagittal plane y = 0 (x forward, z up)",
+            "x (m)",
+            "z (m)",
+            lambda a, b: np.stack([a, np.zeros_like(a), b], -1),
+            xs,
+            g,
+            (0, 2),
+        ),
+        (
+            axes[0, 1],
+            "horizontal plane z = -0.25 m (x forward, y medial)",
+            "x (m)",
+            "y (m)",
+            lambda a, b: np.stack([a, b, np.full_like(a, -0.25)], -1),
+            xs,
+            g,
+            (0, 1),
+        ),
+        (
+            axes[1, 0],
+            "horizontal plane z = +0.15 m",
+            "x (m)",
+            "y (m)",
+            lambda a, b: np.stack([a, b, np.full_like(a, 0.15)], -1),
+            xs,
+            g,
+            (0, 1),
+        ),
+    ]
     vmax = None
     for ax, title, xl, yl, make, a, b, (i, j) in panels:
         A, B = np.meshgrid(a, b)
@@ -398,12 +443,17 @@ def plot_workspace(
             top = float(max(y.max(), yp.max()))
             ax.plot([0, top], [0, top], "k--", lw=1)
             ax.legend(loc="upper left")
-        ax.set(title=f"held-out participants: {', '.join(test)}", xlabel="label k (N m/rad)",
-               ylabel="network k (N m/rad)")  # fmt: skip
+        ax.set(
+            title=f"held-out participants: {', '.join(test)}",
+            xlabel="label k (N m/rad)",
+            ylabel="network k (N m/rad)",
+        )
     else:
         ax.axis("off")
-    fig.suptitle("Stiffness network over the workspace (wrist relative to the shoulder, "
-                 "canonical axes; dots: training records)")  # fmt: skip
+    fig.suptitle(
+        "Stiffness network over the workspace (wrist relative to the shoulder, "
+        "canonical axes; dots: training records)"
+    )
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path

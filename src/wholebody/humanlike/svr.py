@@ -29,8 +29,9 @@ def _sklearn():
         from sklearn.model_selection import GroupKFold
         from sklearn.svm import SVR
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise SolverError("the SVR baseline needs scikit-learn: pip install "
-                          "'.[learn]' from the checkout") from exc  # fmt: skip
+        raise SolverError(
+            "the SVR baseline needs scikit-learn: pip install '.[learn]' from the checkout"
+        ) from exc
     return SVR, GroupKFold
 
 
@@ -80,8 +81,11 @@ def select_svr(
     candidates."""
     _, GroupKFold = _sklearn()
     grid = grid or SVR_GRID
-    cands = [{"C": float(c), "gamma": float(g), "epsilon": epsilon}
-             for c in grid["C"] for g in grid["gamma"]]  # fmt: skip
+    cands = [
+        {"C": float(c), "gamma": float(g), "epsilon": epsilon}
+        for c in grid["C"]
+        for g in grid["gamma"]
+    ]
     n_groups = len(set(np.asarray(groups).tolist()))
     if n_groups < 2:
         raise DataError(f"select_svr: grouped cross-validation needs >= 2 groups, got {n_groups}")

@@ -66,13 +66,31 @@ __all__ = [
 # (m: upper arm SJC-EJC, forearm EJC-WJC, hand WJC-MET3), mass (fraction of body mass) and
 # centre of mass (fraction of the length from the proximal end).
 DE_LEVA = {
-    "F": {"stature": 1.735, "mass": 61.9, "upper_arm": 0.2751, "forearm": 0.2643,
-          "hand": 0.0780, "upper_arm_mass": 0.0255, "forearm_mass": 0.0138,
-          "hand_mass": 0.0056, "upper_arm_com": 0.5754, "forearm_com": 0.4559},
-    "M": {"stature": 1.741, "mass": 73.0, "upper_arm": 0.2817, "forearm": 0.2689,
-          "hand": 0.0862, "upper_arm_mass": 0.0271, "forearm_mass": 0.0162,
-          "hand_mass": 0.0061, "upper_arm_com": 0.5772, "forearm_com": 0.4574},
-}  # fmt: skip
+    "F": {
+        "stature": 1.735,
+        "mass": 61.9,
+        "upper_arm": 0.2751,
+        "forearm": 0.2643,
+        "hand": 0.0780,
+        "upper_arm_mass": 0.0255,
+        "forearm_mass": 0.0138,
+        "hand_mass": 0.0056,
+        "upper_arm_com": 0.5754,
+        "forearm_com": 0.4559,
+    },
+    "M": {
+        "stature": 1.741,
+        "mass": 73.0,
+        "upper_arm": 0.2817,
+        "forearm": 0.2689,
+        "hand": 0.0862,
+        "upper_arm_mass": 0.0271,
+        "forearm_mass": 0.0162,
+        "hand_mass": 0.0061,
+        "upper_arm_com": 0.5772,
+        "forearm_com": 0.4574,
+    },
+}
 SHOULDER_HEIGHT = 0.818  # x stature
 SHOULDER_WIDTH = 0.259  # x stature
 SAMPLE_RATE = 30.0  # Hz
@@ -178,8 +196,10 @@ def generate_participant(
     S_lab = p.shoulder
     zero = np.zeros(3)
     e_part = rng.normal(0.0, model.sd_participant)
-    e_block = {"standing": rng.normal(0.0, model.sd_block),
-               "tabletop": rng.normal(0.0, model.sd_block)}  # fmt: skip
+    e_block = {
+        "standing": rng.normal(0.0, model.sd_block),
+        "tabletop": rng.normal(0.0, model.sd_block),
+    }
     counters = {"standing": 0, "tabletop": 0}
     recs = []
     note = (

@@ -42,8 +42,9 @@ def _torch():
     try:
         import torch
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise SolverError("training the stiffness network needs PyTorch: pip install "
-                          "'.[learn]' from the checkout") from exc  # fmt: skip
+        raise SolverError(
+            "training the stiffness network needs PyTorch: pip install '.[learn]' from the checkout"
+        ) from exc
     return torch
 
 
@@ -105,8 +106,9 @@ def torch_module(net: NetworkStiffness, dtype: object = None):
     """A torch module computing exactly ``net`` (float64 by default), for checks."""
     torch = _torch()
     dtype = dtype or torch.float64
-    m = _module(net.hidden_sizes, net.x_mean, net.x_scale, net.k_mean, net.k_scale,
-                net.floor_beta, dtype)  # fmt: skip
+    m = _module(
+        net.hidden_sizes, net.x_mean, net.x_scale, net.k_mean, net.k_scale, net.floor_beta, dtype
+    )
     with torch.no_grad():
         for layer, W, b in zip([*m.hidden, m.out], net.weights, net.biases, strict=True):
             layer.weight.copy_(torch.as_tensor(W, dtype=dtype))
@@ -202,6 +204,7 @@ def train_network(
         },
         **(meta or {}),
     }
-    net = NetworkStiffness(Ws, bs_, x_mean, x_scale, k_mean, k_scale, beta, X.min(0), X.max(0),
-                           info)  # fmt: skip
+    net = NetworkStiffness(
+        Ws, bs_, x_mean, x_scale, k_mean, k_scale, beta, X.min(0), X.max(0), info
+    )
     return TrainingResult(net, losses, model, seconds)

@@ -39,8 +39,19 @@ __all__ = [
     "trtrs",
 ]
 
-_ARGS = {"dpotrf": 5, "dtrtri": 6, "dtrtrs": 10, "dgeqp3": 9, "dgeqrf": 8, "dorgqr": 9, "dgels": 11,
-         "dgesdd": 14, "dsyevd": 11, "dgetrf": 6, "dgetrs": 9}  # fmt: skip
+_ARGS = {
+    "dpotrf": 5,
+    "dtrtri": 6,
+    "dtrtrs": 10,
+    "dgeqp3": 9,
+    "dgeqrf": 8,
+    "dorgqr": 9,
+    "dgels": 11,
+    "dgesdd": 14,
+    "dsyevd": 11,
+    "dgetrf": 6,
+    "dgetrs": 9,
+}
 
 
 def _external(name: str):
@@ -80,8 +91,9 @@ def potrf(a: np.ndarray, lower: bool) -> int:
     iv[0] = n
     iv[1] = max(n, 1)
     iv[2] = 0
-    _dpotrf(ch.ctypes.data, iv[0:].ctypes.data, a.ctypes.data, iv[1:].ctypes.data,
-            iv[2:].ctypes.data)  # fmt: skip
+    _dpotrf(
+        ch.ctypes.data, iv[0:].ctypes.data, a.ctypes.data, iv[1:].ctypes.data, iv[2:].ctypes.data
+    )
     for j in range(n):
         for i in range(n):
             if (lower and i < j) or (not lower and i > j):
@@ -100,8 +112,14 @@ def trtri(a: np.ndarray, lower: bool) -> int:
     iv[0] = n
     iv[1] = max(n, 1)
     iv[2] = 0
-    _dtrtri(ch[0:].ctypes.data, ch[1:].ctypes.data, iv[0:].ctypes.data, a.ctypes.data,
-            iv[1:].ctypes.data, iv[2:].ctypes.data)  # fmt: skip
+    _dtrtri(
+        ch[0:].ctypes.data,
+        ch[1:].ctypes.data,
+        iv[0:].ctypes.data,
+        a.ctypes.data,
+        iv[1:].ctypes.data,
+        iv[2:].ctypes.data,
+    )
     return int(iv[2])
 
 
@@ -121,9 +139,18 @@ def trtrs(a: np.ndarray, b: np.ndarray, lower: bool, transpose: bool) -> int:
     iv[2] = max(a.strides[1] // 8, 1)
     iv[3] = max(n, 1)
     iv[4] = 0
-    _dtrtrs(ch[0:].ctypes.data, ch[1:].ctypes.data, ch[2:].ctypes.data, iv[0:].ctypes.data,
-            iv[1:].ctypes.data, a.ctypes.data, iv[2:].ctypes.data, b.ctypes.data,
-            iv[3:].ctypes.data, iv[4:].ctypes.data)  # fmt: skip
+    _dtrtrs(
+        ch[0:].ctypes.data,
+        ch[1:].ctypes.data,
+        ch[2:].ctypes.data,
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        a.ctypes.data,
+        iv[2:].ctypes.data,
+        b.ctypes.data,
+        iv[3:].ctypes.data,
+        iv[4:].ctypes.data,
+    )
     return int(iv[4])
 
 
@@ -142,9 +169,17 @@ def geqp3(a: np.ndarray, jpvt: np.ndarray, tau: np.ndarray) -> int:
     iv[2] = max(m, 1)
     iv[3] = lwork
     iv[4] = 0
-    _dgeqp3(iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data, iv[2:].ctypes.data,
-            jpvt.ctypes.data, tau.ctypes.data, work.ctypes.data, iv[3:].ctypes.data,
-            iv[4:].ctypes.data)  # fmt: skip
+    _dgeqp3(
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        a.ctypes.data,
+        iv[2:].ctypes.data,
+        jpvt.ctypes.data,
+        tau.ctypes.data,
+        work.ctypes.data,
+        iv[3:].ctypes.data,
+        iv[4:].ctypes.data,
+    )
     return int(iv[4])
 
 
@@ -161,8 +196,16 @@ def geqrf(a: np.ndarray, tau: np.ndarray) -> int:
     iv[2] = max(m, 1)
     iv[3] = lwork
     iv[4] = 0
-    _dgeqrf(iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data, iv[2:].ctypes.data,
-            tau.ctypes.data, work.ctypes.data, iv[3:].ctypes.data, iv[4:].ctypes.data)  # fmt: skip
+    _dgeqrf(
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        a.ctypes.data,
+        iv[2:].ctypes.data,
+        tau.ctypes.data,
+        work.ctypes.data,
+        iv[3:].ctypes.data,
+        iv[4:].ctypes.data,
+    )
     return int(iv[4])
 
 
@@ -180,9 +223,17 @@ def orgqr(a: np.ndarray, tau: np.ndarray, k: int, lwork: int) -> int:
     iv[3] = max(m, 1)
     iv[4] = lwork
     iv[5] = 0
-    _dorgqr(iv[0:].ctypes.data, iv[1:].ctypes.data, iv[2:].ctypes.data, a.ctypes.data,
-            iv[3:].ctypes.data, tau.ctypes.data, work.ctypes.data, iv[4:].ctypes.data,
-            iv[5:].ctypes.data)  # fmt: skip
+    _dorgqr(
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        iv[2:].ctypes.data,
+        a.ctypes.data,
+        iv[3:].ctypes.data,
+        tau.ctypes.data,
+        work.ctypes.data,
+        iv[4:].ctypes.data,
+        iv[5:].ctypes.data,
+    )
     return int(iv[5])
 
 
@@ -206,9 +257,19 @@ def gels(a: np.ndarray, b: np.ndarray) -> int:
     iv[4] = max(b.shape[0], 1)
     iv[5] = lwork
     iv[6] = 0
-    _dgels(ch.ctypes.data, iv[0:].ctypes.data, iv[1:].ctypes.data, iv[2:].ctypes.data,
-           a.ctypes.data, iv[3:].ctypes.data, b.ctypes.data, iv[4:].ctypes.data,
-           work.ctypes.data, iv[5:].ctypes.data, iv[6:].ctypes.data)  # fmt: skip
+    _dgels(
+        ch.ctypes.data,
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        iv[2:].ctypes.data,
+        a.ctypes.data,
+        iv[3:].ctypes.data,
+        b.ctypes.data,
+        iv[4:].ctypes.data,
+        work.ctypes.data,
+        iv[5:].ctypes.data,
+        iv[6:].ctypes.data,
+    )
     return int(iv[6])
 
 
@@ -237,10 +298,22 @@ def gesdd(a: np.ndarray, full: bool) -> tuple[int, np.ndarray, np.ndarray, np.nd
     iv[5] = lwork
     iv[6] = 0
     if k:
-        _dgesdd(ch.ctypes.data, iv[0:].ctypes.data, iv[1:].ctypes.data, a.ctypes.data,
-                iv[2:].ctypes.data, s.ctypes.data, U.ctypes.data, iv[3:].ctypes.data,
-                Vt.ctypes.data, iv[4:].ctypes.data, work.ctypes.data, iv[5:].ctypes.data,
-                iwork.ctypes.data, iv[6:].ctypes.data)  # fmt: skip
+        _dgesdd(
+            ch.ctypes.data,
+            iv[0:].ctypes.data,
+            iv[1:].ctypes.data,
+            a.ctypes.data,
+            iv[2:].ctypes.data,
+            s.ctypes.data,
+            U.ctypes.data,
+            iv[3:].ctypes.data,
+            Vt.ctypes.data,
+            iv[4:].ctypes.data,
+            work.ctypes.data,
+            iv[5:].ctypes.data,
+            iwork.ctypes.data,
+            iv[6:].ctypes.data,
+        )
     else:  # nothing to decompose: identities of the requested shapes
         for j in range(min(mu, m)):
             U[j, j] = 1.0
@@ -270,9 +343,19 @@ def syevd(a: np.ndarray) -> tuple[int, np.ndarray]:
     iv[3] = liwork
     iv[4] = 0
     if n:
-        _dsyevd(ch[0:].ctypes.data, ch[1:].ctypes.data, iv[0:].ctypes.data, a.ctypes.data,
-                iv[1:].ctypes.data, w.ctypes.data, work.ctypes.data, iv[2:].ctypes.data,
-                iwork.ctypes.data, iv[3:].ctypes.data, iv[4:].ctypes.data)  # fmt: skip
+        _dsyevd(
+            ch[0:].ctypes.data,
+            ch[1:].ctypes.data,
+            iv[0:].ctypes.data,
+            a.ctypes.data,
+            iv[1:].ctypes.data,
+            w.ctypes.data,
+            work.ctypes.data,
+            iv[2:].ctypes.data,
+            iwork.ctypes.data,
+            iv[3:].ctypes.data,
+            iv[4:].ctypes.data,
+        )
     return int(iv[4]), w[:n]
 
 
@@ -285,8 +368,14 @@ def getrf(a: np.ndarray, ipiv: np.ndarray) -> int:
     iv[0] = n
     iv[1] = max(n, 1)
     iv[2] = 0
-    _dgetrf(iv[0:].ctypes.data, iv[0:].ctypes.data, a.ctypes.data, iv[1:].ctypes.data,
-            ipiv.ctypes.data, iv[2:].ctypes.data)  # fmt: skip
+    _dgetrf(
+        iv[0:].ctypes.data,
+        iv[0:].ctypes.data,
+        a.ctypes.data,
+        iv[1:].ctypes.data,
+        ipiv.ctypes.data,
+        iv[2:].ctypes.data,
+    )
     return int(iv[2])
 
 
@@ -303,7 +392,15 @@ def getrs(lu: np.ndarray, ipiv: np.ndarray, b: np.ndarray) -> int:
     iv[2] = max(n, 1)
     iv[3] = max(n, 1)
     iv[4] = 0
-    _dgetrs(ch.ctypes.data, iv[0:].ctypes.data, iv[1:].ctypes.data, lu.ctypes.data,
-            iv[2:].ctypes.data, ipiv.ctypes.data, b.ctypes.data, iv[3:].ctypes.data,
-            iv[4:].ctypes.data)  # fmt: skip
+    _dgetrs(
+        ch.ctypes.data,
+        iv[0:].ctypes.data,
+        iv[1:].ctypes.data,
+        lu.ctypes.data,
+        iv[2:].ctypes.data,
+        ipiv.ctypes.data,
+        b.ctypes.data,
+        iv[3:].ctypes.data,
+        iv[4:].ctypes.data,
+    )
     return int(iv[4])

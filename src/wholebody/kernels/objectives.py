@@ -357,8 +357,14 @@ def _contract(Jf: np.ndarray, Pf: np.ndarray, mask: np.ndarray, out: np.ndarray)
     cols = np.empty(nu, np.int64)
     n = 0
     for k in range(nu):
-        if (Jf[0, k] != 0.0 or Jf[1, k] != 0.0 or Jf[2, k] != 0.0 or Jf[3, k] != 0.0
-                or Jf[4, k] != 0.0 or Jf[5, k] != 0.0):  # fmt: skip
+        if (
+            Jf[0, k] != 0.0
+            or Jf[1, k] != 0.0
+            or Jf[2, k] != 0.0
+            or Jf[3, k] != 0.0
+            or Jf[4, k] != 0.0
+            or Jf[5, k] != 0.0
+        ):
             cols[n] = k
             n += 1
     same = np.empty((n, 3))  # v_k x a_k + w_k x b_k
@@ -387,5 +393,11 @@ def _contract(Jf: np.ndarray, Pf: np.ndarray, mask: np.ndarray, out: np.ndarray)
                 t0 += other[j, 0]
                 t1 += other[j, 1]
                 t2 += other[j, 2]
-        out[l] += (Jf[3, l] * s0 + Jf[4, l] * s1 + Jf[5, l] * s2
-                   + Jf[0, l] * t0 + Jf[1, l] * t1 + Jf[2, l] * t2)  # fmt: skip
+        out[l] += (
+            Jf[3, l] * s0
+            + Jf[4, l] * s1
+            + Jf[5, l] * s2
+            + Jf[0, l] * t0
+            + Jf[1, l] * t1
+            + Jf[2, l] * t2
+        )

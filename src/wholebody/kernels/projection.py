@@ -154,8 +154,9 @@ def _pass(
         if sns and k >= 0:
             lev_out[k, 1] = s
     if goal.shape[0] and free_rank(free) > 0:
-        u, free, sat, s = _level(Rows(np.zeros((n, 0)), to_goal, 1.0, 1.0), u, free, sat, box,
-                                 sns, par)  # fmt: skip
+        u, free, sat, s = _level(
+            Rows(np.zeros((n, 0)), to_goal, 1.0, 1.0), u, free, sat, box, sns, par
+        )
     return u
 
 

@@ -92,9 +92,11 @@ def robot_toml(name_or_path: str | Path) -> Path:
     """The ``robot.toml`` that :func:`load_robot` reads for ``name_or_path`` (a
     :class:`ConfigError` as it raises)."""
     if not isinstance(name_or_path, (str, Path)) or not str(name_or_path):
-        raise ConfigError(f"load_robot: expected a bundled robot name "
-                          f"({', '.join(available_robots()) or 'none installed'}), a robot "
-                          f"directory or a robot.toml path, got {name_or_path!r}")  # fmt: skip
+        raise ConfigError(
+            f"load_robot: expected a bundled robot name "
+            f"({', '.join(available_robots()) or 'none installed'}), a robot "
+            f"directory or a robot.toml path, got {name_or_path!r}"
+        )
     path = Path(name_or_path)
     if path.suffix == ".toml":
         return path

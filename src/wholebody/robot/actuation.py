@@ -83,8 +83,13 @@ class Actuation:
     base: BaseModel
 
 
-def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo, base: BaseModel,
-                    locked: Mapping[str, float] | None = None) -> Actuation:  # fmt: skip
+def build_actuation(
+    config: RobotConfig,
+    model: pin.Model,
+    urdf: UrdfInfo,
+    base: BaseModel,
+    locked: Mapping[str, float] | None = None,
+) -> Actuation:
     """The actuated velocity space of ``model`` (loaded from ``config``'s URDF) with ``base``
     at its root: :class:`ModelError` for a joint wholebody cannot actuate (more than one
     DOF, or a range of zero), a ``config`` error for a wheel that is not a joint (or that
@@ -127,17 +132,20 @@ def build_actuation(config: RobotConfig, model: pin.Model, urdf: UrdfInfo, base:
     mimic = _couple_mimics(config, model, joint_ids, followers, names, A, lower, upper, vmax)
     lower[~np.isfinite(lower) | (lower < -1e300)] = -np.inf
     upper[~np.isfinite(upper) | (upper > 1e300)] = np.inf
-    _check_movable(config, names, lower, upper, kinds, own, _mimic_ranges(model, joint_ids,
-                                                                          followers))  # fmt: skip
+    _check_movable(
+        config, names, lower, upper, kinds, own, _mimic_ranges(model, joint_ids, followers)
+    )
     vmax[vmax <= 0] = np.inf  # URDF velocity 0 means "not given"
     for arr in (A, lower, upper, vmax, kinds, qidx):
         arr.setflags(write=False)
-    return Actuation(tuple(names), A, lower, upper, vmax, kinds, qidx, joint_ids, followers,
-                     mimic, base)  # fmt: skip
+    return Actuation(
+        tuple(names), A, lower, upper, vmax, kinds, qidx, joint_ids, followers, mimic, base
+    )
 
 
-def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel,
-               locked: Mapping[str, float]) -> dict[str, int]:  # fmt: skip
+def _joint_ids(
+    config: RobotConfig, model: pin.Model, base: BaseModel, locked: Mapping[str, float]
+) -> dict[str, int]:
     """The model's joints below the root by name, each checked to have one DOF, and the
     wheels checked to be among them (not ``locked``)."""
     first = 2 if base.mobile else 1  # joint 0 = universe, 1 = the root joint if mobile
@@ -165,15 +173,24 @@ def _joint_ids(config: RobotConfig, model: pin.Model, base: BaseModel,
     for k, m in enumerate(config.base.modules):
         for j in (m.steering, m.drive):
             if j not in joint_ids:
-                raise config.error(f"base.modules[{k}]", f"{j!r} is not a moving joint of "
-                                   f"{config.urdf.name}" + suggest(j, joint_ids))  # fmt: skip
+                raise config.error(
+                    f"base.modules[{k}]",
+                    f"{j!r} is not a moving joint of {config.urdf.name}" + suggest(j, joint_ids),
+                )
     return joint_ids
 
 
-def _couple_mimics(config: RobotConfig, model: pin.Model, joint_ids: Mapping[str, int],
-                   followers: Mapping[str, Mimic], names: Sequence[str], A: np.ndarray,
-                   lower: np.ndarray, upper: np.ndarray,
-                   vmax: np.ndarray) -> list[tuple[int, int, float, float]]:  # fmt: skip
+def _couple_mimics(
+    config: RobotConfig,
+    model: pin.Model,
+    joint_ids: Mapping[str, int],
+    followers: Mapping[str, Mimic],
+    names: Sequence[str],
+    A: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    vmax: np.ndarray,
+) -> list[tuple[int, int, float, float]]:
     """Each mimic joint moves with its leader: its row of ``A`` is ``multiplier`` in the
     leader's column, and its position and velocity limits narrow the leader's (in the
     leader's coordinate). Returns ``(q index, leader's q index, multiplier, offset)``."""
@@ -182,8 +199,10 @@ def _couple_mimics(config: RobotConfig, model: pin.Model, joint_ids: Mapping[str
     for name, m in followers.items():
         jf, jl = model.joints[joint_ids[name]], model.joints[joint_ids[m.leader]]
         if jf.nq != 1 or jl.nq != 1:
-            raise ModelError(f"{config.urdf}: mimic joint {name!r}: wholebody "
-                             "couples revolute and prismatic joints only")  # fmt: skip
+            raise ModelError(
+                f"{config.urdf}: mimic joint {name!r}: wholebody "
+                "couples revolute and prismatic joints only"
+            )
         k = index[m.leader]
         A[jf.idx_v, k] = m.multiplier
         lo, hi = model.lowerPositionLimit[jf.idx_q], model.upperPositionLimit[jf.idx_q]
@@ -196,8 +215,9 @@ def _couple_mimics(config: RobotConfig, model: pin.Model, joint_ids: Mapping[str
     return out
 
 
-def _mimic_ranges(model: pin.Model, joint_ids: Mapping[str, int],
-                  followers: Mapping[str, Mimic]) -> dict[str, list[str]]:  # fmt: skip
+def _mimic_ranges(
+    model: pin.Model, joint_ids: Mapping[str, int], followers: Mapping[str, Mimic]
+) -> dict[str, list[str]]:
     """Per leader, each mimic joint's own limits and what they allow the leader, in words:
     ``"'f' (q_f = -1 q_l + 0; limits [0, 0.548] in the URDF, so [-0.548, 0] for 'l')"``."""
     out: dict[str, list[str]] = {}
@@ -214,9 +234,15 @@ def _mimic_ranges(model: pin.Model, joint_ids: Mapping[str, int],
     return out
 
 
-def _check_movable(config: RobotConfig, names: Sequence[str], lower: np.ndarray,
-                   upper: np.ndarray, kinds: np.ndarray, own: tuple[np.ndarray, np.ndarray],
-                   mimics: Mapping[str, list[str]]) -> None:  # fmt: skip
+def _check_movable(
+    config: RobotConfig,
+    names: Sequence[str],
+    lower: np.ndarray,
+    upper: np.ndarray,
+    kinds: np.ndarray,
+    own: tuple[np.ndarray, np.ndarray],
+    mimics: Mapping[str, list[str]],
+) -> None:
     """A :class:`ModelError` for a scalar joint whose range is empty or a point: its own
     (``own``: the URDF's), or once its mimic joints narrowed it (``mimics``: their ranges
     in words, by leader)."""

@@ -41,8 +41,10 @@ def arm_chain(robot: Robot, cfg: ArmConfig) -> ArmChain:
             frames[key] = robot.frame(getattr(cfg, key))
         except FrameError as exc:
             raise robot.config.error(f"{where}.{key}", str(exc)) from None
-    segments = {key: _segment(robot, f"{where}.{key}", getattr(cfg, key))
-                for key in ("upper_arm", "forearm")}  # fmt: skip
+    segments = {
+        key: _segment(robot, f"{where}.{key}", getattr(cfg, key))
+        for key in ("upper_arm", "forearm")
+    }
     group = robot.groups[cfg.group] if cfg.group else None
     _check_chain(robot, cfg, frames, segments, group)
     lengths = _arm_lengths(robot, cfg, frames)
@@ -70,21 +72,27 @@ def _segment(robot: Robot, key: str, links: tuple[str, ...]) -> tuple[Body, ...]
     for name in links:
         if name not in known:
             raise config.error(
-                key, f"{name!r} is not a link of {config.urdf.name}" + suggest(name, known),
-            )  # fmt: skip
+                key,
+                f"{name!r} is not a link of {config.urdf.name}" + suggest(name, known),
+            )
         mass, com = known[name]
         if mass <= 0:
             raise config.error(
-                key, f"link {name!r} has no mass in the URDF: expected an <inertial> "
+                key,
+                f"link {name!r} has no mass in the URDF: expected an <inertial> "
                 "with mass > 0 (the arm energy needs it)",
-            )  # fmt: skip
+            )
         out.append(Body(name, robot.frame(name), mass, com))
     return tuple(out)
 
 
-def _check_chain(robot: Robot, cfg: ArmConfig, frames: dict[str, Frame],
-                 segments: dict[str, tuple[Body, ...]],
-                 group: JointGroup | None) -> None:  # fmt: skip
+def _check_chain(
+    robot: Robot,
+    cfg: ArmConfig,
+    frames: dict[str, Frame],
+    segments: dict[str, tuple[Body, ...]],
+    group: JointGroup | None,
+) -> None:
     """Shoulder, elbow, wrist and tool one below the other on one kinematic chain, the
     upper arm between shoulder and elbow, the forearm between elbow and wrist, and the
     arm's group made of joints of that chain."""
@@ -103,8 +111,7 @@ def _check_chain(robot: Robot, cfg: ArmConfig, frames: dict[str, Frame],
                 "kinematic chain: expected shoulder, elbow, wrist and tool in that order "
                 "along the arm",
             )
-    for key, (a, b) in (("upper_arm", ("shoulder", "elbow")),
-                        ("forearm", ("elbow", "wrist"))):  # fmt: skip
+    for key, (a, b) in (("upper_arm", ("shoulder", "elbow")), ("forearm", ("elbow", "wrist"))):
         for body in (s.frame for s in segments[key]):
             if not (below(frames[a], body) and below(body, frames[b])):
                 raise robot.config.error(
@@ -122,8 +129,11 @@ def _check_group(robot: Robot, where: str, group: JointGroup, tool: Frame) -> No
     chain = set(model.supports[tool.joint])
     # the base's actuators (wheels, a planar base's virtual joints) move every frame
     base = set(robot.base.wheel_joints)
-    off = [j for j in group.joints if j not in base and model.existJointName(j)
-           and model.getJointId(j) not in chain]  # fmt: skip
+    off = [
+        j
+        for j in group.joints
+        if j not in base and model.existJointName(j) and model.getJointId(j) not in chain
+    ]
     if off:
         raise robot.config.error(
             f"{where}.group",
@@ -140,10 +150,10 @@ def _arm_lengths(robot: Robot, cfg: ArmConfig, frames: dict[str, Frame]) -> tupl
     # only the joints between shoulder and wrist move, the others stay at neutral
     supports, neutral = robot.model.supports, robot.neutral()
     above = set(supports[frames["shoulder"].joint])
-    moving = [robot.model.joints[j] for j in supports[frames["wrist"].joint]
-              if j not in above]  # fmt: skip
-    idx = np.concatenate([np.arange(jm.idx_q, jm.idx_q + jm.nq) for jm in moving]
-                         or [np.zeros(0, dtype=int)])  # fmt: skip
+    moving = [robot.model.joints[j] for j in supports[frames["wrist"].joint] if j not in above]
+    idx = np.concatenate(
+        [np.arange(jm.idx_q, jm.idx_q + jm.nq) for jm in moving] or [np.zeros(0, dtype=int)]
+    )
     rng = np.random.default_rng(0)
     configurations = [neutral]
     for _ in range(20):
@@ -181,11 +191,17 @@ def _centres_hint(robot: Robot, cfg: ArmConfig) -> str:
     them as ``[frames]`` entries."""
     found = suggest_centres(robot, cfg)
     if found is None:
-        return ("; no points of its links are: the axes of the joints between them do not "
-                "meet where they would have to")  # fmt: skip
-    off = [f"the {s.key} {s.frame!r} is {1e3 * s.offset:.1f} mm from one (on the axes of "
-           f"{', '.join(s.axes) or 'no joint'}: xyz = [{', '.join(map(repr, s.xyz))}] in "
-           f"link {s.link!r})" for s in found if s.moved]  # fmt: skip
+        return (
+            "; no points of its links are: the axes of the joints between them do not "
+            "meet where they would have to"
+        )
+    off = [
+        f"the {s.key} {s.frame!r} is {1e3 * s.offset:.1f} mm from one (on the axes of "
+        f"{', '.join(s.axes) or 'no joint'}: xyz = [{', '.join(map(repr, s.xyz))}] in "
+        f"link {s.link!r})"
+        for s in found
+        if s.moved
+    ]
     where = shlex.quote(str(robot.config.path.parent.resolve()))
     return (
         f"; {'; '.join(off)}. `wholebody info {where} --suggest-frames` prints these "

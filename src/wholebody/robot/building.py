@@ -36,14 +36,21 @@ class Built:
     """The model to run on, and how it came from the URDF's: ``locked`` maps each locked
     joint to its position (rad, m), ``locked_groups`` the ``[groups]`` locked whole."""
 
-    def __init__(self, model: pin.Model, full: pin.Model, locked: dict[str, float],
-                 locked_groups: tuple[str, ...], reference: np.ndarray) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: pin.Model,
+        full: pin.Model,
+        locked: dict[str, float],
+        locked_groups: tuple[str, ...],
+        reference: np.ndarray,
+    ) -> None:
         self.model, self.full, self.locked = model, full, locked
         self.locked_groups, self.reference = locked_groups, reference
 
 
-def build_model(config: RobotConfig, info: UrdfInfo, mobile: bool,
-                text: str | None = None) -> Built:  # fmt: skip
+def build_model(
+    config: RobotConfig, info: UrdfInfo, mobile: bool, text: str | None = None
+) -> Built:
     """The robot's Pinocchio model: the URDF (``text``: as ``[joints]`` changed it), its root
     placed at ``[base] height``, locked joints removed, declared frames added."""
     full = _load(config, mobile, text)
@@ -58,8 +65,9 @@ def build_model(config: RobotConfig, info: UrdfInfo, mobile: bool,
     return Built(model, full, locked, groups, reference)
 
 
-def geometry_model(config: RobotConfig, built: Built,
-                   kind: pin.GeometryType) -> tuple[pin.GeometryModel, str]:  # fmt: skip
+def geometry_model(
+    config: RobotConfig, built: Built, kind: pin.GeometryType
+) -> tuple[pin.GeometryModel, str]:
     """The URDF's visual or collision geometry matching ``built.model`` (meshes found through
     the package search path), and a note: empty, or, where a mesh cannot be found, what was
     left out (the geometry is then the URDF's shapes without any mesh)."""
@@ -98,8 +106,9 @@ def _without_meshes(urdf: Path) -> tuple[str, int]:
 _RENAMED = "#link"
 
 
-def _reduced(full: pin.Model, ids: list[int], reference: np.ndarray,
-             geom: pin.GeometryModel | None = None) -> pin.Model:  # fmt: skip
+def _reduced(
+    full: pin.Model, ids: list[int], reference: np.ndarray, geom: pin.GeometryModel | None = None
+) -> pin.Model:
     """``pinocchio.buildReducedModel`` (of the model, or with ``geom`` of the geometry,
     returned alone), for a URDF where a link and a joint share a name too (Pinocchio's
     reduction looks frames up by name alone and refuses the ambiguity): such links' frames
@@ -149,8 +158,9 @@ def _raise_root(model: pin.Model, height: float) -> None:
     model.inertias[0] = model.inertias[0].se3Action(up)
 
 
-def _resolve_locked(config: RobotConfig, info: UrdfInfo, full: pin.Model,
-                    mobile: bool) -> tuple[dict[str, float], tuple[str, ...]]:  # fmt: skip
+def _resolve_locked(
+    config: RobotConfig, info: UrdfInfo, full: pin.Model, mobile: bool
+) -> tuple[dict[str, float], tuple[str, ...]]:
     """``[locked]`` expanded to joints (names, patterns, groups, in the file's order; a later
     key overrides an earlier one for the same joint), with the followers of locked leaders."""
     joints = list(full.names)[2 if mobile else 1 :]  # below the universe and a root joint
@@ -163,8 +173,11 @@ def _resolve_locked(config: RobotConfig, info: UrdfInfo, full: pin.Model,
         else:
             matched = [j for j in joints if fnmatch.fnmatchcase(j, key)]
         if not matched:
-            raise config.error(f"locked.{key}", "matches no joint of the URDF and is not a "
-                               "group: expected a joint, a glob pattern or a group")  # fmt: skip
+            raise config.error(
+                f"locked.{key}",
+                "matches no joint of the URDF and is not a "
+                "group: expected a joint, a glob pattern or a group",
+            )
         for j in matched:
             if j not in joints:
                 raise config.error(f"locked.{key}", f"{j!r} is not a moving joint of the URDF")
@@ -183,8 +196,9 @@ def _check_inside(config: RobotConfig, full: pin.Model, joint: str, value: float
         return
     lo, hi = full.lowerPositionLimit[jm.idx_q], full.upperPositionLimit[jm.idx_q]
     if not lo - 1e-9 <= value <= hi + 1e-9:
-        raise config.error("locked", f"joint {joint!r} locked at {value:g}, outside its limits "
-                           f"[{lo:g}, {hi:g}]")  # fmt: skip
+        raise config.error(
+            "locked", f"joint {joint!r} locked at {value:g}, outside its limits [{lo:g}, {hi:g}]"
+        )
 
 
 def _reference(full: pin.Model, locked: Mapping[str, float]) -> np.ndarray:
@@ -199,8 +213,14 @@ def _reference(full: pin.Model, locked: Mapping[str, float]) -> np.ndarray:
     return q
 
 
-def _add_frame(config: RobotConfig, model: pin.Model, name: str, parent: str,
-               xyz: tuple[float, ...], rpy: tuple[float, ...]) -> None:  # fmt: skip
+def _add_frame(
+    config: RobotConfig,
+    model: pin.Model,
+    name: str,
+    parent: str,
+    xyz: tuple[float, ...],
+    rpy: tuple[float, ...],
+) -> None:
     """An operational frame ``name`` at ``(xyz, rpy)`` in the frame of link or joint
     ``parent``."""
     where = f"frames.{name}"
@@ -215,5 +235,6 @@ def _add_frame(config: RobotConfig, model: pin.Model, name: str, parent: str,
         raise config.error(f"{where}.parent", f"{parent!r} is no link or joint of the model")
     base = model.frames[index]
     local = pin.SE3(pin.rpy.rpyToMatrix(np.array(rpy)), np.array(xyz))
-    model.addFrame(pin.Frame(name, base.parentJoint, index, base.placement * local,
-                             pin.FrameType.OP_FRAME))  # fmt: skip
+    model.addFrame(
+        pin.Frame(name, base.parentJoint, index, base.placement * local, pin.FrameType.OP_FRAME)
+    )

@@ -98,8 +98,12 @@ def suggest_centres(robot: Robot, cfg: ArmConfig) -> tuple[CentreSuggestion, ...
     links = [model.parents[joints[0]], *joints] if joints else []  # position -> joint id
     origins = [data.oMf[f.index].translation.copy() for f in frames]
     for positions, points, sets in _candidates(robot, cfg, links, axes, origins):
-        out = tuple(_suggestion(robot, data, cfg, k, frames[i], links[positions[i]], points[i],
-                                sets[i], origins[i]) for i, k in enumerate(KEYS))  # fmt: skip
+        out = tuple(
+            _suggestion(
+                robot, data, cfg, k, frames[i], links[positions[i]], points[i], sets[i], origins[i]
+            )
+            for i, k in enumerate(KEYS)
+        )
         if _passes(robot, out):
             return out
     return None
@@ -123,8 +127,13 @@ _Choice = tuple[tuple[int, int, int], list[np.ndarray], tuple[list[_Axis], ...]]
 """Link positions of shoulder, elbow and wrist, their points (world, m) and axis sets."""
 
 
-def _candidates(robot: Robot, cfg: ArmConfig, links: list[int], axes: list[_Axis | None],
-                origins: list[np.ndarray]) -> list[_Choice]:  # fmt: skip
+def _candidates(
+    robot: Robot,
+    cfg: ArmConfig,
+    links: list[int],
+    axes: list[_Axis | None],
+    origins: list[np.ndarray],
+) -> list[_Choice]:
     """The possible choices (module docstring) as ``(link positions, points, axis sets)``,
     best first."""
     found = []
@@ -163,10 +172,13 @@ def _allowed(robot: Robot, cfg: ArmConfig, links: list[int]) -> tuple[set[int], 
     positions = range(len(links))
     return (
         {i for i in positions if all(below(links[i], b) for b in upper)},
-        {i for i in positions if all(below(b, links[i]) for b in upper)
-         and all(below(links[i], b) for b in fore)},
+        {
+            i
+            for i in positions
+            if all(below(b, links[i]) for b in upper) and all(below(links[i], b) for b in fore)
+        },
         {i for i in positions if all(below(b, links[i]) for b in fore) and below(links[i], tool)},
-    )  # fmt: skip
+    )
 
 
 def _axis(model: pin.Model, data: pin.Data, j: int) -> _Axis | None:
@@ -192,13 +204,22 @@ def _nearest(axes: list[_Axis], p0: np.ndarray) -> np.ndarray:
 
 def _residual(axes: list[_Axis], p: np.ndarray) -> float:
     """The largest distance (m) from ``p`` to one of ``axes`` (0 without any)."""
-    return max((float(np.linalg.norm(np.cross(p - ax.point, ax.direction))) for ax in axes),
-               default=0.0)  # fmt: skip
+    return max(
+        (float(np.linalg.norm(np.cross(p - ax.point, ax.direction))) for ax in axes), default=0.0
+    )
 
 
-def _suggestion(robot: Robot, data: pin.Data, cfg: ArmConfig, key: str, frame: Frame,
-                joint: int, point: np.ndarray, axes: list[_Axis],
-                origin: np.ndarray) -> CentreSuggestion:  # fmt: skip
+def _suggestion(
+    robot: Robot,
+    data: pin.Data,
+    cfg: ArmConfig,
+    key: str,
+    frame: Frame,
+    joint: int,
+    point: np.ndarray,
+    axes: list[_Axis],
+    origin: np.ndarray,
+) -> CentreSuggestion:
     """The world ``point`` as a frame in the link that ``joint`` moves."""
     link = _link_of(robot, joint)
     local = data.oMf[robot.frame(link).index].actInv(point)
@@ -206,9 +227,16 @@ def _suggestion(robot: Robot, data: pin.Data, cfg: ArmConfig, key: str, frame: F
     while robot.model.existFrame(name):
         name += "_"
     xyz = tuple(round(float(v), 6) + 0.0 for v in local)
-    return CentreSuggestion(cfg.name, key, frame.name, name, link, xyz,  # type: ignore[arg-type]
-                            tuple(a.joint for a in axes),
-                            float(np.linalg.norm(point - origin)))  # fmt: skip
+    return CentreSuggestion(
+        cfg.name,
+        key,
+        frame.name,
+        name,
+        link,
+        xyz,  # type: ignore[arg-type]
+        tuple(a.joint for a in axes),
+        float(np.linalg.norm(point - origin)),
+    )
 
 
 def _link_of(robot: Robot, joint: int) -> str:
@@ -250,9 +278,14 @@ def frames_toml(suggestions: tuple[CentreSuggestion, ...]) -> str:
     for s in moved:
         xyz = ", ".join(repr(v) for v in s.xyz)
         on = ", ".join(s.axes) or "no joint between the frames"
-        lines += [f"# {s.arm} {s.key}: on the axes of {on}; {s.frame!r} is "
-                  f"{1e3 * s.offset:.1f} mm from it",
-                  f"[frames.{s.name}]", f'parent = "{s.link}"', f"xyz = [{xyz}]", ""]  # fmt: skip
+        lines += [
+            f"# {s.arm} {s.key}: on the axes of {on}; {s.frame!r} is "
+            f"{1e3 * s.offset:.1f} mm from it",
+            f"[frames.{s.name}]",
+            f'parent = "{s.link}"',
+            f"xyz = [{xyz}]",
+            "",
+        ]
     keys = ", ".join(f'{s.key} = "{s.name}"' for s in moved if s.name != s.frame)
     if keys:
         lines.append(f"# and in [arms.{moved[0].arm}]: {keys}")
@@ -274,10 +307,14 @@ def centres_text(config: RobotConfig) -> str:
             arm_chain(robot, cfg)
         except ConfigError as exc:
             found = suggest_centres(robot, cfg)
-            parts.append(frames_toml(found) if found else
-                         f"# arm {name}: {exc}\n# no joint centres found: the axes of its "
-                         "joints do not meet where they would have to\n")  # fmt: skip
+            parts.append(
+                frames_toml(found)
+                if found
+                else f"# arm {name}: {exc}\n# no joint centres found: the axes of its "
+                "joints do not meet where they would have to\n"
+            )
         else:
-            parts.append(f"# arm {name}: its shoulder, elbow and wrist frames are joint "
-                         "centres already\n")  # fmt: skip
+            parts.append(
+                f"# arm {name}: its shoulder, elbow and wrist frames are joint centres already\n"
+            )
     return "\n".join(parts) if parts else "# no [arms] in robot.toml\n"

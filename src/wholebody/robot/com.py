@@ -45,8 +45,10 @@ def center_of_mass(
     moving, fixed = float(data.mass[0]), model.inertias[0]
     mass = moving + fixed.mass
     if not mass > 0.0:
-        raise ModelError("the robot has no mass: its URDF has no <inertial> with a mass > 0, "
-                         "so it has no centre of mass")  # fmt: skip
+        raise ModelError(
+            "the robot has no mass: its URDF has no <inertial> with a mass > 0, "
+            "so it has no centre of mass"
+        )
     if not moving > 0.0:  # everything welded to the world (Pinocchio divides by zero)
         c, Jm = np.zeros(3), np.zeros_like(Jm)
     else:

@@ -102,8 +102,16 @@ from wholebody.robot.urdf import PACKAGE, resolve_package
 from wholebody.tomlreader import TomlReader as _Reader
 from wholebody.tomlreader import config_error, load_toml
 
-__all__ = ["ACCELERATION_DEFAULTS", "ArmConfig", "BaseConfig", "FrameConfig", "JointOverride",
-           "RobotConfig", "SwerveModuleConfig", "read_robot_config"]  # fmt: skip
+__all__ = [
+    "ACCELERATION_DEFAULTS",
+    "ArmConfig",
+    "BaseConfig",
+    "FrameConfig",
+    "JointOverride",
+    "RobotConfig",
+    "SwerveModuleConfig",
+    "read_robot_config",
+]
 
 ACCELERATION_DEFAULTS: Mapping[str, float] = {
     "joints": 20.0,  # rad/s^2 (m/s^2 prismatic): inside the 15-40 of common cobots
@@ -250,13 +258,32 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     data = load_toml(path, "robot configuration")
     check_format(r, data, ROBOT)
 
-    r.only(data, "", (FORMAT_KEY, "robot", "base", "groups", "arms", "home", "acceleration",
-                      "locked", "frames", "collision", "sim", "joints"))  # fmt: skip
+    r.only(
+        data,
+        "",
+        (
+            FORMAT_KEY,
+            "robot",
+            "base",
+            "groups",
+            "arms",
+            "home",
+            "acceleration",
+            "locked",
+            "frames",
+            "collision",
+            "sim",
+            "joints",
+        ),
+    )
     robot = r.table(data, "robot", "", required=True)
     r.only(robot, "robot", ("name", "urdf", "description", "package_dirs"))
     name = r.string(robot, "name", "robot")
-    package_dirs = tuple(path.parent / d for d in r.names(robot, "package_dirs", "robot")
-                         ) if "package_dirs" in robot else ()  # fmt: skip
+    package_dirs = (
+        tuple(path.parent / d for d in r.names(robot, "package_dirs", "robot"))
+        if "package_dirs" in robot
+        else ()
+    )
     urdf = _urdf_path(r, path, r.string(robot, "urdf", "robot"), package_dirs)
     description = r.string(robot, "description", "robot", default="")
 
@@ -299,12 +326,18 @@ def read_robot_config(path: str | Path) -> RobotConfig:
     home: dict[str, float] = {}
     for joint in r.table(data, "home", "", required=False):
         home[joint] = r.number(data["home"], joint, "home")
-    acceleration = {key: r.number(data["acceleration"], key, "acceleration", positive=True)
-                    for key in r.table(data, "acceleration", "", required=False)}  # fmt: skip
-    locked = {key: r.number(data["locked"], key, "locked")
-              for key in r.table(data, "locked", "", required=False)}  # fmt: skip
-    frames = {fname: _frame(r, fname, table)
-              for fname, table in r.table(data, "frames", "", required=False).items()}  # fmt: skip
+    acceleration = {
+        key: r.number(data["acceleration"], key, "acceleration", positive=True)
+        for key in r.table(data, "acceleration", "", required=False)
+    }
+    locked = {
+        key: r.number(data["locked"], key, "locked")
+        for key in r.table(data, "locked", "", required=False)
+    }
+    frames = {
+        fname: _frame(r, fname, table)
+        for fname, table in r.table(data, "frames", "", required=False).items()
+    }
 
     collision = _read_collision(r, r.table(data, "collision", "", required=False))
     overrides = r.table(data, "joints", "", required=False)
@@ -346,16 +379,21 @@ def _read_sim(r: _Reader, table: Mapping[str, Any]) -> dict[str, float | bool]:
 
 def _read_collision(r: _Reader, table: Mapping[str, Any]) -> CollisionConfig:
     r.only(table, "collision", ("shapes", "exclude"))
-    shapes = {link: r.string(table["shapes"], link, "collision.shapes",
-                             choices=("capsule", "sphere", "urdf"))
-              for link in r.table(table, "shapes", "collision", required=False)}  # fmt: skip
+    shapes = {
+        link: r.string(
+            table["shapes"], link, "collision.shapes", choices=("capsule", "sphere", "urdf")
+        )
+        for link in r.table(table, "shapes", "collision", required=False)
+    }
     pairs = table.get("exclude", [])
     ok = isinstance(pairs, list) and all(
         isinstance(p, list) and len(p) == 2 and all(isinstance(n, str) for n in p) for p in pairs
     )
     if not ok:
-        raise r.fail("collision.exclude", "expected a list of pairs of link or shape names, "
-                     'e.g. [["torso", "left_forearm"]]')  # fmt: skip
+        raise r.fail(
+            "collision.exclude",
+            'expected a list of pairs of link or shape names, e.g. [["torso", "left_forearm"]]',
+        )
     return CollisionConfig(shapes, tuple((a, b) for a, b in pairs))
 
 
@@ -368,8 +406,11 @@ def _urdf_path(r: _Reader, path: Path, value: str, package_dirs: tuple[Path, ...
             raise r.fail("robot.urdf", str(exc)) from None
     urdf = path.parent / value
     if not urdf.is_file():
-        raise r.fail("robot.urdf", f"file {urdf} does not exist: expected a URDF path relative "
-                     "to the robot.toml or a package:// path")  # fmt: skip
+        raise r.fail(
+            "robot.urdf",
+            f"file {urdf} does not exist: expected a URDF path relative "
+            "to the robot.toml or a package:// path",
+        )
     return urdf
 
 
@@ -398,8 +439,11 @@ def _joint_override(r: _Reader, key: str, table: Any) -> JointOverride:
     position limit for a continuous joint."""
     where = f"joints.{key}"
     if not isinstance(table, dict) or not table:
-        raise r.fail(where, "expected a table of type, lower, upper, velocity, effort, e.g. "
-                     f'[joints.{key}] type = "continuous"')  # fmt: skip
+        raise r.fail(
+            where,
+            "expected a table of type, lower, upper, velocity, effort, e.g. "
+            f'[joints.{key}] type = "continuous"',
+        )
     r.only(table, where, ("type", "lower", "upper", "velocity", "effort"))
     kind = r.string(table, "type", where, choices=JOINT_TYPES) if "type" in table else None
     lower, upper, velocity, effort = (
@@ -407,8 +451,11 @@ def _joint_override(r: _Reader, key: str, table: Any) -> JointOverride:
         for k in ("lower", "upper", "velocity", "effort")
     )
     if kind == "continuous" and (lower is not None or upper is not None):
-        raise r.fail(where, "a continuous joint turns without position limits: give lower "
-                     'and upper with type = "revolute"')  # fmt: skip
+        raise r.fail(
+            where,
+            "a continuous joint turns without position limits: give lower "
+            'and upper with type = "revolute"',
+        )
     if lower is not None and upper is not None and not lower < upper:
         raise r.fail(where, f"lower = {lower:g} must be below upper = {upper:g}")
     return JointOverride(key, kind, lower, upper, velocity, effort)
@@ -439,8 +486,7 @@ def _base_of_type(r: _Reader, table: Mapping[str, Any], kind: str) -> BaseConfig
     if kind == "swerve":
         return _read_swerve(r, table)
     if kind == "mecanum":
-        r.only(table, "base", ("type", "height", "wheels", "wheel_radius", "wheel_base",
-                               "track"))  # fmt: skip
+        r.only(table, "base", ("type", "height", "wheels", "wheel_radius", "wheel_base", "track"))
         return BaseConfig(
             type="mecanum",
             wheels=r.names(table, "wheels", "base", count=4),
@@ -459,21 +505,29 @@ def _base_of_type(r: _Reader, table: Mapping[str, Any], kind: str) -> BaseConfig
 
 def _read_swerve(r: _Reader, table: Mapping[str, Any]) -> BaseConfig:
     """``[base] type = "swerve"``: the twist limits and at least two modules."""
-    r.only(table, "base", ("type", "height", "modules", "max_linear_velocity",
-                           "max_angular_velocity"))  # fmt: skip
+    r.only(
+        table, "base", ("type", "height", "modules", "max_linear_velocity", "max_angular_velocity")
+    )
     modules = table.get("modules")
     if not isinstance(modules, list) or len(modules) < 2:
-        raise r.fail("base.modules", "expected a list of at least two tables "
-                     '{ steering = "<joint>", drive = "<joint>", wheel_radius = <m> }')  # fmt: skip
+        raise r.fail(
+            "base.modules",
+            "expected a list of at least two tables "
+            '{ steering = "<joint>", drive = "<joint>", wheel_radius = <m> }',
+        )
     out = []
     for k, m in enumerate(modules):
         where = f"base.modules[{k}]"
         if not isinstance(m, dict):
             raise r.fail(where, f"expected a table, got {type(m).__name__}")
         r.only(m, where, ("steering", "drive", "wheel_radius"))
-        out.append(SwerveModuleConfig(
-            r.string(m, "steering", where), r.string(m, "drive", where),
-            r.number(m, "wheel_radius", where, positive=True)))  # fmt: skip
+        out.append(
+            SwerveModuleConfig(
+                r.string(m, "steering", where),
+                r.string(m, "drive", where),
+                r.number(m, "wheel_radius", where, positive=True),
+            )
+        )
     joints = [j for m in out for j in (m.steering, m.drive)]
     if len(set(joints)) != len(joints):
         raise r.fail("base.modules", "a joint appears twice among the modules' joints")

@@ -154,8 +154,11 @@ class Configurations:
         if not self.base.floating:
             return q
         pin.framesForwardKinematics(self.model, self._stand_data, q)
-        low = min(M.translation[2] for M, f in zip(self._stand_data.oMf, self.model.frames,
-                                                   strict=True) if f.parentJoint > 0)  # fmt: skip
+        low = min(
+            M.translation[2]
+            for M, f in zip(self._stand_data.oMf, self.model.frames, strict=True)
+            if f.parentJoint > 0
+        )
         q[2] -= low
         return q
 
@@ -181,10 +184,12 @@ class Configurations:
                 )
             return
         values = tuple(pose) if isinstance(pose, (tuple, list, np.ndarray)) else ()
-        if len(values) != 3 or not all(isinstance(v, numbers.Real) and math.isfinite(v)
-                                       for v in values):  # fmt: skip
-            raise DimensionError(f"base_pose must be three finite numbers (x m, y m, yaw rad), "
-                                 f"got {pose!r}")  # fmt: skip
+        if len(values) != 3 or not all(
+            isinstance(v, numbers.Real) and math.isfinite(v) for v in values
+        ):
+            raise DimensionError(
+                f"base_pose must be three finite numbers (x m, y m, yaw rad), got {pose!r}"
+            )
         x, y, yaw = map(float, values)
         if self.base.floating:  # upright, turned by yaw about z: the height is unchanged
             q[0:2] = x, y
@@ -201,19 +206,25 @@ class Configurations:
         uniform in ``[-base_range, base_range]^2`` with any heading (a floating base upright,
         standing)."""
         if not (isinstance(margin, numbers.Real) and 0.0 <= margin < 0.5):
-            raise DimensionError("random_configuration: margin is the fraction of each range kept "
-                                 f"clear on each side, in [0, 0.5); got {margin!r}")  # fmt: skip
+            raise DimensionError(
+                "random_configuration: margin is the fraction of each range kept "
+                f"clear on each side, in [0, 0.5); got {margin!r}"
+            )
         if not (isinstance(base_range, numbers.Real) and 0.0 <= base_range < math.inf):
-            raise DimensionError(f"random_configuration: base_range must be a finite distance "
-                                 f">= 0 (m), got {base_range!r}")  # fmt: skip
+            raise DimensionError(
+                f"random_configuration: base_range must be a finite distance "
+                f">= 0 (m), got {base_range!r}"
+            )
         lower, upper = self.position_limits
         q = self.neutral()
         s = self._scalar
         lo, hi = lower[s], upper[s]
         # a side without a limit: 2 pi (rad or m) from the other, or [-pi, pi] with neither
         has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
-        lo, hi = (np.where(has_lo, lo, np.where(has_hi, hi - 2 * np.pi, -np.pi)),
-                  np.where(has_hi, hi, np.where(has_lo, lo + 2 * np.pi, np.pi)))  # fmt: skip
+        lo, hi = (
+            np.where(has_lo, lo, np.where(has_hi, hi - 2 * np.pi, -np.pi)),
+            np.where(has_hi, hi, np.where(has_lo, lo + 2 * np.pi, np.pi)),
+        )
         span = hi - lo
         q[self._scalar_q] = rng.uniform(lo + margin * span, hi - margin * span)
         ang = rng.uniform(-np.pi, np.pi, self._cont.size)
@@ -323,8 +334,9 @@ class Configurations:
         return pin.integrate(self.model, q, self.actuation.dot(u * dt))
 
 
-def _not_actuated(name: str, locked: Mapping[str, float], followers: Mapping[str, Mimic],
-                  known: Mapping[str, int]) -> str:  # fmt: skip
+def _not_actuated(
+    name: str, locked: Mapping[str, float], followers: Mapping[str, Mimic], known: Mapping[str, int]
+) -> str:
     """Why ``name`` cannot be given a position: locked, a mimic joint, or unknown."""
     if name in locked:
         return f"{name!r} is locked at {locked[name]:g} ([locked] of robot.toml)"

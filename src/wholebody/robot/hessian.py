@@ -76,7 +76,8 @@ def frame_hessian(state: RobotState, frame: Frame, mask: np.ndarray) -> np.ndarr
     J = state.jacobian(frame)
     v, w = J[:3].T, J[3:].T  # (nu, 3)
     m = mask.T[:, :, None]  # [k, l] -> M[l, k]
-    lin = np.where(m, np.cross(w[None, :, :], v[:, None, :]),
-                   np.cross(w[:, None, :], v[None, :, :]))  # fmt: skip
+    lin = np.where(
+        m, np.cross(w[None, :, :], v[:, None, :]), np.cross(w[:, None, :], v[None, :, :])
+    )
     ang = np.where(m, np.cross(w[None, :, :], w[:, None, :]), 0.0)
     return np.transpose(np.concatenate([lin, ang], axis=2), (2, 0, 1))

@@ -39,8 +39,10 @@ def urdf_text(config: RobotConfig) -> str | None:
     for override in config.joints:
         matched = [n for n in joints if fnmatch.fnmatchcase(n, override.key)]
         if not matched:
-            raise config.error(f"joints.{override.key}", "matches no joint of "
-                               f"{config.urdf.name}" + suggest(override.key, joints))  # fmt: skip
+            raise config.error(
+                f"joints.{override.key}",
+                f"matches no joint of {config.urdf.name}" + suggest(override.key, joints),
+            )
         for name in matched:
             _apply(config, override, name, joints[name])
     return ET.tostring(root, encoding="unicode")
@@ -51,9 +53,12 @@ def _apply(config: RobotConfig, o: JointOverride, name: str, joint: ET.Element) 
     where = f"joints.{o.key}"
     kind = joint.get("type")
     if kind not in JOINT_TYPES:
-        raise config.error(where, f"joint {name!r} is {kind} in the URDF: [joints] changes "
-                           f"moving joints ({', '.join(JOINT_TYPES)}); lock a joint you want "
-                           "held ([locked])")  # fmt: skip
+        raise config.error(
+            where,
+            f"joint {name!r} is {kind} in the URDF: [joints] changes "
+            f"moving joints ({', '.join(JOINT_TYPES)}); lock a joint you want "
+            "held ([locked])",
+        )
     kind = o.type or kind
     joint.set("type", kind)
     limit = joint.find("limit")
@@ -69,6 +74,9 @@ def _apply(config: RobotConfig, o: JointOverride, name: str, joint: ET.Element) 
         return
     lower, upper = (float(limit.get(k, "0")) for k in ("lower", "upper"))
     if not lower < upper:
-        raise config.error(where, f"joint {name!r} would have the range [{lower:g}, "
-                           f"{upper:g}] (the URDF's where [joints] gives no lower or upper): "
-                           "give both, lower < upper")  # fmt: skip
+        raise config.error(
+            where,
+            f"joint {name!r} would have the range [{lower:g}, "
+            f"{upper:g}] (the URDF's where [joints] gives no lower or upper): "
+            "give both, lower < upper",
+        )

@@ -149,8 +149,10 @@ class Robot(Configurations):
                 a[self._u_index[name]] = given[name]
             else:
                 known = [*ACCELERATION_DEFAULTS, *self.groups, *self.actuated_joints]
-                raise self.config.error(f"acceleration.{name}", "not a group or joint of the "
-                                        "robot" + suggest(name, known))  # fmt: skip
+                raise self.config.error(
+                    f"acceleration.{name}",
+                    "not a group or joint of the robot" + suggest(name, known),
+                )
         a.setflags(write=False)
         return a
 
@@ -159,8 +161,10 @@ class Robot(Configurations):
         for j in joints:
             if j in self.locked or j in self._followers:
                 why = "locked ([locked])" if j in self.locked else "a mimic joint"
-                raise self.config.error(f"groups.{gname}", f"joint {j!r} is {why}: it is no "
-                                        "velocity of u; leave it out of the group")  # fmt: skip
+                raise self.config.error(
+                    f"groups.{gname}",
+                    f"joint {j!r} is {why}: it is no velocity of u; leave it out of the group",
+                )
             if j not in self._u_index:
                 raise self.config.error(
                     f"groups.{gname}",
@@ -277,8 +281,10 @@ class Robot(Configurations):
         if self.locked:
             lines.append(f"  locked: {len(self.locked)} joints ({_abridged(list(self.locked))})")
         if self._followers:
-            lines.append("  mimic: " + ", ".join(f"{f} follows {m.leader}"
-                                                 for f, m in self._followers.items()))  # fmt: skip
+            lines.append(
+                "  mimic: "
+                + ", ".join(f"{f} follows {m.leader}" for f, m in self._followers.items())
+            )
         for g in self.groups.values():
             lines.append(f"  group {g.name} ({len(g)}): {', '.join(g.joints)}")
         for arm in self.arms.values():

@@ -64,14 +64,25 @@ class SimSettings:
     base_torque: float = 300.0
 
     def __post_init__(self) -> None:
-        for name in ("timestep", "servo_hz", "damping_ratio", "effort_scale", "stall_time",
-                     "friction", "contact_time", "base_force", "base_torque"):  # fmt: skip
+        for name in (
+            "timestep",
+            "servo_hz",
+            "damping_ratio",
+            "effort_scale",
+            "stall_time",
+            "friction",
+            "contact_time",
+            "base_force",
+            "base_torque",
+        ):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ModelError(f"sim setting {name} must be a finite number > 0, got {value!r}")
         if self.contact_time < 2 * self.timestep:
-            raise ModelError(f"sim setting contact_time ({self.contact_time} s) must be at "
-                             f"least two physics steps ({2 * self.timestep} s)")  # fmt: skip
+            raise ModelError(
+                f"sim setting contact_time ({self.contact_time} s) must be at "
+                f"least two physics steps ({2 * self.timestep} s)"
+            )
         for name in ("armature", "damping"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):

@@ -77,8 +77,13 @@ class SwerveModule:
     upper: float
 
 
-def swerve_modules(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int],
-                   config: RobotConfig, urdf: UrdfInfo) -> tuple[SwerveModule, ...]:  # fmt: skip
+def swerve_modules(
+    model: pin.Model,
+    base: BaseModel,
+    joint_ids: Mapping[str, int],
+    config: RobotConfig,
+    urdf: UrdfInfo,
+) -> tuple[SwerveModule, ...]:
     """The modules of a ``swerve`` base read from the model (module docstring); ``()`` for
     another base. A ``robot.toml`` error for a module whose axes are not those of a steered
     wheel or whose radius is not the URDF's."""
@@ -93,55 +98,82 @@ def swerve_modules(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, in
         where = f"base.modules[{k}]"
         js, jd = joint_ids[m.steering], joint_ids[m.drive]
         if js not in model.supports[jd]:
-            raise config.error(where, f"the drive joint {m.drive!r} must be below the steering "
-                               f"joint {m.steering!r} in the URDF")  # fmt: skip
+            raise config.error(
+                where,
+                f"the drive joint {m.drive!r} must be below the steering "
+                f"joint {m.steering!r} in the URDF",
+            )
         s_axis, s_point = _axis(model, data, root, js)
         d_axis, d_point = _axis(model, data, root, jd)
         if abs(abs(s_axis[2]) - 1.0) > _AXIS_TOLERANCE:
-            raise config.error(where, f"the steering joint {m.steering!r} turns about "
-                               f"{np.round(s_axis, 4).tolist()} in the base frame: a steering "
-                               "axis must be vertical (+z or -z)")  # fmt: skip
+            raise config.error(
+                where,
+                f"the steering joint {m.steering!r} turns about "
+                f"{np.round(s_axis, 4).tolist()} in the base frame: a steering "
+                "axis must be vertical (+z or -z)",
+            )
         if abs(d_axis[2]) > _AXIS_TOLERANCE:
-            raise config.error(where, f"the drive joint {m.drive!r} turns about "
-                               f"{np.round(d_axis, 4).tolist()}: a wheel's axis must be "
-                               "horizontal")  # fmt: skip
+            raise config.error(
+                where,
+                f"the drive joint {m.drive!r} turns about "
+                f"{np.round(d_axis, 4).tolist()}: a wheel's axis must be "
+                "horizontal",
+            )
         offset = float(np.linalg.norm(d_point[:2] - s_point[:2]))
         if offset > WHEEL_PLACEMENT_TOLERANCE:
-            raise config.error(where, f"the wheel of {m.drive!r} is {offset:.4f} m off its "
-                               "steering axis: wholebody's swerve modules have the wheel "
-                               "centred under the steering axis (no caster offset)")  # fmt: skip
+            raise config.error(
+                where,
+                f"the wheel of {m.drive!r} is {offset:.4f} m off its "
+                "steering axis: wholebody's swerve modules have the wheel "
+                "centred under the steering axis (no caster offset)",
+            )
         _check_radius(config, urdf, where, m.drive, m.wheel_radius)
         roll = np.cross(d_axis, [0.0, 0.0, 1.0])  # a x z: the rolling direction at angle 0
         iq = model.joints[js].idx_q
         lower, upper = model.lowerPositionLimit[iq], model.upperPositionLimit[iq]
         if model.joints[js].nq == 2:  # a continuous steering joint
             lower, upper = -math.inf, math.inf
-        out.append(SwerveModule(m.steering, m.drive, float(s_point[0]), float(s_point[1]),
-                                m.wheel_radius, math.copysign(1.0, s_axis[2]),
-                                math.atan2(roll[1], roll[0]), float(lower),
-                                float(upper)))  # fmt: skip
+        out.append(
+            SwerveModule(
+                m.steering,
+                m.drive,
+                float(s_point[0]),
+                float(s_point[1]),
+                m.wheel_radius,
+                math.copysign(1.0, s_axis[2]),
+                math.atan2(roll[1], roll[0]),
+                float(lower),
+                float(upper),
+            )
+        )
     return tuple(out)
 
 
-def _axis(model: pin.Model, data: pin.Data, root: pin.SE3,
-          joint: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _axis(
+    model: pin.Model, data: pin.Data, root: pin.SE3, joint: int
+) -> tuple[np.ndarray, np.ndarray]:
     """A one-velocity revolute joint's unit axis and origin in the base (root joint) frame."""
     J = pin.getJointJacobian(model, data, joint, pin.WORLD)[3:, model.joints[joint].idx_v]
     axis = root.rotation.T @ (J / np.linalg.norm(J))
     return axis, root.actInv(data.oMi[joint].translation)
 
 
-def _check_radius(config: RobotConfig, urdf: UrdfInfo, where: str, drive: str,
-                  radius: float) -> None:  # fmt: skip
+def _check_radius(
+    config: RobotConfig, urdf: UrdfInfo, where: str, drive: str, radius: float
+) -> None:
     """The module's radius equals the URDF's wheel (a cylinder or sphere) to 1 mm."""
     r = urdf.radii.get(urdf.children.get(drive, ""))
     if r is not None and abs(r - radius) > WHEEL_PLACEMENT_TOLERANCE:
-        raise config.error(f"{where}.wheel_radius", f"{radius:g} m, but the URDF's wheel of "
-                           f"{drive!r} has a radius of {r:g} m (its geometry)")  # fmt: skip
+        raise config.error(
+            f"{where}.wheel_radius",
+            f"{radius:g} m, but the URDF's wheel of "
+            f"{drive!r} has a radius of {r:g} m (its geometry)",
+        )
 
 
-def module_commands(modules: Sequence[SwerveModule], twist: Sequence[float],
-                    steering: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def module_commands(
+    modules: Sequence[SwerveModule], twist: Sequence[float], steering: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
     """Each module's steering angle (rad) and wheel speed (rad/s) for the base twist
     ``(vx m/s, vy m/s, wz rad/s)`` (base frame), from the present steering angles
     ``steering`` (rad; one per module): the angle nearer to the present one of the two that
@@ -150,8 +182,9 @@ def module_commands(modules: Sequence[SwerveModule], twist: Sequence[float],
     that no angle inside a steering joint's limits gives."""
     vx, vy, wz = (float(c) for c in twist)
     if len(steering) != len(modules):
-        raise DimensionError(f"module_commands: {len(steering)} steering angles for "
-                             f"{len(modules)} modules")  # fmt: skip
+        raise DimensionError(
+            f"module_commands: {len(steering)} steering angles for {len(modules)} modules"
+        )
     angles, speeds = np.empty(len(modules)), np.empty(len(modules))
     for i, (m, now) in enumerate(zip(modules, steering, strict=True)):
         mx, my = vx - wz * m.y, vy + wz * m.x
@@ -177,14 +210,17 @@ def _nearest(theta: float, now: float, m: SwerveModule) -> tuple[float, float]:
         ):
             best = (angle, -1.0 if k % 2 else 1.0)
     if best is None:
-        raise DimensionError(f"swerve module {m.steering!r}: no steering angle inside its "
-                             f"limits [{m.lower:g}, {m.upper:g}] rad gives the heading "
-                             f"{theta:g} rad (or its reverse) near {now:g} rad")  # fmt: skip
+        raise DimensionError(
+            f"swerve module {m.steering!r}: no steering angle inside its "
+            f"limits [{m.lower:g}, {m.upper:g}] rad gives the heading "
+            f"{theta:g} rad (or its reverse) near {now:g} rad"
+        )
     return best
 
 
-def module_twist(modules: Sequence[SwerveModule], steering: Sequence[float],
-                 speeds: Sequence[float]) -> np.ndarray:  # fmt: skip
+def module_twist(
+    modules: Sequence[SwerveModule], steering: Sequence[float], speeds: Sequence[float]
+) -> np.ndarray:
     """The base twist ``(vx, vy, wz)`` (base frame) that the modules at the steering angles
     ``steering`` (rad) and wheel speeds ``speeds`` (rad/s) give, by least squares over the
     modules' velocities ``v_i = w_i r_i (cos, sin)(phi_0 + s theta_i)`` (exact when they

@@ -123,8 +123,10 @@ def resolve_package(uri: str, dirs: Sequence[Path]) -> Path:
             return d / rest
     found = [d / package for d in search if (d / package).is_dir()]
     if found:
-        raise FileNotFoundError(f"{uri}: package {package!r} is at {found[0]}, but "
-                                + _missing_file(found[0], rest.split("/")[1:]))  # fmt: skip
+        raise FileNotFoundError(
+            f"{uri}: package {package!r} is at {found[0]}, but "
+            + _missing_file(found[0], rest.split("/")[1:])
+        )
     hint = f"; install it with {ROBOT_DATA_HINT}" if package == ROBOT_DATA else ""
     known = [p.name for d in search if d.is_dir() for p in d.iterdir() if p.is_dir()]
     close = difflib.get_close_matches(package, known, n=3, cutoff=0.6)
@@ -175,13 +177,20 @@ def read_urdf(path: Path, text: str | None = None) -> UrdfInfo:
             mimic[name] = _mimic(path, name, m)
     for name, m in mimic.items():
         if m.leader not in types or types[m.leader] == "fixed":
-            raise ModelError(f"{path}: joint {name!r} mimics {m.leader!r}, which is not a moving "
-                             "joint of the URDF")  # fmt: skip
+            raise ModelError(
+                f"{path}: joint {name!r} mimics {m.leader!r}, which is not a moving "
+                "joint of the URDF"
+            )
         if m.leader in mimic:
-            raise ModelError(f"{path}: joint {name!r} mimics {m.leader!r}, itself a mimic "
-                             "joint: give it the first leader of the chain")  # fmt: skip
-    child_of = {str(j.get("name")): str(c.get("link")) for j in root.findall("joint")
-                for c in j.findall("child")}  # fmt: skip
+            raise ModelError(
+                f"{path}: joint {name!r} mimics {m.leader!r}, itself a mimic "
+                "joint: give it the first leader of the chain"
+            )
+    child_of = {
+        str(j.get("name")): str(c.get("link"))
+        for j in root.findall("joint")
+        for c in j.findall("child")
+    }
     roots = [name for name in links if name not in set(child_of.values())]
     if len(roots) != 1:
         raise ModelError(f"{path}: expected one root link, found {roots or 'none'}")
@@ -194,9 +203,12 @@ def _radii(root: ET.Element) -> dict[str, float]:
     out: dict[str, float] = {}
     for link in root.findall("link"):
         for tag in ("collision", "visual"):
-            r = [float(g.get("radius", "nan")) for e in link.findall(tag)
-                 for g in (e.find("geometry/cylinder"), e.find("geometry/sphere"))
-                 if g is not None]  # fmt: skip
+            r = [
+                float(g.get("radius", "nan"))
+                for e in link.findall(tag)
+                for g in (e.find("geometry/cylinder"), e.find("geometry/sphere"))
+                if g is not None
+            ]
             r = [v for v in r if np.isfinite(v) and v > 0]
             if r:
                 out[str(link.get("name"))] = max(r)
@@ -204,8 +216,9 @@ def _radii(root: ET.Element) -> dict[str, float]:
     return out
 
 
-def _meshes(path: Path, root: ET.Element,
-            radii: dict[str, float]) -> dict[str, tuple[MeshRef, ...]]:  # fmt: skip
+def _meshes(
+    path: Path, root: ET.Element, radii: dict[str, float]
+) -> dict[str, tuple[MeshRef, ...]]:
     """The meshes of each link that :func:`_radii` found no radius for: its collision
     geometry's, else its visual geometry's."""
     out: dict[str, tuple[MeshRef, ...]] = {}
@@ -214,8 +227,11 @@ def _meshes(path: Path, root: ET.Element,
         if name in radii:
             continue
         for tag in ("collision", "visual"):
-            refs = tuple(_mesh_ref(path, name, e) for e in link.findall(tag)
-                         if e.find("geometry/mesh") is not None)  # fmt: skip
+            refs = tuple(
+                _mesh_ref(path, name, e)
+                for e in link.findall(tag)
+                if e.find("geometry/mesh") is not None
+            )
             if refs:
                 out[name] = refs
                 break
@@ -233,8 +249,12 @@ def _mesh_ref(path: Path, link: str, element: ET.Element) -> MeshRef:
         text = e.get(key, default) if e is not None else default
         return tuple(float(v) for v in _numbers(path, f"{where} {key}>", text, 3))  # type: ignore[return-value]
 
-    return MeshRef(mesh.get("filename", ""), numbers(mesh, "scale", "1 1 1"),
-                   numbers(origin, "xyz", "0 0 0"), numbers(origin, "rpy", "0 0 0"))  # fmt: skip
+    return MeshRef(
+        mesh.get("filename", ""),
+        numbers(mesh, "scale", "1 1 1"),
+        numbers(origin, "xyz", "0 0 0"),
+        numbers(origin, "rpy", "0 0 0"),
+    )
 
 
 def _mimic(path: Path, name: str, element: ET.Element) -> Mimic:
@@ -245,8 +265,10 @@ def _mimic(path: Path, name: str, element: ET.Element) -> Mimic:
     multiplier = float(_numbers(path, f"{where} multiplier>", element.get("multiplier", "1"), 1)[0])
     offset = float(_numbers(path, f"{where} offset>", element.get("offset", "0"), 1)[0])
     if multiplier == 0.0:
-        raise ModelError(f"{path}: joint {name!r}: <mimic multiplier> is 0: the joint would "
-                         "never move; make it fixed")  # fmt: skip
+        raise ModelError(
+            f"{path}: joint {name!r}: <mimic multiplier> is 0: the joint would "
+            "never move; make it fixed"
+        )
     return Mimic(leader, multiplier, offset)
 
 
@@ -296,8 +318,10 @@ def _check_joint(path: Path, joint: ET.Element) -> None:
     if axis is not None:
         xyz = _numbers(path, f"{where} <axis xyz>", axis.get("xyz", "1 0 0"), 3)
         if not np.linalg.norm(xyz) > 1e-9:
-            raise ModelError(f"{path}: {where}: <axis xyz> is zero: the joint would move "
-                             "nothing; give its axis or make it fixed")  # fmt: skip
+            raise ModelError(
+                f"{path}: {where}: <axis xyz> is zero: the joint would move "
+                "nothing; give its axis or make it fixed"
+            )
     limit = joint.find("limit")
     if limit is None:
         return
@@ -305,5 +329,6 @@ def _check_joint(path: Path, joint: ET.Element) -> None:
         if key in limit.attrib:
             value = float(_numbers(path, f"{where} <limit {key}>", limit.get(key, ""), 1)[0])
             if key in ("effort", "velocity") and value < 0:
-                raise ModelError(f"{path}: {where}: <limit {key}> = {value:g} is negative "
-                                 "(0 means not given)")  # fmt: skip
+                raise ModelError(
+                    f"{path}: {where}: <limit {key}> = {value:g} is negative (0 means not given)"
+                )

@@ -22,8 +22,13 @@ from wholebody.robot.base import BaseModel
 from wholebody.robot.config import RobotConfig
 from wholebody.robot.urdf import PACKAGE, MeshRef, UrdfInfo, resolve_package
 
-__all__ = ["WHEEL_PLACEMENT_TOLERANCE", "WHEEL_RADIUS_TOLERANCE", "check_base_geometry",
-           "check_wheel_radius", "wheel_geometry"]  # fmt: skip
+__all__ = [
+    "WHEEL_PLACEMENT_TOLERANCE",
+    "WHEEL_RADIUS_TOLERANCE",
+    "check_base_geometry",
+    "check_wheel_radius",
+    "wheel_geometry",
+]
 
 WHEEL_PLACEMENT_TOLERANCE = 1e-3  # m, between robot.toml's base geometry and the URDF
 WHEEL_RADIUS_TOLERANCE = 0.01
@@ -33,8 +38,9 @@ hard (polyurethane, rubber-coated) robot wheel's rolling radius differs from its
 under load; a typo or a wrong wheel (5 mm on an 8 cm wheel is 6 %) is well beyond it."""
 
 
-def wheel_geometry(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int],
-                   config: RobotConfig) -> BaseModel:  # fmt: skip
+def wheel_geometry(
+    model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int], config: RobotConfig
+) -> BaseModel:
     """The base model with the URDF's wheel axes and axle: a wheel turning positively
     about ``+y`` of the base drives it forward, so a wheel whose joint axis is ``-y``
     gets its column of ``B`` negated; a differential axle at ``x = x_a`` of the base
@@ -75,8 +81,13 @@ def wheel_geometry(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, in
     return replace(base, matrix=B)
 
 
-def check_base_geometry(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int],
-                        config: RobotConfig, urdf: UrdfInfo) -> None:  # fmt: skip
+def check_base_geometry(
+    model: pin.Model,
+    base: BaseModel,
+    joint_ids: Mapping[str, int],
+    config: RobotConfig,
+    urdf: UrdfInfo,
+) -> None:
     """Check the base parameters of robot.toml against the URDF's wheel placements and the
     wheels' radius (:func:`check_wheel_radius`)."""
     cfg = config.base
@@ -111,8 +122,13 @@ def check_base_geometry(model: pin.Model, base: BaseModel, joint_ids: Mapping[st
         )
 
 
-def check_wheel_radius(model: pin.Model, base: BaseModel, joint_ids: Mapping[str, int],
-                       config: RobotConfig, urdf: UrdfInfo) -> None:  # fmt: skip
+def check_wheel_radius(
+    model: pin.Model,
+    base: BaseModel,
+    joint_ids: Mapping[str, int],
+    config: RobotConfig,
+    urdf: UrdfInfo,
+) -> None:
     """``[base] wheel_radius`` against each wheel's geometry in the URDF, to
     :data:`WHEEL_RADIUS_TOLERANCE`: a cylinder's or sphere's radius, or a mesh's extent
     ``max_i |p_i - (p_i . a) a|`` about the wheel's axis ``a`` (vertices ``p_i`` in the
@@ -140,8 +156,9 @@ def check_wheel_radius(model: pin.Model, base: BaseModel, joint_ids: Mapping[str
         )
 
 
-def _mesh_radius(config: RobotConfig, meshes: tuple[MeshRef, ...],
-                 axis: np.ndarray) -> float | None:  # fmt: skip
+def _mesh_radius(
+    config: RobotConfig, meshes: tuple[MeshRef, ...], axis: np.ndarray
+) -> float | None:
     """The largest distance (m) of the meshes' vertices (scaled, placed in the link frame)
     from the line through the link origin along ``axis``; None if a file cannot be read."""
     import coal  # Pinocchio's collision library: it reads the meshes Pinocchio draws

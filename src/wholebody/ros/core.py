@@ -84,8 +84,10 @@ def frame_reach(robot: Robot, frame: str, travel: float = 0.0) -> Reach:
         radius += float(np.linalg.norm(model.jointPlacements[j].translation))
         name = model.names[j]
         if "Prismatic" in model.joints[j].shortname() or model.joints[j].shortname() in (
-            "JointModelPX", "JointModelPY", "JointModelPZ"
-        ):  # fmt: skip
+            "JointModelPX",
+            "JointModelPY",
+            "JointModelPZ",
+        ):
             k = robot.index(name)
             radius += max(abs(lower[k]), abs(upper[k]))
         j = model.parents[j]
@@ -111,13 +113,21 @@ class ControlCore:
         The monotonic clock (s) the refusals are timed with.
     """
 
-    def __init__(self, robot: Robot, node_stack: NodeStack, dt: float, *,
-                 stale_periods: float = 3.0, base_travel: float = 2.0,
-                 clock=time.monotonic) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        node_stack: NodeStack,
+        dt: float,
+        *,
+        stale_periods: float = 3.0,
+        base_travel: float = 2.0,
+        clock=time.monotonic,
+    ) -> None:
         self.robot, self.dt, self.clock = robot, float(dt), clock
         self.node_stack = node_stack
-        self.controller = Controller(robot, node_stack.stack, node_stack.solver, dt=dt,
-                                     recovery=False, threads=1)  # fmt: skip
+        self.controller = Controller(
+            robot, node_stack.stack, node_stack.solver, dt=dt, recovery=False, threads=1
+        )
         self.state = StateAssembler(robot)
         self.limiter = CommandLimiter(robot.velocity_limits, robot.acceleration_limits, dt)
         self.stale_periods = stale_periods
@@ -146,8 +156,9 @@ class ControlCore:
         self.changed = True
         return self.last_refusal[1]
 
-    def on_joint_state(self, names: Sequence[str], positions: Sequence[float], now: float,
-                       stamp: int = 0) -> str | None:  # fmt: skip
+    def on_joint_state(
+        self, names: Sequence[str], positions: Sequence[float], now: float, stamp: int = 0
+    ) -> str | None:
         """A ``JointState`` received at ``now`` (s, monotonic; ``stamp``: its header's,
         ns): None when taken, else the refusal."""
         why = self.state.update_joints(names, positions, now, stamp)
@@ -158,8 +169,9 @@ class ControlCore:
         why = self.state.update_base(x, y, yaw, now)
         return None if why is None else self._refuse("odometry", why)
 
-    def on_target(self, frame: str, frame_id: str, position: Sequence[float],
-                  quaternion: Sequence[float]) -> str | None:  # fmt: skip
+    def on_target(
+        self, frame: str, frame_id: str, position: Sequence[float], quaternion: Sequence[float]
+    ) -> str | None:
         """A target of ``frame``'s task: None when taken, else the refusal."""
         root = self._root()
         pose, why = check_pose(frame_id, position, quaternion, self.reach[frame], root)
@@ -171,8 +183,14 @@ class ControlCore:
         self._active = True
         return None
 
-    def on_twist(self, frame: str, frame_id: str, linear: Sequence[float],
-                 angular: Sequence[float], now: float) -> str | None:  # fmt: skip
+    def on_twist(
+        self,
+        frame: str,
+        frame_id: str,
+        linear: Sequence[float],
+        angular: Sequence[float],
+        now: float,
+    ) -> str | None:
         """A feed-forward twist of ``frame``'s target received at ``now``: None or the
         refusal. A twist older than the stale age is dropped."""
         twist, why = check_twist(frame_id, linear, angular, *MAX_TWIST)
@@ -204,8 +222,11 @@ class ControlCore:
         self._arrived = reading.arrived
         if reading.age > self.max_age or self._uses > self.stale_periods:
             self._restart = True
-            self._set_mode("STALE", f"the newest complete state is {reading.age * 1e3:.1f} "
-                           f"ms old (at most {self.max_age * 1e3:.1f} ms)")  # fmt: skip
+            self._set_mode(
+                "STALE",
+                f"the newest complete state is {reading.age * 1e3:.1f} "
+                f"ms old (at most {self.max_age * 1e3:.1f} ms)",
+            )
             return Tick(self.limiter.stop(), self.mode, 0, -math.inf)
         self._q = reading.q
         if not self._active:
@@ -312,8 +333,10 @@ class ControlCore:
         if model is None or self._q is None:
             return []
         state = self.robot.update(self._q)
-        return [(p.name, p.point_a, p.point_b, p.distance)
-                for p in model.distances(state, within)[:most]]  # fmt: skip
+        return [
+            (p.name, p.point_a, p.point_b, p.distance)
+            for p in model.distances(state, within)[:most]
+        ]
 
     def frame_poses(self) -> dict[str, np.ndarray]:
         """Each task frame's pose (4x4, world) at the last fresh configuration (empty

@@ -67,11 +67,15 @@ class StateAssembler:
             joint = model.joints[model.getJointId(name)]
             self._index[name] = (joint.idx_q, joint.nq == 2, float(lower[k]), float(upper[k]))
         self._mimic = [
-            (model.joints[model.getJointId(f)].idx_q,
-             model.joints[model.getJointId(m.leader)].idx_q, m.multiplier, m.offset)
+            (
+                model.joints[model.getJointId(f)].idx_q,
+                model.joints[model.getJointId(m.leader)].idx_q,
+                m.multiplier,
+                m.offset,
+            )
             for f, m in robot.urdf.mimic.items()
             if model.existJointName(f) and model.existJointName(m.leader)
-        ]  # fmt: skip
+        ]
         """``(q index, leader's q index, multiplier, offset)`` of each mimic joint, which
         follows its leader (its own reading, if any, is not used)."""
         wheels = set(robot.base.wheel_joints)
@@ -89,8 +93,9 @@ class StateAssembler:
         """Every joint whose position is read (wheels included)."""
         return tuple(self._index)
 
-    def update_joints(self, names: Sequence[str], positions: Sequence[float], now: float,
-                      stamp: int = 0) -> str | None:  # fmt: skip
+    def update_joints(
+        self, names: Sequence[str], positions: Sequence[float], now: float, stamp: int = 0
+    ) -> str | None:
         """Take a joint-state message received at ``now`` (s, monotonic), ``stamp`` its
         header's time (ns); None when taken, else why it was refused (nothing kept)."""
         if len(names) != len(positions):
@@ -105,8 +110,10 @@ class StateAssembler:
             if not math.isfinite(value):
                 return f"joint state of {name} is not finite ({value})"
             if not continuous and not lo - self.tolerance <= value <= hi + self.tolerance:
-                return (f"joint state of {name} is {value:.4f}, outside its limits "
-                        f"[{lo:.4f}, {hi:.4f}] by more than {self.tolerance} rad or m")  # fmt: skip
+                return (
+                    f"joint state of {name} is {value:.4f}, outside its limits "
+                    f"[{lo:.4f}, {hi:.4f}] by more than {self.tolerance} rad or m"
+                )
             taken.append((name, value if continuous else min(max(value, lo), hi)))
         self._store(taken, now)
         if taken:

@@ -88,8 +88,12 @@ def pose_stamped(T: np.ndarray, frame_id: str, stamp: Time) -> PoseStamped:
     return PoseStamped(header=Header(stamp=stamp, frame_id=frame_id), pose=_pose(T))
 
 
-def joint_state(names: Sequence[str], stamp: Time, positions: np.ndarray | None = None,
-                velocities: np.ndarray | None = None) -> JointState:  # fmt: skip
+def joint_state(
+    names: Sequence[str],
+    stamp: Time,
+    positions: np.ndarray | None = None,
+    velocities: np.ndarray | None = None,
+) -> JointState:
     """A ``JointState`` with the given fields (rad or m, rad/s or m/s)."""
     msg = JointState(header=Header(stamp=stamp), name=list(names))
     if positions is not None:
@@ -122,33 +126,41 @@ def odometry(base: Sequence[float], v: Sequence[float], stamp: Time, child: str)
     return msg
 
 
-def diagnostics(name: str, hardware: str, level: str, message: str,
-                values: Mapping[str, str], stamp: Time) -> DiagnosticArray:  # fmt: skip
+def diagnostics(
+    name: str, hardware: str, level: str, message: str, values: Mapping[str, str], stamp: Time
+) -> DiagnosticArray:
     """A ``DiagnosticArray`` of one status (``level``: a key of :data:`LEVELS`)."""
     pairs = [KeyValue(key=k, value=v) for k, v in values.items()]
-    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
-                              hardware_id=hardware, values=pairs)  # fmt: skip
+    status = DiagnosticStatus(
+        level=LEVELS[level], name=name, message=message, hardware_id=hardware, values=pairs
+    )
     return DiagnosticArray(header=Header(stamp=stamp), status=[status])
 
 
 def _marker(ns: str, index: int, kind: int, stamp: Time, rgba: Sequence[float]) -> Marker:
-    m = Marker(header=Header(stamp=stamp, frame_id="world"), ns=ns, id=index, type=kind,
-               action=Marker.ADD)  # fmt: skip
+    m = Marker(
+        header=Header(stamp=stamp, frame_id="world"), ns=ns, id=index, type=kind, action=Marker.ADD
+    )
     m.pose.orientation.w = 1.0
     m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
     return m
 
 
-def markers(targets: Mapping[str, np.ndarray | None], frames: Mapping[str, np.ndarray],
-            pairs: Sequence[tuple[str, np.ndarray, np.ndarray, float]],
-            stamp: Time) -> MarkerArray:  # fmt: skip
+def markers(
+    targets: Mapping[str, np.ndarray | None],
+    frames: Mapping[str, np.ndarray],
+    pairs: Sequence[tuple[str, np.ndarray, np.ndarray, float]],
+    stamp: Time,
+) -> MarkerArray:
     """RViz markers: each target (green arrow along its x axis) and current frame (blue
     arrow), and each close collision pair (a line between its witness points, red within
     the pair's distance of 1 cm, orange beyond, labelled with the distance in mm)."""
     out = MarkerArray()
     for i, (name, T) in enumerate(frames.items()):
-        for ns, pose, rgba in (("frames", T, (0.2, 0.4, 1.0, 1.0)),
-                               ("targets", targets.get(name), (0.1, 0.9, 0.2, 1.0))):  # fmt: skip
+        for ns, pose, rgba in (
+            ("frames", T, (0.2, 0.4, 1.0, 1.0)),
+            ("targets", targets.get(name), (0.1, 0.9, 0.2, 1.0)),
+        ):
             if pose is None:
                 continue
             m = _marker(ns, i, Marker.ARROW, stamp, rgba)
@@ -156,8 +168,13 @@ def markers(targets: Mapping[str, np.ndarray | None], frames: Mapping[str, np.nd
             m.scale.x, m.scale.y, m.scale.z = 0.1, 0.01, 0.01
             out.markers.append(m)
     for i, (name, a, b, d) in enumerate(pairs):
-        m = _marker("collision_pairs", i, Marker.LINE_LIST, stamp,
-                    (1.0, 0.1, 0.1, 1.0) if d < 0.01 else (1.0, 0.6, 0.0, 1.0))  # fmt: skip
+        m = _marker(
+            "collision_pairs",
+            i,
+            Marker.LINE_LIST,
+            stamp,
+            (1.0, 0.1, 0.1, 1.0) if d < 0.01 else (1.0, 0.6, 0.0, 1.0),
+        )
         m.scale.x = 0.004
         m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in (a, b)]
         m.text = f"{name}: {d * 1e3:.1f} mm"

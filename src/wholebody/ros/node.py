@@ -57,8 +57,9 @@ COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 class WholebodyNode:
     """The ROS side of a :class:`ControlCore` (module docstring)."""
 
-    def __init__(self, core: ControlCore, rate: float,
-                 collision: CollisionModel | None = None) -> None:  # fmt: skip
+    def __init__(
+        self, core: ControlCore, rate: float, collision: CollisionModel | None = None
+    ) -> None:
         self.core, self.robot = core, core.robot
         self.period = 1.0 / rate
         self.collision = collision
@@ -78,28 +79,38 @@ class WholebodyNode:
     # ------------------------------------------------------------------ topics
     def _subscribe(self) -> None:
         node, robot = self.node, self.robot
-        node.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state,
-                                 SENSOR_QOS)  # fmt: skip
+        node.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, SENSOR_QOS)
         if robot.base.mobile:
             node.create_subscription(Odometry, topics.ODOM, self._on_odometry, SENSOR_QOS)
         for frame in self.core.tasks:
-            node.create_subscription(PoseStamped, topics.frame_topic(frame, "target"),
-                                     lambda m, f=frame: self._on_target(f, m), 10)  # fmt: skip
-            node.create_subscription(TwistStamped, topics.frame_topic(frame, "twist"),
-                                     lambda m, f=frame: self._on_twist(f, m),
-                                     SENSOR_QOS)  # fmt: skip
+            node.create_subscription(
+                PoseStamped,
+                topics.frame_topic(frame, "target"),
+                lambda m, f=frame: self._on_target(f, m),
+                10,
+            )
+            node.create_subscription(
+                TwistStamped,
+                topics.frame_topic(frame, "twist"),
+                lambda m, f=frame: self._on_twist(f, m),
+                SENSOR_QOS,
+            )
 
     def _advertise(self) -> None:
         node, robot = self.node, self.robot
         self.pub_command = node.create_publisher(JointState, topics.COMMAND, COMMAND_QOS)
-        self.pub_array = node.create_publisher(Float64MultiArray, topics.VELOCITY_COMMANDS,
-                                               COMMAND_QOS)  # fmt: skip
-        self.pub_cmd_vel = (node.create_publisher(Twist, topics.CMD_VEL, COMMAND_QOS)
-                            if robot.base.mobile else None)  # fmt: skip
+        self.pub_array = node.create_publisher(
+            Float64MultiArray, topics.VELOCITY_COMMANDS, COMMAND_QOS
+        )
+        self.pub_cmd_vel = (
+            node.create_publisher(Twist, topics.CMD_VEL, COMMAND_QOS) if robot.base.mobile else None
+        )
         self.pub_status = node.create_publisher(DiagnosticArray, topics.STATUS, 10)
         self.pub_markers = node.create_publisher(MarkerArray, topics.MARKERS, 10)
-        self.pub_poses = {f: node.create_publisher(PoseStamped, topics.frame_topic(f, "pose"), 10)
-                          for f in self.core.tasks}  # fmt: skip
+        self.pub_poses = {
+            f: node.create_publisher(PoseStamped, topics.frame_topic(f, "pose"), 10)
+            for f in self.core.tasks
+        }
         self.order = topics.velocity_permutation(robot)
         self.names = list(robot.actuated_joints)
         self.nb = len(robot.base.actuators) if robot.base.mobile else 0
@@ -120,16 +131,18 @@ class WholebodyNode:
     def _on_target(self, frame: str, msg: PoseStamped) -> None:
         p, o = msg.pose.position, msg.pose.orientation
         with self.lock:
-            why = self.core.on_target(frame, msg.header.frame_id, (p.x, p.y, p.z),
-                                      (o.x, o.y, o.z, o.w))  # fmt: skip
+            why = self.core.on_target(
+                frame, msg.header.frame_id, (p.x, p.y, p.z), (o.x, o.y, o.z, o.w)
+            )
         if why:
             self.node.get_logger().warning(why)
 
     def _on_twist(self, frame: str, msg: TwistStamped) -> None:
         v, w = msg.twist.linear, msg.twist.angular
         with self.lock:
-            why = self.core.on_twist(frame, msg.header.frame_id, (v.x, v.y, v.z),
-                                     (w.x, w.y, w.z), time.monotonic())  # fmt: skip
+            why = self.core.on_twist(
+                frame, msg.header.frame_id, (v.x, v.y, v.z), (w.x, w.y, w.z), time.monotonic()
+            )
         if why:
             self.node.get_logger().warning(why)
 
@@ -198,18 +211,23 @@ class WholebodyNode:
             self.core.changed = False
         p50, p99 = self.command_period.percentiles(50, 99)
         l50, l99 = self.latency.percentiles(50, 99)
-        values.update({
-            "rate (Hz)": f"{1.0 / self.period:g}",
-            "missed periods": str(self.metronome.missed),
-            "command period p50 (us)": f"{p50 * 1e6:.0f}",
-            "command period p99 (us)": f"{p99 * 1e6:.0f}",
-            "command period max (us)": f"{self.command_period.maximum() * 1e6:.0f}",
-            "latency state to command p50 (us)": f"{l50 * 1e6:.0f}",
-            "latency state to command p99 (us)": f"{l99 * 1e6:.0f}",
-        })  # fmt: skip
+        values.update(
+            {
+                "rate (Hz)": f"{1.0 / self.period:g}",
+                "missed periods": str(self.metronome.missed),
+                "command period p50 (us)": f"{p50 * 1e6:.0f}",
+                "command period p99 (us)": f"{p99 * 1e6:.0f}",
+                "command period max (us)": f"{self.command_period.maximum() * 1e6:.0f}",
+                "latency state to command p50 (us)": f"{l50 * 1e6:.0f}",
+                "latency state to command p99 (us)": f"{l99 * 1e6:.0f}",
+            }
+        )
         stamp = self.node.get_clock().now().to_msg()
-        self.pub_status.publish(msgs.diagnostics("wholebody: controller", self.robot.name,
-                                                 level, message, values, stamp))  # fmt: skip
+        self.pub_status.publish(
+            msgs.diagnostics(
+                "wholebody: controller", self.robot.name, level, message, values, stamp
+            )
+        )
         self._status_due = now + STATUS_PERIOD
 
     def close(self) -> None:
@@ -227,8 +245,12 @@ def _stop_on_signals(stop: threading.Event) -> None:
         signal.signal(sig, lambda *_: stop.set())
 
 
-def run_node(core: ControlCore, rate: float, ros_args: Sequence[str] = (),
-             collision: CollisionModel | None = None) -> int:  # fmt: skip
+def run_node(
+    core: ControlCore,
+    rate: float,
+    ros_args: Sequence[str] = (),
+    collision: CollisionModel | None = None,
+) -> int:
     """Start ROS, run the node until SIGINT or SIGTERM, stop it; the exit status."""
     stop = threading.Event()
     _stop_on_signals(stop)
@@ -242,8 +264,14 @@ def run_node(core: ControlCore, rate: float, ros_args: Sequence[str] = (),
     return 0
 
 
-def start(robot_name: str, frames: Sequence[str] | None, stack_file: str | None,
-          backend: str, rate: float, ros_args: Sequence[str] = ()) -> int:  # fmt: skip
+def start(
+    robot_name: str,
+    frames: Sequence[str] | None,
+    stack_file: str | None,
+    backend: str,
+    rate: float,
+    ros_args: Sequence[str] = (),
+) -> int:
     """``wholebody ros``: load the robot and the stack, compile and warm the kernels, then
     run the node (module docstring)."""
     from wholebody.robot import load_robot
@@ -267,8 +295,7 @@ def start(robot_name: str, frames: Sequence[str] | None, stack_file: str | None,
     if collision is not None:  # the markers' distance kernel, loaded before the first period
         collision.distances(robot.update(robot.home()), 0.1)
     frames_text = ", ".join(core.tasks)
-    print(f"wholebody: ready; targets on /wholebody/<FRAME>/target for {frames_text}",
-          flush=True)  # fmt: skip
+    print(f"wholebody: ready; targets on /wholebody/<FRAME>/target for {frames_text}", flush=True)
     return run_node(core, rate, ros_args, collision)
 
 

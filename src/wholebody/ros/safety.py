@@ -55,8 +55,9 @@ class CommandLimiter:
         self.velocity = np.asarray(velocity, dtype=float).copy()
         self.acceleration = np.asarray(acceleration, dtype=float).copy()
         if self.velocity.shape != self.acceleration.shape or self.velocity.ndim != 1:
-            raise DimensionError("velocity and acceleration limits must be two vectors of "
-                                 "the same length")  # fmt: skip
+            raise DimensionError(
+                "velocity and acceleration limits must be two vectors of the same length"
+            )
         if np.any(self.velocity <= 0) or np.any(self.acceleration <= 0):
             raise DimensionError("velocity and acceleration limits must be > 0")
         if not (math.isfinite(dt) and dt > 0):
@@ -114,44 +115,59 @@ def pose_matrix(position: Sequence[float], quaternion: Sequence[float]) -> np.nd
     return T
 
 
-def check_pose(frame_id: str, position: Sequence[float], quaternion: Sequence[float],
-               reach: Reach, root: np.ndarray) -> tuple[np.ndarray | None, str]:  # fmt: skip
+def check_pose(
+    frame_id: str,
+    position: Sequence[float],
+    quaternion: Sequence[float],
+    reach: Reach,
+    root: np.ndarray,
+) -> tuple[np.ndarray | None, str]:
     """A target pose (4x4, world) from a ``PoseStamped``'s fields, or None and why it was
     refused: a frame id not in :data:`WORLD_FRAMES`, a non-finite number, a quaternion
     whose norm is off 1 by more than 1 % (one within is normalised), or a position beyond
     ``reach`` of ``root`` (the robot's root origin, world, m)."""
     values = [*position, *quaternion]
     if frame_id not in WORLD_FRAMES:
-        return None, (f"frame_id {frame_id!r}: targets are taken in "
-                      f"{' or '.join(WORLD_FRAMES)}")  # fmt: skip
+        return None, (f"frame_id {frame_id!r}: targets are taken in {' or '.join(WORLD_FRAMES)}")
     if not all(math.isfinite(v) for v in values):
-        return None, (f"not finite: position {[float(v) for v in position]}, orientation "
-                      f"{[float(v) for v in quaternion]}")  # fmt: skip
+        return None, (
+            f"not finite: position {[float(v) for v in position]}, orientation "
+            f"{[float(v) for v in quaternion]}"
+        )
     norm = math.sqrt(sum(v * v for v in quaternion))
     if abs(norm - 1.0) > 0.01:
         return None, f"the orientation quaternion has norm {norm:.4f}, not 1"
     beyond = reach.distance_beyond(np.asarray(position, dtype=float), root)
     if beyond > 0:
-        return None, (f"out of reach: {beyond:.3f} m beyond the {reach.radius:.3f} m the "
-                      f"frame can reach" + (f" after {reach.travel:g} m of base travel"
-                                            if reach.travel else ""))  # fmt: skip
+        return None, (
+            f"out of reach: {beyond:.3f} m beyond the {reach.radius:.3f} m the "
+            f"frame can reach"
+            + (f" after {reach.travel:g} m of base travel" if reach.travel else "")
+        )
     return pose_matrix(position, [v / norm for v in quaternion]), ""
 
 
-def check_twist(frame_id: str, linear: Sequence[float], angular: Sequence[float],
-                max_linear: float, max_angular: float
-                ) -> tuple[np.ndarray | None, str]:  # fmt: skip
+def check_twist(
+    frame_id: str,
+    linear: Sequence[float],
+    angular: Sequence[float],
+    max_linear: float,
+    max_angular: float,
+) -> tuple[np.ndarray | None, str]:
     """A feed-forward twist ``[v (m/s), w (rad/s)]`` (world axes) from a ``TwistStamped``'s
     fields, or None and why it was refused: a frame id not in :data:`WORLD_FRAMES`, a
     non-finite number, or a speed above ``max_linear`` (m/s) or ``max_angular`` (rad/s)."""
     if frame_id not in WORLD_FRAMES:
-        return None, (f"frame_id {frame_id!r}: twists are taken in "
-                      f"{' or '.join(WORLD_FRAMES)} axes")  # fmt: skip
+        return None, (
+            f"frame_id {frame_id!r}: twists are taken in {' or '.join(WORLD_FRAMES)} axes"
+        )
     twist = np.array([*linear, *angular], dtype=float)
     if not np.all(np.isfinite(twist)):
         return None, f"not finite: {twist.tolist()}"
     v, w = float(np.linalg.norm(twist[:3])), float(np.linalg.norm(twist[3:]))
     if v > max_linear or w > max_angular:
-        return None, (f"too fast: {v:.3f} m/s, {w:.3f} rad/s (at most {max_linear:g} m/s, "
-                      f"{max_angular:g} rad/s)")  # fmt: skip
+        return None, (
+            f"too fast: {v:.3f} m/s, {w:.3f} rad/s (at most {max_linear:g} m/s, "
+            f"{max_angular:g} rad/s)"
+        )
     return twist, ""

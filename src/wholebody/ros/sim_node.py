@@ -41,11 +41,13 @@ class SimNode:
         self.node = rclpy.create_node("wholebody_sim")
         node = self.node
         node.create_subscription(JointState, topics.COMMAND, self._on_command, COMMAND_QOS)
-        node.create_subscription(Float64MultiArray, topics.VELOCITY_COMMANDS, self._on_array,
-                                 COMMAND_QOS)  # fmt: skip
+        node.create_subscription(
+            Float64MultiArray, topics.VELOCITY_COMMANDS, self._on_array, COMMAND_QOS
+        )
         self.pub_joints = node.create_publisher(JointState, topics.JOINT_STATES, 10)
-        self.pub_odom = (node.create_publisher(Odometry, topics.ODOM, 10)
-                         if self.robot.base.mobile else None)  # fmt: skip
+        self.pub_odom = (
+            node.create_publisher(Odometry, topics.ODOM, 10) if self.robot.base.mobile else None
+        )
         model = self.robot.model
         self.names = [n for n in self.robot.actuated_joints if model.existJointName(n)]
         self.index = [self.robot.index(n) for n in self.names]
@@ -75,12 +77,16 @@ class SimNode:
         robot, q = self.robot, self.sim.q
         stamp = self.node.get_clock().now().to_msg()
         jp, u = robot.joint_positions(q), self.sim.last_applied
-        self.pub_joints.publish(msgs.joint_state(self.names, stamp, positions=jp[self.index],
-                                                 velocities=u[self.index]))  # fmt: skip
+        self.pub_joints.publish(
+            msgs.joint_state(self.names, stamp, positions=jp[self.index], velocities=u[self.index])
+        )
         if self.pub_odom is not None:
             nb = len(robot.base.actuators)
-            self.pub_odom.publish(msgs.odometry(robot.base_pose(q), robot.base.matrix @ u[:nb],
-                                                stamp, robot.base_frame.name))  # fmt: skip
+            self.pub_odom.publish(
+                msgs.odometry(
+                    robot.base_pose(q), robot.base.matrix @ u[:nb], stamp, robot.base_frame.name
+                )
+            )
 
     def run(self, stop: threading.Event, period: float) -> int:
         """Publish and integrate every ``period`` until ``stop``; the exit status."""
@@ -92,8 +98,7 @@ class SimNode:
             with self.lock:
                 self.sim.step(now)
             if self.sim.stop_reason:
-                print(f"wholebody ros-sim: the physics stopped: {self.sim.stop_reason}",
-                      flush=True)  # fmt: skip
+                print(f"wholebody ros-sim: the physics stopped: {self.sim.stop_reason}", flush=True)
                 return 1
             self.publish()
         return 0
@@ -127,6 +132,9 @@ def start(robot_name: str, sim: str, rate: float, ros_args: Sequence[str] = ()) 
 
     robot = load_robot(robot_name)
     simulated = SimulatedRobot(robot, sim, 1.0 / rate)
-    print(f"wholebody ros-sim: {robot.name}, {sim}, {rate:g} Hz: publishing /joint_states"
-          + (" and /odom" if robot.base.mobile else ""), flush=True)  # fmt: skip
+    print(
+        f"wholebody ros-sim: {robot.name}, {sim}, {rate:g} Hz: publishing /joint_states"
+        + (" and /odom" if robot.base.mobile else ""),
+        flush=True,
+    )
     return run_sim(simulated, rate, ros_args)

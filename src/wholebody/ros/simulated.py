@@ -46,8 +46,14 @@ class SimulatedRobot:
         Seconds without a command after which the robot stops.
     """
 
-    def __init__(self, robot: Robot, sim: str, dt: float, q0: np.ndarray | None = None,
-                 command_timeout: float = 0.1) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        sim: str,
+        dt: float,
+        q0: np.ndarray | None = None,
+        command_timeout: float = 0.1,
+    ) -> None:
         if sim not in SIMS:
             raise ConfigError(f"unknown sim {sim!r}: expected one of {', '.join(SIMS)}")
         self.robot, self.sim, self.dt = robot, sim, float(dt)
@@ -65,13 +71,15 @@ class SimulatedRobot:
             try:
                 from wholebody.sim import MujocoPlant
             except ImportError as exc:
-                raise ConfigError(f"--sim mujoco needs MuJoCo: pip install 'wholebody[sim]' "
-                                  f"({exc})") from None  # fmt: skip
+                raise ConfigError(
+                    f"--sim mujoco needs MuJoCo: pip install 'wholebody[sim]' ({exc})"
+                ) from None
             self.plant = MujocoPlant(robot, settings=robot.sim_settings)
             self.plant.reset(self.q)
 
-    def on_command(self, names: Sequence[str], velocities: Sequence[float],
-                   now: float) -> str | None:  # fmt: skip
+    def on_command(
+        self, names: Sequence[str], velocities: Sequence[float], now: float
+    ) -> str | None:
         """A command by joint name received at ``now`` (s): None when taken, else why it
         was refused (the robot then stops)."""
         if len(names) != len(velocities):

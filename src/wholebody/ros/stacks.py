@@ -60,30 +60,33 @@ class NodeStack:
     collision: CollisionModel | None = None
 
 
-def _frame_tasks(robot: Robot, frames: Sequence[str], kp: float, ki: float
-                 ) -> dict[str, FrameTask]:  # fmt: skip
+def _frame_tasks(robot: Robot, frames: Sequence[str], kp: float, ki: float) -> dict[str, FrameTask]:
     """A frame task per frame, keyed by the frame's name (checked: a topic name part)."""
     tasks: dict[str, FrameTask] = {}
     for frame in frames:
         name = robot.frame(frame).name
         if not _TOPIC_NAME.match(name):
-            raise ConfigError(f"frame {name!r} cannot be part of a ROS topic name (letters, "
-                              f"digits and _, starting with a letter)")  # fmt: skip
+            raise ConfigError(
+                f"frame {name!r} cannot be part of a ROS topic name (letters, "
+                f"digits and _, starting with a letter)"
+            )
         if name in tasks:
             raise ConfigError(f"frame {name!r} given twice")
         tasks[name] = FrameTask(robot, name, kp=kp, ki=ki)
     return tasks
 
 
-def default_stack(robot: Robot, frames: Sequence[str] | None, solver: Solver, *,
-                  kp: float = 10.0, ki: float = 0.0) -> NodeStack:  # fmt: skip
+def default_stack(
+    robot: Robot, frames: Sequence[str] | None, solver: Solver, *, kp: float = 10.0, ki: float = 0.0
+) -> NodeStack:
     """The default stack (module docstring) for ``frames`` (None: the arms' tool
     frames)."""
     if frames is None:
         frames = [arm.tool.name for arm in robot.arms.values()]
         if not frames:
-            raise ConfigError(f"robot {robot.name!r} has no [arms]: name the frames to "
-                              "control with --task FRAME")  # fmt: skip
+            raise ConfigError(
+                f"robot {robot.name!r} has no [arms]: name the frames to control with --task FRAME"
+            )
     tasks = _frame_tasks(robot, frames, kp, ki)
     posture = PostureTask(robot, kp=1.0, weight=1.0)
     metric = paper_metric(robot) if robot.base.mobile else np.ones(robot.nu)
@@ -96,8 +99,7 @@ def default_stack(robot: Robot, frames: Sequence[str] | None, solver: Solver, *,
     return NodeStack(stack, tasks, posture, solver)
 
 
-def scenario_stack(robot: Robot, path: str | Path, solver: Solver, backend: str
-                   ) -> NodeStack:  # fmt: skip
+def scenario_stack(robot: Robot, path: str | Path, solver: Solver, backend: str) -> NodeStack:
     """A scenario file's stack and hands on ``robot`` (module docstring); ``backend``
     ``"pinv"`` leaves the objectives out."""
     from wholebody.scenarios import load_scenario
@@ -105,21 +107,30 @@ def scenario_stack(robot: Robot, path: str | Path, solver: Solver, backend: str
 
     spec = load_scenario(path)
     if scenario_robot(spec).name != robot.name:
-        raise ConfigError(f"{path}: the scenario is for robot {spec.robot!r}, the node runs "
-                          f"{robot.name!r}")  # fmt: skip
+        raise ConfigError(
+            f"{path}: the scenario is for robot {spec.robot!r}, the node runs {robot.name!r}"
+        )
     tasks: dict[str, FrameTask] = {}
     for hand in spec.hands.values():
         tasks.update(_frame_tasks(robot, [hand.frame], hand.kp, hand.ki))
     weights: PaperWeights = spec.stack
-    stiffness = (default_stiffness(robot) if spec.stack.stiffness == "learned"
-                 else spec.stack.stiffness)  # fmt: skip
+    stiffness = (
+        default_stiffness(robot) if spec.stack.stiffness == "learned" else spec.stack.stiffness
+    )
     model = collision_model(spec, robot)
     cs = spec.collision
     avoid = None
     if model is not None and cs is not None and cs.enforce:
-        avoid = CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
-                                   speed=cs.speed)  # fmt: skip
-    stack = paper_stack(robot, list(tasks.values()), objectives=backend != "pinv",
-                        weights=weights, stiffness=stiffness, acceleration=True,
-                        collision=avoid)  # fmt: skip
+        avoid = CollisionAvoidance(
+            robot, model, safety=cs.safety, influence=cs.influence, speed=cs.speed
+        )
+    stack = paper_stack(
+        robot,
+        list(tasks.values()),
+        objectives=backend != "pinv",
+        weights=weights,
+        stiffness=stiffness,
+        acceleration=True,
+        collision=avoid,
+    )
     return NodeStack(stack, tasks, None, solver, model)

@@ -28,8 +28,12 @@ class Metronome:
     ``clock`` and ``sleep`` are the monotonic clock and the sleep (s); tests give their own.
     """
 
-    def __init__(self, period: float, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep) -> None:  # fmt: skip
+    def __init__(
+        self,
+        period: float,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
         if not (math.isfinite(period) and period > 0):
             raise ValueError(f"period must be > 0 s, got {period!r}")
         self.period, self.clock, self.sleep = float(period), clock, sleep

@@ -118,12 +118,15 @@ class MotionScores:
     trials: list[TrialResult] = field(default_factory=list, repr=False)
 
     def as_dict(self) -> dict[str, object]:
-        return {"alpha_rms_deg": self.alpha_rms_deg,
-                "alpha_rms_deg_interval": list(self.alpha_rms_deg_interval),
-                "alpha_rms_deg_by_participant": self.alpha_rms_deg_by_participant,
-                "waist_travel_rad": self.waist_travel_rad, "frames": self.frames,
-                "wrist_error_mm_max": self.wrist_error_mm,
-                "wrist_error_mm_median": self.wrist_error_median_mm}  # fmt: skip
+        return {
+            "alpha_rms_deg": self.alpha_rms_deg,
+            "alpha_rms_deg_interval": list(self.alpha_rms_deg_interval),
+            "alpha_rms_deg_by_participant": self.alpha_rms_deg_by_participant,
+            "waist_travel_rad": self.waist_travel_rad,
+            "frames": self.frames,
+            "wrist_error_mm_max": self.wrist_error_mm,
+            "wrist_error_mm_median": self.wrist_error_median_mm,
+        }
 
 
 def _robot_arm(robot: Robot, side: str) -> ArmChain:
@@ -147,58 +150,89 @@ def defined(S: np.ndarray, E: np.ndarray, W: np.ndarray, min_rho: float) -> np.n
 def robot_wrist_path(arm: ArmChain, rec: Recording) -> np.ndarray:
     """The person's wrist relative to their shoulder, mapped onto the robot's arm, in the
     robot's base axes (T, 3) (m)."""
-    S, E, W = (lab_to_canonical(v - rec.shoulder, rec.side)
-               for v in (rec.shoulder, rec.elbow, rec.wrist))  # fmt: skip
+    S, E, W = (
+        lab_to_canonical(v - rec.shoulder, rec.side) for v in (rec.shoulder, rec.elbow, rec.wrist)
+    )
     _, W_R = map_to_robot(S, E, W, arm.upper_arm_length, arm.forearm_length)
     medial = 1.0 if arm.side == "right" else -1.0  # canonical y (medial) in the base's axes
     return W_R * np.array([1.0, medial, 1.0])
 
 
-def run_trial(robot: Robot, rec: Recording, weights: PaperWeights | None, *,
-              stiffness: object = None, arm_angle_model: object = None, min_rho: float = 0.02,
-              dt: float = 0.01) -> TrialResult:  # fmt: skip
+def run_trial(
+    robot: Robot,
+    rec: Recording,
+    weights: PaperWeights | None,
+    *,
+    stiffness: object = None,
+    arm_angle_model: object = None,
+    min_rho: float = 0.02,
+    dt: float = 0.01,
+) -> TrialResult:
     """Drive the robot's wrist along one trial with the paper's stack of ``weights`` (None:
     the plain pseudo-inverse) and collect the arm angles on the scored frames."""
     arm = _robot_arm(robot, "right" if rec.side == "R" else "left")
     other = next((a for a in robot.arms.values() if a is not arm), None)
     if other is None:
-        raise DataError(f"the motion test drives one arm and holds the other: robot "
-                        f"{robot.name!r} has one arm")  # fmt: skip
+        raise DataError(
+            f"the motion test drives one arm and holds the other: robot {robot.name!r} has one arm"
+        )
     q0 = robot.home()
     path = robot_wrist_path(arm, rec)
-    wrist = RelativePositionTask(robot, arm.shoulder, arm.wrist, axes=robot.base_frame,
-                                 kp=20.0, ki=5.0, name="wrist")  # fmt: skip
+    wrist = RelativePositionTask(
+        robot, arm.shoulder, arm.wrist, axes=robot.base_frame, kp=20.0, ki=5.0, name="wrist"
+    )
     hold = FrameTask(robot, other.tool, kp=20.0, name="other_hand")
     hold.set_target(robot.frame_pose(q0, other.tool))
-    stack = paper_stack(robot, [wrist, hold], objectives=weights is not None,
-                        weights=weights or PaperWeights(), stiffness=stiffness,
-                        arm_angle_model=arm_angle_model)  # fmt: skip
+    stack = paper_stack(
+        robot,
+        [wrist, hold],
+        objectives=weights is not None,
+        weights=weights or PaperWeights(),
+        stiffness=stiffness,
+        arm_angle_model=arm_angle_model,
+    )
     monitor = ArmPotentialEnergy(robot, arm, 0.0)
     start = np.eye(4)
     start[:3, 3] = wrist.relative_position(robot.update(q0))
     goal = start.copy()
     goal[:3, 3] = path[0]
     approach = MinimumJerkTrajectory(start, goal, APPROACH_S)
-    ctrl = Controller(robot, stack, ProjectionSolver(), dt=dt, monitors=[monitor],
-                      references={wrist: approach})  # fmt: skip
+    ctrl = Controller(
+        robot, stack, ProjectionSolver(), dt=dt, monitors=[monitor], references={wrist: approach}
+    )
     first = ctrl.run(q0, APPROACH_S)
-    ctrl = Controller(robot, stack, ProjectionSolver(), dt=dt, monitors=[monitor],
-                      references={wrist: PathTrajectory(rec.time_s, path)})  # fmt: skip
-    log = ctrl.run(np.asarray(first.meta["final_q"]), float(rec.time_s[-1] - rec.time_s[0]),
-                   u0=first.u[-1])  # fmt: skip
+    ctrl = Controller(
+        robot,
+        stack,
+        ProjectionSolver(),
+        dt=dt,
+        monitors=[monitor],
+        references={wrist: PathTrajectory(rec.time_s, path)},
+    )
+    log = ctrl.run(
+        np.asarray(first.meta["final_q"]), float(rec.time_s[-1] - rec.time_s[0]), u0=first.u[-1]
+    )
     t = rec.time_s - rec.time_s[0]
     k = np.clip(np.round(t / dt).astype(int), 0, len(log) - 1)
     human = arm_angle(rec.shoulder, rec.elbow, rec.wrist, rec.side_sign)
     robot_alpha = log.arms[arm.name].arm_angle[k]
-    scored = defined(rec.shoulder, rec.elbow, rec.wrist, min_rho) & (log.arms[arm.name].rho[k]
-                                                                        >= min_rho)  # fmt: skip
+    scored = defined(rec.shoulder, rec.elbow, rec.wrist, min_rho) & (
+        log.arms[arm.name].rho[k] >= min_rho
+    )
     waist = robot.groups.get("waist")
     travel = 0.0
     if waist is not None:
         travel = float(np.abs(np.diff(log.joint_positions[:, waist.indices], axis=0)).sum())
     err = np.linalg.norm(log.task_errors["wrist"], axis=1)
-    return TrialResult(rec.participant, rec.name, human[scored], robot_alpha[scored], travel,
-                       float(err.max()), float(np.median(err)))  # fmt: skip
+    return TrialResult(
+        rec.participant,
+        rec.name,
+        human[scored],
+        robot_alpha[scored],
+        travel,
+        float(err.max()),
+        float(np.median(err)),
+    )
 
 
 def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
@@ -207,8 +241,9 @@ def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
     per participant; waist travel summed (rad)."""
     if not trials:
         raise DataError("compare_arm_angles: no trials")
-    diffs = [np.degrees(np.remainder(t.robot - t.human + math.pi, 2 * math.pi) - math.pi)
-             for t in trials]  # fmt: skip
+    diffs = [
+        np.degrees(np.remainder(t.robot - t.human + math.pi, 2 * math.pi) - math.pi) for t in trials
+    ]
     every = np.concatenate(diffs)
     by: dict[str, list[np.ndarray]] = {}
     for t, d in zip(trials, diffs, strict=True):
@@ -226,8 +261,9 @@ def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
     )
 
 
-def _participant_interval(diffs: Sequence[np.ndarray], n_boot: int = 2000,
-                          seed: int = 0) -> tuple[float, float]:  # fmt: skip
+def _participant_interval(
+    diffs: Sequence[np.ndarray], n_boot: int = 2000, seed: int = 0
+) -> tuple[float, float]:
     """95 % bootstrap interval of the rms over all frames (deg), the participants resampled
     with replacement (``diffs``: one array of differences per participant). Why participants:
     frames of one person are not independent, people are."""
@@ -240,9 +276,14 @@ def _participant_interval(diffs: Sequence[np.ndarray], n_boot: int = 2000,
     return float(low), float(high)
 
 
-def evaluate(robot: Robot, recordings: Sequence[Recording],
-             controllers: Mapping[str, PaperWeights | None], *, stiffness: object = None,
-             arm_angle_model: object = None) -> dict[str, MotionScores]:  # fmt: skip
+def evaluate(
+    robot: Robot,
+    recordings: Sequence[Recording],
+    controllers: Mapping[str, PaperWeights | None],
+    *,
+    stiffness: object = None,
+    arm_angle_model: object = None,
+) -> dict[str, MotionScores]:
     """Every trial under every controller (``name -> weights``; None: the pseudo-inverse).
 
     ``arm_angle_model``: the human arm angle the controllers with a pull use (None: the
@@ -254,15 +295,28 @@ def evaluate(robot: Robot, recordings: Sequence[Recording],
         if missing:
             raise DataError(f"evaluate: no arm-angle model for the participants {missing}")
     models = arm_angle_model if isinstance(arm_angle_model, Mapping) else None
-    return {name: compare_arm_angles([run_trial(robot, rec, w, stiffness=stiffness,
-                                                arm_angle_model=models[rec.participant]
-                                                if models is not None else arm_angle_model)
-                                      for rec in recordings])
-            for name, w in controllers.items()}  # fmt: skip
+    return {
+        name: compare_arm_angles(
+            [
+                run_trial(
+                    robot,
+                    rec,
+                    w,
+                    stiffness=stiffness,
+                    arm_angle_model=models[rec.participant]
+                    if models is not None
+                    else arm_angle_model,
+                )
+                for rec in recordings
+            ]
+        )
+        for name, w in controllers.items()
+    }
 
 
-def held_out_arm_angle_models(recordings: Sequence[Recording], *, n_records: int = 20000,
-                              only: Sequence[str] | None = None) -> dict[str, object]:  # fmt: skip
+def held_out_arm_angle_models(
+    recordings: Sequence[Recording], *, n_records: int = 20000, only: Sequence[str] | None = None
+) -> dict[str, object]:
     """Per participant of ``recordings`` (or of ``only``), the arm-angle network trained as
     the shipped one (:func:`wholebody.humanlike.arm_angle_fit.train_arm_angle`, its default
     settings, on ``n_records`` records of every recording) without that participant's
@@ -299,8 +353,9 @@ objective of ``H`` instead, ``human_arm_angle = w``, stays further from people a
 weight measured: benchmarks/README.md, "Human motion")."""
 
 
-def write_report(scores: Mapping[str, MotionScores], out: Path,
-                 meta: Mapping[str, object]) -> dict[str, Path]:  # fmt: skip
+def write_report(
+    scores: Mapping[str, MotionScores], out: Path, meta: Mapping[str, object]
+) -> dict[str, Path]:
     """``humanlike.json`` (per controller its scores, and ``meta``) and ``humanlike.png``
     (the robot's arm angle against the person's, one panel per controller) in ``out``."""
     from wholebody.files import save_figure, write_json
@@ -323,9 +378,13 @@ def _figure(scores: Mapping[str, MotionScores]):
         step = max(1, h.size // 4000)  # a few thousand points tell the picture
         ax.scatter(h[::step], r[::step], s=2, alpha=0.3)
         ax.plot([-60, 120], [-60, 120], "k--", lw=0.8, label="robot = person")
-        ax.set(xlim=(-60, 120), ylim=(-60, 120), xlabel="person's arm angle (deg)",
-               ylabel="robot's arm angle (deg)",
-               title=f"{name}: {sc.alpha_rms_deg:.1f} deg rms")  # fmt: skip
+        ax.set(
+            xlim=(-60, 120),
+            ylim=(-60, 120),
+            xlabel="person's arm angle (deg)",
+            ylabel="robot's arm angle (deg)",
+            title=f"{name}: {sc.alpha_rms_deg:.1f} deg rms",
+        )
         ax.legend(loc="upper left", fontsize=8)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.9, wspace=0.3)
     return fig

@@ -27,8 +27,15 @@ from wholebody.files import write_json, write_npz, write_text
 from wholebody.scenarios import plots
 from wholebody.scenarios.runner import ScenarioRun
 
-__all__ = ["OutputsInterrupted", "comparison", "comparison_markdown", "physics_arrays",
-           "write_comparison", "write_figures", "write_run"]  # fmt: skip
+__all__ = [
+    "OutputsInterrupted",
+    "comparison",
+    "comparison_markdown",
+    "physics_arrays",
+    "write_comparison",
+    "write_figures",
+    "write_run",
+]
 
 BACKEND_LABELS = {
     "pinv": "pseudo-inverse (paper's baseline)",
@@ -100,17 +107,34 @@ def _figure_jobs(run: ScenarioRun, out: Path) -> list[tuple[str, Callable[[], Pa
     spec, log = run.spec, run.log
     title = f"{spec.title or spec.name} [{run.backend}]"
     jobs: list[tuple[str, Callable[[], Path]]] = [
-        ("hands", partial(plots.hand_paths, log, out / "hands.png", spec.objects,
-                          run.object_poses, title=title)),
-        ("joint_velocities",
-         partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title)),
-    ]  # fmt: skip
+        (
+            "hands",
+            partial(
+                plots.hand_paths,
+                log,
+                out / "hands.png",
+                spec.objects,
+                run.object_poses,
+                title=title,
+            ),
+        ),
+        (
+            "joint_velocities",
+            partial(plots.joint_velocities, log, out / "joint_velocities.png", title=title),
+        ),
+    ]
     if log.arms:
-        jobs.append(("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png",
-                                           title=title)))  # fmt: skip
+        jobs.append(
+            ("arm_energy", partial(plots.arm_energy, log, out / "arm_energy.png", title=title))
+        )
     if run.physics is not None:
-        figure = partial(plots.physics, log, run.physics, out / "physics.png",
-                         title=f"{title} under physics (MuJoCo)")  # fmt: skip
+        figure = partial(
+            plots.physics,
+            log,
+            run.physics,
+            out / "physics.png",
+            title=f"{title} under physics (MuJoCo)",
+        )
         jobs.append(("physics_figure", figure))
     return jobs
 
@@ -187,11 +211,12 @@ def comparison_markdown(rows: list[dict], title: str) -> str:
         cells += [f"{r['final_arm_energy_j'].get(a, float('nan')):.3f}" for a in arms]
         cells += [str(r["solver_failures"]), str(r["limit_violations"])]
         if physics:
-            cells += [f"{1e3 * r['max_tracking_error_m']:.2f}",
-                      f"{1e3 * r['closed_chain_error_max_m']:.2f}" if r["closed_chain"]
-                      else "–",
-                      f"{100 * r['torque_peak_fraction']:.0f}"
-                      + (" (stopped)" if r.get("stopped") else "")]  # fmt: skip
+            cells += [
+                f"{1e3 * r['max_tracking_error_m']:.2f}",
+                f"{1e3 * r['closed_chain_error_max_m']:.2f}" if r["closed_chain"] else "–",
+                f"{100 * r['torque_peak_fraction']:.0f}"
+                + (" (stopped)" if r.get("stopped") else ""),
+            ]
         lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",

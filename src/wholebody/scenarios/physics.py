@@ -76,11 +76,13 @@ def physics_metrics(plant, rec: dict) -> dict:
     saturated = rec["saturated"].mean(axis=0) if len(rec["saturated"]) else []
     m: dict = {
         "torque_peak_nm": {g: float(p.max()) for g, p in peak.items()},
-        "torque_peak_fraction": {g: float((p / rec["group_limit"][g]).max())
-                                 for g, p in peak.items()},
-        "torque_saturated": {plant.dof_name(k): float(share)
-                             for k, share in enumerate(saturated) if share > 0},
-    }  # fmt: skip
+        "torque_peak_fraction": {
+            g: float((p / rec["group_limit"][g]).max()) for g, p in peak.items()
+        },
+        "torque_saturated": {
+            plant.dof_name(k): float(share) for k, share in enumerate(saturated) if share > 0
+        },
+    }
     if plant.planar and len(rec["torque_peak"]):
         m["base_force_peak_n"] = float(rec["torque_peak"][:, :2].max())
         m["base_torque_peak_nm"] = float(rec["torque_peak"][:, 2].max())
@@ -89,16 +91,18 @@ def physics_metrics(plant, rec: dict) -> dict:
         norm = np.linalg.norm(force, axis=1)
         grasp.setdefault(obj, {})[rec["hands"][frame]] = float(norm.max()) if len(norm) else 0.0
     m["grasp_force_peak_n"] = grasp
-    m["squeeze_force_n"] = {obj: {"peak": float(np.nanmax(np.abs(s))),
-                                  "mean": float(np.nanmean(s))}
-                            for obj, s in rec["squeeze"].items()}  # fmt: skip
+    m["squeeze_force_n"] = {
+        obj: {"peak": float(np.nanmax(np.abs(s))), "mean": float(np.nanmean(s))}
+        for obj, s in rec["squeeze"].items()
+    }
     first = sorted(rec["contacts"].items(), key=lambda item: item[1][0])
     m["contacts"] = [{"pair": k, "first_s": t, "peak_force_n": f} for k, (t, f) in first]
     return m
 
 
-def _squeeze(forces: Mapping[tuple[str, str], np.ndarray], log: RunLog,
-             hands: Mapping[str, str]) -> dict[str, np.ndarray]:  # fmt: skip
+def _squeeze(
+    forces: Mapping[tuple[str, str], np.ndarray], log: RunLog, hands: Mapping[str, str]
+) -> dict[str, np.ndarray]:
     """Per object held by two hands at some step: the squeeze (N) at every step, NaN where
     fewer than two hold it."""
     out: dict[str, np.ndarray] = {}
@@ -117,9 +121,13 @@ def _squeeze(forces: Mapping[tuple[str, str], np.ndarray], log: RunLog,
     return out
 
 
-def true_tracking(robot: Robot, log: RunLog, configuration: np.ndarray,
-                  hands: Mapping[str, Frame],
-                  chains: list[tuple[np.ndarray, Frame, Frame]]) -> dict:  # fmt: skip
+def true_tracking(
+    robot: Robot,
+    log: RunLog,
+    configuration: np.ndarray,
+    hands: Mapping[str, Frame],
+    chains: list[tuple[np.ndarray, Frame, Frame]],
+) -> dict:
     """The hands' tracking and the closed chain on the simulated configuration
     ``configuration`` ((N, nq), one row per logged step), not on the one the controller saw.
 

@@ -51,8 +51,16 @@ __all__ = [
     "thin",
 ]
 
-PHASE_COLORS = ("#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22",
-                "#7f7f7f")  # fmt: skip
+PHASE_COLORS = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#17becf",
+    "#bcbd22",
+    "#7f7f7f",
+)
 """One colour per phase, in order, the same in every figure (no red: obstacles; no green:
 carried objects)."""
 OBSTACLE, PROP, CARRIED = "#d62728", "0.45", "#2ca02c"
@@ -83,8 +91,9 @@ def _save(fig: Figure, out: Path) -> Path:
 def _margins(fig: Figure, left: float, right: float, bottom: float, top: float, **kw) -> None:
     """Fixed margins in inches (no layout engine: one draw instead of two or three)."""
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
-                        **kw)  # fmt: skip
+    fig.subplots_adjust(
+        left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, **kw
+    )
 
 
 def thin(t: np.ndarray, y: np.ndarray, n_max: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
@@ -128,8 +137,10 @@ def break_wraps(
 def _phases(log: RunLog) -> list[tuple[str, float, float, str]]:
     """``(name, start s, end s, colour)`` of every phase in order."""
     phases = log.meta.get("phases", {})
-    return [(name, float(t0), float(t1), PHASE_COLORS[i % len(PHASE_COLORS)])
-            for i, (name, (t0, t1)) in enumerate(phases.items())]  # fmt: skip
+    return [
+        (name, float(t0), float(t1), PHASE_COLORS[i % len(PHASE_COLORS)])
+        for i, (name, (t0, t1)) in enumerate(phases.items())
+    ]
 
 
 def _phase_rows(log: RunLog) -> list[tuple[str, int, int, str]]:
@@ -179,8 +190,9 @@ def _box_edges(center: np.ndarray, size: np.ndarray, R: np.ndarray) -> list[np.n
     return edges
 
 
-def _draw_object(ax, obj: ObjectSpec, pose: np.ndarray | None = None, color=PROP,
-                 alpha=0.6) -> None:  # fmt: skip
+def _draw_object(
+    ax, obj: ObjectSpec, pose: np.ndarray | None = None, color=PROP, alpha=0.6
+) -> None:
     """An object's wire frame in a 3-D axes (one line collection per object)."""
     c = np.asarray(obj.position) if pose is None else pose[:3, 3]
     R = np.eye(3) if pose is None else pose[:3, :3]
@@ -256,8 +268,12 @@ def _axes3d(ax, title: str) -> None:
     _title(ax, title)
 
 
-def _draw_objects3d(ax, objects: Mapping[str, ObjectSpec], carried: Mapping[str, np.ndarray],
-                    window: tuple[np.ndarray, np.ndarray] | None = None) -> None:  # fmt: skip
+def _draw_objects3d(
+    ax,
+    objects: Mapping[str, ObjectSpec],
+    carried: Mapping[str, np.ndarray],
+    window: tuple[np.ndarray, np.ndarray] | None = None,
+) -> None:
     """Obstacles (red), props (grey) and each carried object at five instants (green); in a
     ``window``, only what lies within it (by its centre, grown by 0.3 m)."""
 
@@ -337,8 +353,9 @@ def _legend(fig: Figure, log: RunLog, objects: Mapping[str, ObjectSpec], carried
         handles.append(Patch(color=PROP, alpha=0.6, label="prop"))
     if carried:
         handles.append(Patch(color=CARRIED, alpha=0.8, label="carried object"))
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8,
-               frameon=False)  # fmt: skip
+    fig.legend(
+        handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=8, frameon=False
+    )
 
 
 def hand_paths(
@@ -422,8 +439,7 @@ def _obstacle_detail(ax, log: RunLog, obstacles: list[ObjectSpec]) -> None:
         else:
             ax.add_patch(Circle(c[:2], o.radius, color=OBSTACLE, alpha=0.5))
             if o.margin:
-                ax.add_patch(Circle(c[:2], o.radius + o.margin, color=OBSTACLE, fill=False,
-                                    ls=":"))  # fmt: skip
+                ax.add_patch(Circle(c[:2], o.radius + o.margin, color=OBSTACLE, fill=False, ls=":"))
         ax.text(c[0], c[1], o.name, fontsize=7, ha="center")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
@@ -467,10 +483,21 @@ def _phase_labels(ax, log: RunLog, width_in: float, fontsize: float = 7.0) -> No
             ends.append(mid + half)
         else:
             ends[row] = mid + half
-        where = offset_copy(ax.get_xaxis_transform(), fig=ax.figure, y=3 + row * (fontsize + 4),
-                            units="points")  # fmt: skip
-        ax.text(mid, 1.0, name, transform=where, fontsize=fontsize, color=color, ha="center",
-                va="bottom", fontweight="bold", clip_on=False)  # fmt: skip
+        where = offset_copy(
+            ax.get_xaxis_transform(), fig=ax.figure, y=3 + row * (fontsize + 4), units="points"
+        )
+        ax.text(
+            mid,
+            1.0,
+            name,
+            transform=where,
+            fontsize=fontsize,
+            color=color,
+            ha="center",
+            va="bottom",
+            fontweight="bold",
+            clip_on=False,
+        )
 
 
 def joint_velocities(log: RunLog, out: Path, title: str = "") -> Path:
@@ -496,8 +523,14 @@ def joint_velocities_figure(log: RunLog, title: str = "") -> Figure:
             ax.plot(t, u[:, j], lw=0.9, label=names[i] if i < len(names) else str(i))
         ax.set_ylabel(f"{g.replace('_', ' ')}\n(rad/s)", fontsize=9)
         _plain(ax)
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0,
-                  ncol=1 if len(idx) <= 10 else 2, frameon=False)  # fmt: skip
+        ax.legend(
+            fontsize=7,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            borderaxespad=0,
+            ncol=1 if len(idx) <= 10 else 2,
+            frameon=False,
+        )
     axes[-1].set_xlabel("time (s)")
     axes[-1].xaxis.set_major_locator(MaxNLocator(10))
     axes[0].set_xlim(float(log.t[0]), float(log.t[-1] + log.dt))
@@ -526,8 +559,9 @@ def arm_energy_figure(log: RunLog, title: str = "") -> Figure:
         _arm_row(fig, row, log, arm)
     handles = [Line2D([], [], color=c, lw=2, label=label) for label, c in ENERGY_TERMS.items()]
     handles += [Patch(color=c, alpha=0.15, label=f"phase {name}") for name, _, _, c in _phases(log)]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8,
-               frameon=False)  # fmt: skip
+    fig.legend(
+        handles=handles, loc="lower center", ncol=min(len(handles), 8), fontsize=8, frameon=False
+    )
     fig.suptitle(title or "arm potential energy", fontsize=11)
     return fig
 
@@ -554,8 +588,9 @@ def _arm_row(fig: Figure, row: Sequence, log: RunLog, arm: str) -> None:
         ax.set_xlabel("time (s)")
         _title(ax, f"{arm} arm: {what}")
     ts, pts = thin(log.t[ok], np.column_stack([tr.arm_angle[ok], tr.spring[ok]]))
-    sc = row[2].scatter(pts[:, 0], pts[:, 1], s=3, c=ts, cmap="viridis", vmin=float(log.t[0]),
-                        vmax=float(log.t[-1]))  # fmt: skip
+    sc = row[2].scatter(
+        pts[:, 0], pts[:, 1], s=3, c=ts, cmap="viridis", vmin=float(log.t[0]), vmax=float(log.t[-1])
+    )
     bar = fig.colorbar(sc, ax=row[2], pad=0.02, fraction=0.05)
     bar.set_label("time (s)", fontsize=8)
     bar.ax.tick_params(labelsize=7)
@@ -582,14 +617,16 @@ def _plain(ax, bins: int = 5) -> None:
 
 
 # ---------------------------------------------------------------------- physics
-def physics(log: RunLog, physics: Mapping, out: Path, title: str = "",
-            kinematic: RunLog | None = None) -> Path:  # fmt: skip
+def physics(
+    log: RunLog, physics: Mapping, out: Path, title: str = "", kinematic: RunLog | None = None
+) -> Path:
     """:func:`physics_figure` written to ``out`` (PNG)."""
     return _save(physics_figure(log, physics, title, kinematic), out)
 
 
-def physics_figure(log: RunLog, physics: Mapping, title: str = "",
-                   kinematic: RunLog | None = None) -> Figure:  # fmt: skip
+def physics_figure(
+    log: RunLog, physics: Mapping, title: str = "", kinematic: RunLog | None = None
+) -> Figure:
     """A physics run over time: each hand's distance to its reference (mm; a kinematic run
     of the same scenario dashed beside it, if given) and the closed chain's error; the peak
     torque of each joint group as a share of its limit; each grasp's force and the squeeze
@@ -603,8 +640,12 @@ def physics_figure(log: RunLog, physics: Mapping, title: str = "",
         ax_err.plot(*thin(log.t, 1e3 * e), lw=0.9, label=f"{name} (physics)")
         if kinematic is not None and name in kinematic.frame_positions:
             k = kinematic.frame_positions[name] - kinematic.reference_positions[name]
-            ax_err.plot(*thin(kinematic.t, 1e3 * np.linalg.norm(k, axis=1)), lw=0.8, ls="--",
-                        label=f"{name} (kinematic)")  # fmt: skip
+            ax_err.plot(
+                *thin(kinematic.t, 1e3 * np.linalg.norm(k, axis=1)),
+                lw=0.8,
+                ls="--",
+                label=f"{name} (kinematic)",
+            )
     if "closed_chain" in log.task_errors:
         chain = np.linalg.norm(log.task_errors["closed_chain"][:, :3], axis=1)
         ax_err.plot(*thin(log.t, 1e3 * chain), lw=0.9, color="k", label="closed chain")
@@ -623,8 +664,13 @@ def physics_figure(log: RunLog, physics: Mapping, title: str = "",
     for ax in (ax_err, ax_tau, ax_f):
         _plain(ax)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0,
-                      frameon=False)  # fmt: skip
+            ax.legend(
+                fontsize=7,
+                loc="upper left",
+                bbox_to_anchor=(1.01, 1.0),
+                borderaxespad=0,
+                frameon=False,
+            )
     ax_f.set_xlabel("time (s)")
     ax_err.set_xlim(float(log.t[0]), float(log.t[-1] + log.dt))
     _shade_phases((ax_err, ax_tau, ax_f), log)

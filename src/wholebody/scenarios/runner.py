@@ -123,8 +123,10 @@ def start_configuration(spec: ScenarioSpec, robot: Robot) -> np.ndarray:
     if spec.start == "neutral":
         return robot.neutral()
     if isinstance(spec.start, str):
-        raise spec.error("scenario.start", f'expected "home", "neutral" or a table of joint '
-                         f"positions, got {spec.start!r}")  # fmt: skip
+        raise spec.error(
+            "scenario.start",
+            f'expected "home", "neutral" or a table of joint positions, got {spec.start!r}',
+        )
     base = len(robot.base.actuators)
     joints = robot.actuated_joints[base:]
     positions = dict(zip(joints, robot.joint_positions(robot.home())[base:], strict=True))
@@ -132,15 +134,17 @@ def start_configuration(spec: ScenarioSpec, robot: Robot) -> np.ndarray:
     for name, value in spec.start.items():
         key = f"scenario.start.{name}"
         if name in robot.actuated_joints[:base]:
-            raise spec.error(key, f"{name!r} is a base actuator; the base starts at the world "
-                             "origin")  # fmt: skip
+            raise spec.error(
+                key, f"{name!r} is a base actuator; the base starts at the world origin"
+            )
         try:
             k = robot.index(name)
         except FrameError as exc:
             raise spec.error(key, f"unknown joint: {exc}") from None
         if not lower[k] <= value <= upper[k]:
-            raise spec.error(key, f"{value} (rad or m) is outside the joint's limits "
-                             f"[{lower[k]}, {upper[k]}]")  # fmt: skip
+            raise spec.error(
+                key, f"{value} (rad or m) is outside the joint's limits [{lower[k]}, {upper[k]}]"
+            )
         positions[name] = value
     return robot.configuration(positions)
 
@@ -173,8 +177,9 @@ class _Planners:
             z = read_npz(self.spec.planner.demo, "DMP demonstration")
             missing = [k for k in ("positions", "times") if k not in z]
             if missing:
-                raise DataError(f"{self.spec.planner.demo}: DMP demonstration lacks "
-                                f"{', '.join(missing)}")  # fmt: skip
+                raise DataError(
+                    f"{self.spec.planner.demo}: DMP demonstration lacks {', '.join(missing)}"
+                )
             self._demo = (z["positions"], z["times"])
         positions, times = self._demo
         config = DMPConfig(n_basis=self.spec.planner.n_basis, stiffness=self.spec.planner.stiffness)
@@ -297,8 +302,9 @@ def run_scenario(
         first = _chain(robot, phase, tasks, starts)
         phase_collision, phase_model = collision, collision_model
         if spec.collision is not None:
-            phase_collision, phase_model = _carrying(spec, robot, phase, state, tasks, held,
-                                                     collision, collision_model)  # fmt: skip
+            phase_collision, phase_model = _carrying(
+                spec, robot, phase, state, tasks, held, collision, collision_model
+            )
         stack = paper_stack(
             robot,
             entries,
@@ -325,8 +331,13 @@ def run_scenario(
             bar.set_postfix_str(phase.name)
         objects = on_objects if plant is not None else None
         callback = _callback(bar, on_step, objects, plant, t0, sum(len(x) for x in logs))
-        log = controller.run(q, duration, callback=callback, meta={"phase": phase.name},
-                             u0=logs[-1].u[-1] if logs else None)  # fmt: skip
+        log = controller.run(
+            q,
+            duration,
+            callback=callback,
+            meta={"phase": phase.name},
+            u0=logs[-1].u[-1] if logs else None,
+        )
         logs.append(log)
         q = np.asarray(log.meta["final_q"])
         if phase_model is not None:
@@ -343,8 +354,16 @@ def run_scenario(
             break
     if bar is not None:
         bar.close()
-    log = concatenate(logs, {"phases": phases, "scenario": spec.name, "backend": backend,
-                             "start": spec.start, "sim": sim})  # fmt: skip
+    log = concatenate(
+        logs,
+        {
+            "phases": phases,
+            "scenario": spec.name,
+            "backend": backend,
+            "start": spec.start,
+            "sim": sim,
+        },
+    )
     metrics = _metrics(log, spec, duration_scale)
     metrics["sim"], metrics["stopped"] = sim, logs[-1].meta.get("stopped")
     frames = {h: tasks[h].frame for h in tasks}
@@ -362,15 +381,21 @@ def run_scenario(
     return ScenarioRun(spec, backend, log, metrics, poses, wall, physics)
 
 
-def _chain(robot: Robot, phase: PhaseSpec, tasks: dict[str, FrameTask],
-           starts: dict[str, np.ndarray]) -> list[RelativeFrameTask]:  # fmt: skip
+def _chain(
+    robot: Robot, phase: PhaseSpec, tasks: dict[str, FrameTask], starts: dict[str, np.ndarray]
+) -> list[RelativeFrameTask]:
     """A closed-chain phase's relative pose task (the secondary hand in the primary's frame,
     held where the phase starts), for a level above the hands: the grasp is never traded."""
     if not phase.closed_chain:
         return []
     secondary = next(h for h in phase.hands if h != phase.primary)
-    chain = RelativeFrameTask(robot, tasks[phase.primary].frame, tasks[secondary].frame,
-                              name="closed_chain", kp=tasks[phase.primary].kp[0])  # fmt: skip
+    chain = RelativeFrameTask(
+        robot,
+        tasks[phase.primary].frame,
+        tasks[secondary].frame,
+        name="closed_chain",
+        kp=tasks[phase.primary].kp[0],
+    )
     chain.set_target(np.linalg.solve(starts[phase.primary], starts[secondary]))
     return [chain]
 
@@ -390,17 +415,24 @@ def _callback(bar, on_step, on_objects, plant, offset: float, done: int):
     return callback
 
 
-def _physics_outcome(spec: ScenarioSpec, robot: Robot, plant, log: RunLog,
-                     frames: dict[str, Frame], metrics: dict,
-                     latency: int) -> tuple[dict, dict]:  # fmt: skip
+def _physics_outcome(
+    spec: ScenarioSpec,
+    robot: Robot,
+    plant,
+    log: RunLog,
+    frames: dict[str, Frame],
+    metrics: dict,
+    latency: int,
+) -> tuple[dict, dict]:
     """A physics run's object poses and records; its metrics added to ``metrics`` (read
     through a sensor: the true state's tracking and ``sensor`` too)."""
     physics = physics_records(plant, log, frames)
     metrics.update(physics_metrics(plant, physics))
     if not plant.sensor.exact:
         metrics["sensor"] = {**plant.sensor.describe(), "latency_compensated_periods": latency}
-        metrics.update(true_tracking(robot, log, physics["configuration"], frames,
-                                     _chains(spec, log, frames)))  # fmt: skip
+        metrics.update(
+            true_tracking(robot, log, physics["configuration"], frames, _chains(spec, log, frames))
+        )
     return physics_poses(spec.objects, physics), physics
 
 
@@ -415,28 +447,37 @@ def _chains(spec: ScenarioSpec, log: RunLog, frames: dict[str, Frame]) -> list:
     return out
 
 
-def _plant(spec: ScenarioSpec, robot: Robot, sim: str, settings: SimSettings | None,
-           sensor: JointSensor | None = None):  # fmt: skip
+def _plant(
+    spec: ScenarioSpec,
+    robot: Robot,
+    sim: str,
+    settings: SimSettings | None,
+    sensor: JointSensor | None = None,
+):
     """The physics plant of a ``sim="mujoco"`` run (None for ``"kinematic"``), with a weld
     for every (object, hand) a phase carries, read through ``sensor``."""
     if sensor is not None and not isinstance(sensor, JointSensor):
         raise ConfigError(f"sensor must be a wholebody.control.JointSensor, got {sensor!r}")
     if sim == "kinematic":
         if sensor is not None and not sensor.exact:
-            raise ConfigError("a sensor model (noise, delay) reads a simulated plant: it needs "
-                              "sim='mujoco' (--sim mujoco)")  # fmt: skip
+            raise ConfigError(
+                "a sensor model (noise, delay) reads a simulated plant: it needs "
+                "sim='mujoco' (--sim mujoco)"
+            )
         return None
     if sim != "mujoco":
         raise ConfigError(f"unknown sim {sim!r}: expected 'kinematic' or 'mujoco'")
     try:
         from wholebody.sim import MujocoPlant
     except ImportError as exc:  # the sim extra
-        raise ConfigError(f'physics runs need MuJoCo: pip install "wholebody[sim]" ({exc})'
-                          ) from None  # fmt: skip
+        raise ConfigError(
+            f'physics runs need MuJoCo: pip install "wholebody[sim]" ({exc})'
+        ) from None
     frames = {h: s.frame for h, s in spec.hands.items()}
     grasps = {(o, frames[h]) for phase in spec.phases for h, o in _carried(phase).items()}
-    return MujocoPlant(robot, spec.objects.values(), sorted(grasps),
-                       settings or robot.sim_settings, sensor)  # fmt: skip
+    return MujocoPlant(
+        robot, spec.objects.values(), sorted(grasps), settings or robot.sim_settings, sensor
+    )
 
 
 def _carried(phase: PhaseSpec) -> dict[str, str]:
@@ -467,12 +508,19 @@ def _collision(
     if cs is None:
         return None, None
     obstacles = [obstacle_of(spec.objects[name]) for name in cs.obstacles]
-    model = CollisionModel(robot, obstacles, safety=cs.safety, self_collision=cs.self_collision,
-                           attached=attached, start=start)  # fmt: skip
+    model = CollisionModel(
+        robot,
+        obstacles,
+        safety=cs.safety,
+        self_collision=cs.self_collision,
+        attached=attached,
+        start=start,
+    )
     if not cs.enforce:
         return None, model
-    task = CollisionAvoidance(robot, model, safety=cs.safety, influence=cs.influence,
-                              speed=cs.speed)  # fmt: skip
+    task = CollisionAvoidance(
+        robot, model, safety=cs.safety, influence=cs.influence, speed=cs.speed
+    )
     return task, model
 
 
@@ -511,13 +559,16 @@ def collision_model(spec: ScenarioSpec, robot: Robot) -> CollisionModel | None:
 def obstacle_of(obj: ObjectSpec) -> Obstacle:
     """A scenario object as a fixed collision shape (centre at its position, axes the
     world's; a cylinder along z)."""
-    sizes = {"box": tuple(obj.size), "cylinder": (obj.radius, obj.height),
-             "sphere": (obj.radius,)}  # fmt: skip
+    sizes = {"box": tuple(obj.size), "cylinder": (obj.radius, obj.height), "sphere": (obj.radius,)}
     return Obstacle(obj.name, obj.kind, sizes[obj.kind], obj.pose)
 
 
-def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: RunLog,
-                     safety: float, within: float = 0.1) -> dict:  # fmt: skip
+def closest_approach(
+    models: Sequence[tuple[CollisionModel, np.ndarray]],
+    log: RunLog,
+    safety: float,
+    within: float = 0.1,
+) -> dict:
     """``min_collision_distance_m`` over every logged step and checked pair, with the pair,
     the time (s) and its witness points (m, world), and ``collision_limited``: per pair held
     at the safety distance (within 1 mm of it), the tasks more than 1 mm (or rad) off their
@@ -542,19 +593,20 @@ def closest_approach(models: Sequence[tuple[CollisionModel, np.ndarray]], log: R
         if math.isfinite(best[0]):
             break
     pair = best[1]
-    return {"min_collision_distance_m": pair.distance if pair else None,
-            "min_collision_pair": pair.name if pair else "",
-            "min_collision_time_s": best[2],
-            "min_collision_points_m": [pair.point_a.tolist(), pair.point_b.tolist()]
-            if pair else None,
-            "collision_limited": [{"pair": p, "task": t, "steps": n}
-                                  for (p, t), n in sorted(limited.items())]}  # fmt: skip
+    return {
+        "min_collision_distance_m": pair.distance if pair else None,
+        "min_collision_pair": pair.name if pair else "",
+        "min_collision_time_s": best[2],
+        "min_collision_points_m": [pair.point_a.tolist(), pair.point_b.tolist()] if pair else None,
+        "collision_limited": [
+            {"pair": p, "task": t, "steps": n} for (p, t), n in sorted(limited.items())
+        ],
+    }
 
 
 def _unmet(log: RunLog, k: int, tol: float = 1e-3) -> list[str]:
     """The tasks more than ``tol`` off at step ``k``."""
-    return [name for name, e in log.task_errors.items()
-            if np.linalg.norm(e[k]) > tol]  # fmt: skip
+    return [name for name, e in log.task_errors.items() if np.linalg.norm(e[k]) > tol]
 
 
 def _progress_bar(total: int, name: str):

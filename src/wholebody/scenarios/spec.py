@@ -245,9 +245,12 @@ def _rotation_vector(r: TomlReader, spec: dict, where: str) -> tuple[float, floa
     rotate = r.vector(spec, "rotate", where, 3, (0.0, 0.0, 0.0))
     angle = math.sqrt(sum(v * v for v in rotate))
     if angle > math.pi + 1e-6:
-        raise r.fail(f"{where}.rotate", f"a rotation vector in radians has an angle of at most "
-                     f"pi; this one's is {angle:g} (degrees? {angle:g} deg = "
-                     f"{math.radians(angle):.4f} rad)")  # fmt: skip
+        raise r.fail(
+            f"{where}.rotate",
+            f"a rotation vector in radians has an angle of at most "
+            f"pi; this one's is {angle:g} (degrees? {angle:g} deg = "
+            f"{math.radians(angle):.4f} rad)",
+        )
     return rotate  # type: ignore[return-value]
 
 
@@ -270,8 +273,11 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
     path = Path(path)
     r = TomlReader(path)
     check_format(r, data, SCENARIO)
-    r.only(data, "", (FORMAT_KEY, "scenario", "stack", "hands", "planner", "objects",
-                      "phases", "collision"))  # fmt: skip
+    r.only(
+        data,
+        "",
+        (FORMAT_KEY, "scenario", "stack", "hands", "planner", "objects", "phases", "collision"),
+    )
 
     head = r.table(data, "scenario", "", required=True)
     r.only(head, "scenario", ("name", "title", "paper", "robot", "backend", "rate_hz", "start"))
@@ -294,8 +300,9 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
         phases.append(_phase(r, table, f"phases[{i}]", hands, objects, planner, seen))
     collision = None
     if "collision" in data:
-        collision = _collision(r, r.table(data, "collision", "", required=True), objects,
-                               phases, rate)  # fmt: skip
+        collision = _collision(
+            r, r.table(data, "collision", "", required=True), objects, phases, rate
+        )
     return ScenarioSpec(
         collision=collision,
         path=path,
@@ -314,8 +321,9 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
     )
 
 
-def _collision(r: TomlReader, table: dict, objects: dict[str, ObjectSpec],
-               phases: list[PhaseSpec], rate: float) -> CollisionSpec:  # fmt: skip
+def _collision(
+    r: TomlReader, table: dict, objects: dict[str, ObjectSpec], phases: list[PhaseSpec], rate: float
+) -> CollisionSpec:
     """``[collision]``: the constraint's distances and speed, and the objects it keeps the
     robot from (static ones: a carried object moves with the hands)."""
     r.only(table, "collision", tuple(CollisionSpec.__dataclass_fields__))
@@ -328,20 +336,29 @@ def _collision(r: TomlReader, table: dict, objects: dict[str, ObjectSpec],
         obstacles=r.names(table, "obstacles", "collision") if "obstacles" in table else (),
     )
     if not 0 <= spec.safety < spec.influence:
-        raise r.fail("collision.safety", f"expected 0 <= safety < influence "
-                     f"({spec.influence} m), got {spec.safety}")  # fmt: skip
+        raise r.fail(
+            "collision.safety",
+            f"expected 0 <= safety < influence ({spec.influence} m), got {spec.safety}",
+        )
     if spec.speed / rate > spec.influence - spec.safety:
-        raise r.fail("collision.speed", f"speed / rate_hz = {spec.speed / rate:.3g} m exceeds "
-                     f"influence - safety = {spec.influence - spec.safety:.3g} m: a step "
-                     "could cross the safety distance")  # fmt: skip
+        raise r.fail(
+            "collision.speed",
+            f"speed / rate_hz = {spec.speed / rate:.3g} m exceeds "
+            f"influence - safety = {spec.influence - spec.safety:.3g} m: a step "
+            "could cross the safety distance",
+        )
     carried = {hp.carry for p in phases for hp in p.hands.values() if hp.carry}
     for name in spec.obstacles:
         if name not in objects:
-            raise r.fail("collision.obstacles", f"unknown object {name!r}; objects: "
-                         f"{', '.join(objects) or '(none)'}")  # fmt: skip
+            raise r.fail(
+                "collision.obstacles",
+                f"unknown object {name!r}; objects: {', '.join(objects) or '(none)'}",
+            )
         if name in carried:
-            raise r.fail("collision.obstacles", f"{name!r} is carried: it moves with the "
-                         "hands, so it cannot be a fixed obstacle")  # fmt: skip
+            raise r.fail(
+                "collision.obstacles",
+                f"{name!r} is carried: it moves with the hands, so it cannot be a fixed obstacle",
+            )
     return spec
 
 
@@ -424,8 +441,18 @@ def _objects(r: TomlReader, raw: Any) -> dict[str, ObjectSpec]:
 def _object(r: TomlReader, table: Any, where: str) -> ObjectSpec:
     if not isinstance(table, dict):
         raise r.fail(where, "expected a table")
-    keys = ("name", "kind", "size", "radius", "height", "position", "obstacle", "margin", "note",
-            "mass")  # fmt: skip
+    keys = (
+        "name",
+        "kind",
+        "size",
+        "radius",
+        "height",
+        "position",
+        "obstacle",
+        "margin",
+        "note",
+        "mass",
+    )
     r.only(table, where, keys)
     kind = r.string(table, "kind", where, choices=KINDS)
     obj = ObjectSpec(
@@ -455,8 +482,10 @@ def _start(r: TomlReader, head: dict) -> str | dict[str, float]:
     if isinstance(value, str):
         return r.string(head, "start", "scenario", default="home", choices=START_POSTURES)
     if not isinstance(value, dict):
-        raise r.fail("scenario.start", f'expected "home", "neutral" or a table of joint '
-                     f"positions (rad, m), got {value!r}")  # fmt: skip
+        raise r.fail(
+            "scenario.start",
+            f'expected "home", "neutral" or a table of joint positions (rad, m), got {value!r}',
+        )
     return {joint: r.number(value, joint, "scenario.start") for joint in value}
 
 
@@ -480,14 +509,23 @@ def _phase(
     closed = r.boolean(table, "closed_chain", where, default=False)
     primary = r.string(table, "primary", where, default="") or None
     hp = r.table(table, "hands", where, required=True)
-    out = {hname: _hand_phase(r, spec, f"{where}.hands.{hname}", hname, hands, objects, planner)
-           for hname, spec in hp.items()}  # fmt: skip
+    out = {
+        hname: _hand_phase(r, spec, f"{where}.hands.{hname}", hname, hands, objects, planner)
+        for hname, spec in hp.items()
+    }
     _check_phase_hands(r, where, out, hands, closed, primary)
     return PhaseSpec(name, duration, out, closed, primary)
 
 
-def _hand_phase(r: TomlReader, spec: Any, w: str, hname: str, hands: dict[str, HandSpec],
-                objects: dict[str, ObjectSpec], planner: PlannerSpec) -> HandPhase:  # fmt: skip
+def _hand_phase(
+    r: TomlReader,
+    spec: Any,
+    w: str,
+    hname: str,
+    hands: dict[str, HandSpec],
+    objects: dict[str, ObjectSpec],
+    planner: PlannerSpec,
+) -> HandPhase:
     """One hand's planner in a phase (``[phases.hands.NAME]``)."""
     if hname not in hands:
         raise r.fail(w, f"unknown hand {hname!r}; the [hands] are {', '.join(hands)}")
@@ -517,9 +555,14 @@ def _hand_phase(r: TomlReader, spec: Any, w: str, hname: str, hands: dict[str, H
     return HandPhase(kind, goal, _rotation_vector(r, spec, w), avoid, carry, shape)  # type: ignore[arg-type]
 
 
-def _check_phase_hands(r: TomlReader, where: str, out: dict[str, HandPhase],
-                       hands: dict[str, HandSpec], closed: bool,
-                       primary: str | None) -> None:  # fmt: skip
+def _check_phase_hands(
+    r: TomlReader,
+    where: str,
+    out: dict[str, HandPhase],
+    hands: dict[str, HandSpec],
+    closed: bool,
+    primary: str | None,
+) -> None:
     """Every hand planned; a closed chain or a follower has a primary with its own planner;
     at least one hand has a task."""
     missing = [h for h in hands if h not in out]

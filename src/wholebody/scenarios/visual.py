@@ -39,8 +39,9 @@ def _draw_closest(scene: Scene, run: ScenarioRun) -> None:
     a, b = (np.asarray(p) for p in m["min_collision_points_m"])
     gap = b - a
     normal = gap / np.linalg.norm(gap) if np.linalg.norm(gap) > 0 else np.zeros(3)
-    pair = PairDistance(m["min_collision_pair"], "", "", m["min_collision_distance_m"], a, b,
-                        normal, np.zeros(0))  # fmt: skip
+    pair = PairDistance(
+        m["min_collision_pair"], "", "", m["min_collision_distance_m"], a, b, normal, np.zeros(0)
+    )
     scene.closest_pairs([pair], most=1, safety=run.spec.collision.safety)
     scene.marker("closest_approach", (a + b) / 2, color="#d62728", radius=0.01)
 
@@ -49,9 +50,16 @@ class LiveView:
     """A control-loop callback drawing the robot at most ``fps`` times a second and pacing
     the loop to real time (the control computation itself is much faster)."""
 
-    def __init__(self, scene: Scene, dt: float, fps: float = 30.0, realtime: bool = True,
-                 collision: CollisionModel | None = None, influence: float = 0.05,
-                 safety: float = 0.01) -> None:  # fmt: skip
+    def __init__(
+        self,
+        scene: Scene,
+        dt: float,
+        fps: float = 30.0,
+        realtime: bool = True,
+        collision: CollisionModel | None = None,
+        influence: float = 0.05,
+        safety: float = 0.01,
+    ) -> None:
         self.scene, self.dt, self.realtime = scene, dt, realtime
         self.every = max(1, round(1.0 / (fps * dt)))
         self._start: float | None = None
@@ -74,8 +82,9 @@ class LiveView:
             self.scene.move(f"scene/props/{name}", pose)
         if self.collision is not None:
             state = self.collision.robot.update(q)
-            self.scene.closest_pairs(self.collision.distances(state, self.influence),
-                                     safety=self.safety)  # fmt: skip
+            self.scene.closest_pairs(
+                self.collision.distances(state, self.influence), safety=self.safety
+            )
         if self.realtime:
             lag = (self._start + t) - time.perf_counter()
             if lag > 0:

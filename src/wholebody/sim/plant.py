@@ -116,9 +116,14 @@ class MujocoPlant:
     simulated one, exactly); :attr:`PhysicsLog.configuration` keeps the true one.
     """
 
-    def __init__(self, robot: Robot, objects: Iterable[ObjectSpec] = (),
-                 grasps: Iterable[tuple[str, str]] = (), settings: SimSettings | None = None,
-                 sensor: JointSensor | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        objects: Iterable[ObjectSpec] = (),
+        grasps: Iterable[tuple[str, str]] = (),
+        settings: SimSettings | None = None,
+        sensor: JointSensor | None = None,
+    ) -> None:
         self.robot = robot
         self.settings = settings or SimSettings()
         self.sensor = sensor or JointSensor()
@@ -158,8 +163,10 @@ class MujocoPlant:
         self._dofs = self.world.dofs
         # the velocities with a motor: all but a free flyer's six
         self._driven = np.arange(6 if free else 0, self.robot.nv)
-        self._actuators = np.array([m.actuator(m.joint(m.dof_jntid[d]).name).id
-                                    for d in self._dofs[self._driven]], dtype=int)  # fmt: skip
+        self._actuators = np.array(
+            [m.actuator(m.joint(m.dof_jntid[d]).name).id for d in self._dofs[self._driven]],
+            dtype=int,
+        )
         self._A = np.asarray(self.robot.actuation)
         base = self.robot.base
         self._wheels = base.matrix if (planar and base.wheel_joints) else np.zeros((3, 0))
@@ -227,8 +234,9 @@ class MujocoPlant:
         mujoco.mj_kinematics(self.model, self.data)
         unknown = sorted(grasps - set(self.world.welds))
         if unknown:
-            raise ModelError(f"no grasp {unknown[0]} in the model; its grasps: "
-                             f"{list(self.world.welds)}")  # fmt: skip
+            raise ModelError(
+                f"no grasp {unknown[0]} in the model; its grasps: {list(self.world.welds)}"
+            )
         for (name, frame), eq in self.world.welds.items():
             on = (name, frame) in grasps
             if on and not self.data.eq_active[eq]:
@@ -249,8 +257,9 @@ class MujocoPlant:
         obj = self.world.objects[name]
         geom = int(self.model.body_geomadr[obj])
         hand = self.robot.frame_pose(self.configuration(), frame)[:3, 3]
-        return float(np.linalg.norm(hand - self.data.xpos[obj]) - self.model.geom_rbound[geom]
-                     - margin)  # fmt: skip
+        return float(
+            np.linalg.norm(hand - self.data.xpos[obj]) - self.model.geom_rbound[geom] - margin
+        )
 
     def _weld_here(self, eq: int, hand: int, obj: int) -> None:
         """The weld's relative pose set to the bodies' current one (no jump when it starts)."""
@@ -272,12 +281,16 @@ class MujocoPlant:
         (:attr:`stop_reason`) and the configuration given before the step is returned."""
         now = self.configuration()
         if not np.allclose(np.asarray(q, dtype=float), self._seen, atol=1e-6):
-            raise ModelError("the plant is not at the controller's configuration: call "
-                             "plant.reset(q0) before running from q0")  # fmt: skip
+            raise ModelError(
+                "the plant is not at the controller's configuration: call "
+                "plant.reset(q0) before running from q0"
+            )
         n = round(dt / self.settings.timestep)
         if n < 1 or abs(n * self.settings.timestep - dt) > 1e-9:
-            raise DimensionError(f"the control period {dt} s must be a whole number of physics "
-                                 f"steps of {self.settings.timestep} s")  # fmt: skip
+            raise DimensionError(
+                f"the control period {dt} s must be a whole number of physics "
+                f"steps of {self.settings.timestep} s"
+            )
         v = self._A @ np.asarray(u, dtype=float)
         m, d = self.model, self.data
         self._record_poses()
@@ -301,8 +314,10 @@ class MujocoPlant:
         mujoco.mj_kinematics(m, d)  # the bodies' poses at the new state, not the last step's
         self._record(peak, saturated, wheels)
         if self._warnings() != warnings:
-            self.stop_reason = (f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
-                                f"found a bad position, velocity or acceleration)")  # fmt: skip
+            self.stop_reason = (
+                f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
+                f"found a bad position, velocity or acceleration)"
+            )
             self.data.qpos[:] = self.qpos(now)
             return self._seen.copy()
         self._check(demand)
@@ -380,8 +395,7 @@ class MujocoPlant:
         """The contacts now of the robot and of the objects it holds: first time and peak
         normal force per pair."""
         m, d = self.model, self.data
-        held = {self.world.objects[o] for (o, _), eq in self.world.welds.items()
-                if d.eq_active[eq]}  # fmt: skip
+        held = {self.world.objects[o] for (o, _), eq in self.world.welds.items() if d.eq_active[eq]}
         wrench = np.zeros(6)
         for i in range(d.ncon):
             c = d.contact[i]
@@ -435,8 +449,10 @@ class MujocoPlant:
         stalled = np.flatnonzero(self._stalled >= stall)
         if stalled.size:
             k = int(stalled[np.argmax(demand[stalled] / self.world.effort[stalled])])
-            slide = self.model.jnt_type[self.model.dof_jntid[self._dofs[k]]] == \
-                mujoco.mjtJoint.mjJNT_SLIDE  # fmt: skip
+            slide = (
+                self.model.jnt_type[self.model.dof_jntid[self._dofs[k]]]
+                == mujoco.mjtJoint.mjJNT_SLIDE
+            )
             unit = "N" if slide else "N m"
             wheels = " (or its wheels' limit)" if self.planar and k < 3 else ""
             self.stop_reason = (

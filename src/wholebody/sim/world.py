@@ -111,11 +111,16 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     if kind == "Planar":
         names = (f"{name}_x", f"{name}_y", f"{name}_yaw")
-        for n, jt, axis in zip(names, ("slide", "slide", "hinge"), ((1, 0, 0), (0, 1, 0),
-                               (0, 0, 1)), strict=True):  # fmt: skip
-            body.add_joint(name=n, type=getattr(mujoco.mjtJoint, f"mjJNT_{jt.upper()}"),
-                           axis=axis, damping=settings.damping,
-                           armature=settings.armature)  # fmt: skip
+        for n, jt, axis in zip(
+            names, ("slide", "slide", "hinge"), ((1, 0, 0), (0, 1, 0), (0, 0, 1)), strict=True
+        ):
+            body.add_joint(
+                name=n,
+                type=getattr(mujoco.mjtJoint, f"mjJNT_{jt.upper()}"),
+                axis=axis,
+                damping=settings.damping,
+                armature=settings.armature,
+            )
         return names
     if kind == "FreeFlyer":
         body.add_freejoint(name=name)
@@ -126,21 +131,35 @@ def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[s
         axis, jtype = _SLIDE.get(kind) or tuple(joint.extract().axis), mujoco.mjtJoint.mjJNT_SLIDE
     elif kind in _CONTINUOUS or kind == "RevoluteUnboundedUnaligned":
         axis = _CONTINUOUS.get(kind) or tuple(joint.extract().axis)
-        body.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_HINGE, axis=axis,
-                       armature=settings.armature, damping=settings.damping)  # fmt: skip
+        body.add_joint(
+            name=name,
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=axis,
+            armature=settings.armature,
+            damping=settings.damping,
+        )
         return (name,)
     else:
-        raise ModelError(f"joint {name!r} of robot {robot.name!r} is a {kind} joint, which the "
-                         "MuJoCo model does not support (revolute, prismatic, continuous, a "
-                         "planar or free-flyer root)")  # fmt: skip
+        raise ModelError(
+            f"joint {name!r} of robot {robot.name!r} is a {kind} joint, which the "
+            "MuJoCo model does not support (revolute, prismatic, continuous, a "
+            "planar or free-flyer root)"
+        )
     k = joint.idx_q
     if not lo[k] < hi[k]:  # no range: a joint no velocity of u moves (a swerve module's)
-        body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
-                       damping=settings.damping)  # fmt: skip
+        body.add_joint(
+            name=name, type=jtype, axis=axis, armature=settings.armature, damping=settings.damping
+        )
         return (name,)
-    body.add_joint(name=name, type=jtype, axis=axis, armature=settings.armature,
-                   damping=settings.damping, limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                   range=[float(lo[k]), float(hi[k])])  # fmt: skip
+    body.add_joint(
+        name=name,
+        type=jtype,
+        axis=axis,
+        armature=settings.armature,
+        damping=settings.damping,
+        limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+        range=[float(lo[k]), float(hi[k])],
+    )
     return (name,)
 
 
@@ -159,9 +178,14 @@ def _add_geom(body, spec: mujoco.MjSpec, obj: pin.GeometryObject, contact: tuple
     """A collision shape of the robot in ``body`` (placement in the joint frame)."""
     g = obj.geometry
     kind = type(g).__name__
-    geom = body.add_geom(name=obj.name, pos=obj.placement.translation,
-                         quat=_quat(obj.placement.rotation), contype=contact[0],
-                         conaffinity=contact[1], group=3)  # fmt: skip
+    geom = body.add_geom(
+        name=obj.name,
+        pos=obj.placement.translation,
+        quat=_quat(obj.placement.rotation),
+        contype=contact[0],
+        conaffinity=contact[1],
+        group=3,
+    )
     if kind == "Box":
         geom.type, geom.size = mujoco.mjtGeom.mjGEOM_BOX, list(g.halfSide)
     elif kind == "Sphere":
@@ -176,15 +200,22 @@ def _add_geom(body, spec: mujoco.MjSpec, obj: pin.GeometryObject, contact: tuple
         geom.type, geom.meshname = mujoco.mjtGeom.mjGEOM_MESH, mesh.name
     else:  # a shape MuJoCo has no counterpart for: a point that touches nothing
         geom.type, geom.size, geom.contype, geom.conaffinity = (
-            mujoco.mjtGeom.mjGEOM_SPHERE, [1e-3, 0, 0], 0, 0)  # fmt: skip
+            mujoco.mjtGeom.mjGEOM_SPHERE,
+            [1e-3, 0, 0],
+            0,
+            0,
+        )
 
 
 def _box_inertia(obj: ObjectSpec, mass: float) -> list[float]:
     """Principal moments (kg m^2) of a uniform solid object about its centre."""
     if obj.kind == "box":
         a, b, c = obj.size
-        return [mass * (b * b + c * c) / 12, mass * (a * a + c * c) / 12,
-                mass * (a * a + b * b) / 12]  # fmt: skip
+        return [
+            mass * (b * b + c * c) / 12,
+            mass * (a * a + c * c) / 12,
+            mass * (a * a + b * b) / 12,
+        ]
     if obj.kind == "cylinder":
         r, h = obj.radius, obj.height
         side = mass * (3 * r * r + h * h) / 12
@@ -199,8 +230,9 @@ def _object_geom(parent, obj: ObjectSpec, contact: tuple[int, int], pos) -> None
         gtype, size = mujoco.mjtGeom.mjGEOM_CYLINDER, [obj.radius, obj.height / 2, 0]
     else:
         gtype, size = mujoco.mjtGeom.mjGEOM_SPHERE, [obj.radius, 0, 0]
-    parent.add_geom(name=obj.name, type=gtype, size=size, pos=pos, contype=contact[0],
-                    conaffinity=contact[1])  # fmt: skip
+    parent.add_geom(
+        name=obj.name, type=gtype, size=size, pos=pos, contype=contact[0], conaffinity=contact[1]
+    )
 
 
 def _hand_body(robot: Robot, frame: str) -> str:
@@ -231,18 +263,30 @@ def build_world(
     spec.option.o_margin = 0.0
     effort = _effort(robot, settings)
     joints = _add_robot(spec, robot, settings, effort)
-    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1],
-                            contype=2, conaffinity=3 if robot.base.floating else 2)  # fmt: skip
+    spec.worldbody.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        contype=2,
+        conaffinity=3 if robot.base.floating else 2,
+    )
     free = [obj.name for obj in objects if _add_object(spec, obj)]
     welds = list(dict.fromkeys(grasps))
     for name, frame in welds:
         if name not in free:
-            raise ModelError(f"object {name!r} is carried, so it needs a mass (kg) under "
-                             "physics: add mass = ... to its [[objects]] entry")  # fmt: skip
-        spec.add_equality(name=f"grasp_{name}_{frame}", type=mujoco.mjtEq.mjEQ_WELD,
-                          objtype=mujoco.mjtObj.mjOBJ_BODY, name1=_hand_body(robot, frame),
-                          name2=name, active=False,
-                          solref=[2 * settings.timestep, 1.0])  # fmt: skip
+            raise ModelError(
+                f"object {name!r} is carried, so it needs a mass (kg) under "
+                "physics: add mass = ... to its [[objects]] entry"
+            )
+        spec.add_equality(
+            name=f"grasp_{name}_{frame}",
+            type=mujoco.mjtEq.mjEQ_WELD,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            name1=_hand_body(robot, frame),
+            name2=name,
+            active=False,
+            solref=[2 * settings.timestep, 1.0],
+        )
     model = spec.compile()
     dofs = np.empty(robot.nv, dtype=int)
     for i, names in joints.items():
@@ -253,16 +297,21 @@ def build_world(
         dofs[jm.idx_v : jm.idx_v + jm.nv] = adr
     wheels = _wheel_dofs(robot)
     return World(
-        model, robot, joints, effort, dofs,
+        model,
+        robot,
+        joints,
+        effort,
+        dofs,
         objects={name: model.body(name).id for name in free},
         welds={w: model.equality(f"grasp_{w[0]}_{w[1]}").id for w in welds},
         hand_bodies={f: model.body(_hand_body(robot, f)).id for _, f in welds},
         wheel_limit=float(effort[wheels].min()) if wheels else math.inf,
-    )  # fmt: skip
+    )
 
 
-def _add_robot(spec: mujoco.MjSpec, robot: Robot, settings: SimSettings,
-               effort: np.ndarray) -> dict[int, tuple[str, ...]]:  # fmt: skip
+def _add_robot(
+    spec: mujoco.MjSpec, robot: Robot, settings: SimSettings, effort: np.ndarray
+) -> dict[int, tuple[str, ...]]:
     """The robot's bodies, joints, collision shapes and torque motors (limit ``effort`` per
     velocity); the MuJoCo joint names of each Pinocchio joint."""
     model = robot.model
@@ -270,8 +319,9 @@ def _add_robot(spec: mujoco.MjSpec, robot: Robot, settings: SimSettings,
     joints: dict[int, tuple[str, ...]] = {}
     for i in range(1, model.njoints):
         M = model.jointPlacements[i]
-        body = bodies[model.parents[i]].add_body(name=model.names[i], pos=M.translation,
-                                                 quat=_quat(M.rotation))  # fmt: skip
+        body = bodies[model.parents[i]].add_body(
+            name=model.names[i], pos=M.translation, quat=_quat(M.rotation)
+        )
         _set_inertia(body, model.inertias[i])
         joints[i] = _add_joint(body, robot, i, settings)
         bodies[i] = body
@@ -279,8 +329,13 @@ def _add_robot(spec: mujoco.MjSpec, robot: Robot, settings: SimSettings,
             continue  # a floating base: nothing drives it
         for k, name in enumerate(joints[i]):
             limit = float(effort[model.joints[i].idx_v + k])
-            spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
-                              ctrllimited=True, ctrlrange=[-limit, limit])  # fmt: skip
+            spec.add_actuator(
+                name=name,
+                target=name,
+                trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                ctrllimited=True,
+                ctrlrange=[-limit, limit],
+            )
     geometry, _ = robot.geometry("collision")
     for obj in geometry.geometryObjects:
         _add_geom(bodies[obj.parentJoint], spec, obj, (1, 0))
@@ -324,15 +379,19 @@ def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
         if wheels:
             gain = np.abs(base.matrix).max(axis=1)  # 0: a direction no wheel drives
             fallback = [settings.base_force, settings.base_force, settings.base_torque]
-            limit[:3] = np.where(gain > 0, limit[wheels].min() / np.maximum(gain, 1e-300),
-                                 fallback)  # fmt: skip
+            limit[:3] = np.where(gain > 0, limit[wheels].min() / np.maximum(gain, 1e-300), fallback)
         else:
             limit[:3] = [settings.base_force, settings.base_force, settings.base_torque]
     bad = (~np.isfinite(limit) | (limit <= 0)) & ~free
     if bad.any():
-        names = [robot.model.names[j] for j in range(1, robot.model.njoints)
-                 if bad[robot.model.joints[j].idx_v]]  # fmt: skip
-        raise ModelError(f"robot {robot.name!r}: joints without an effort limit in the URDF "
-                         f"({', '.join(names)}); a physics run needs one per joint")  # fmt: skip
+        names = [
+            robot.model.names[j]
+            for j in range(1, robot.model.njoints)
+            if bad[robot.model.joints[j].idx_v]
+        ]
+        raise ModelError(
+            f"robot {robot.name!r}: joints without an effort limit in the URDF "
+            f"({', '.join(names)}); a physics run needs one per joint"
+        )
     limit[free] = np.inf
     return limit

@@ -126,8 +126,10 @@ class QPEngine(ABC):
             known = _KNOWN[self.name] = frozenset(self.known_settings())
         unknown = sorted(set(settings) - known)
         if unknown:
-            raise SolverError(f"{self.name}: unknown setting(s) {', '.join(unknown)}; known: "
-                              f"{', '.join(sorted(known))}")  # fmt: skip
+            raise SolverError(
+                f"{self.name}: unknown setting(s) {', '.join(unknown)}; known: "
+                f"{', '.join(sorted(known))}"
+            )
 
     def known_settings(self) -> set[str]:
         """The setting names the engine accepts."""
@@ -153,8 +155,12 @@ class QPEngine(ABC):
             0 if lb is None else np.count_nonzero(lb > ub)  # type: ignore[operator]
         )
         if crossed:  # no engine is needed to see it (and some fail on it in setup)
-            return QPSolution(np.full(n, np.nan), QPStatus.INFEASIBLE, 0,
-                              f"{self.name}: {crossed} lower bound(s) above the upper")  # fmt: skip
+            return QPSolution(
+                np.full(n, np.nan),
+                QPStatus.INFEASIBLE,
+                0,
+                f"{self.name}: {crossed} lower bound(s) above the upper",
+            )
         shape = (n, m, lb is not None)
         try:
             if shape != self._shape:
@@ -165,8 +171,14 @@ class QPEngine(ABC):
             else:
                 self._update(H, g, C, lower, upper, lb, ub)
             sol = self._solve()
-        except (ValueError, RuntimeError, TypeError, ArithmeticError, IndexError,
-                *self._errors) as exc:  # fmt: skip
+        except (
+            ValueError,
+            RuntimeError,
+            TypeError,
+            ArithmeticError,
+            IndexError,
+            *self._errors,
+        ) as exc:
             self._shape = None
             return QPSolution(np.full(n, np.nan), QPStatus.FAILED, 0, f"{self.name}: {exc}")
         if sol.status <= QPStatus.INACCURATE and not np.all(np.isfinite(sol.x)):
@@ -259,8 +271,9 @@ class DaqpEngine(QPEngine):
     def _solve(self) -> QPSolution:
         if self._infeasible:
             self._infeasible = False
-            return QPSolution(np.full(self._n, np.nan), QPStatus.INFEASIBLE, 0,
-                              "daqp exit flag -1 (setup)")  # fmt: skip
+            return QPSolution(
+                np.full(self._n, np.nan), QPStatus.INFEASIBLE, 0, "daqp exit flag -1 (setup)"
+            )
         x, _, flag, info = self._model.solve()
         it = int(info.get("iterations", 0))
         if flag == 1 or flag == 2:  # optimal (2: optimal with soft constraints relaxed)
@@ -354,8 +367,9 @@ class ProxsuiteEngine(QPEngine):
             status = QPStatus.INFEASIBLE
         else:
             status = QPStatus.FAILED
-        return QPSolution(np.array(res.x, dtype=float), status, int(res.info.iter),
-                          f"proxsuite {st}")  # fmt: skip
+        return QPSolution(
+            np.array(res.x, dtype=float), status, int(res.info.iter), f"proxsuite {st}"
+        )
 
 
 # ---------------------------------------------------------------------------------- osqp
@@ -367,8 +381,13 @@ class OsqpEngine(QPEngine):
 
     @staticmethod
     def default_settings() -> dict[str, Any]:
-        return {"eps_abs": 1e-7, "eps_rel": 1e-7, "polishing": True, "max_iter": 10000,
-                "verbose": False}  # fmt: skip
+        return {
+            "eps_abs": 1e-7,
+            "eps_rel": 1e-7,
+            "polishing": True,
+            "max_iter": 10000,
+            "verbose": False,
+        }
 
     def __init__(self, *, warm_start: bool = True, **settings: Any) -> None:
         import osqp
@@ -387,8 +406,9 @@ class OsqpEngine(QPEngine):
             return
         one = self._sparse.csc_matrix(np.ones((1, 1)))
         try:
-            self._osqp.OSQP().setup(one, np.zeros(1), one, -np.ones(1), np.ones(1),
-                                    **{"verbose": False, **settings})  # fmt: skip
+            self._osqp.OSQP().setup(
+                one, np.zeros(1), one, -np.ones(1), np.ones(1), **{"verbose": False, **settings}
+            )
         except (ValueError, TypeError) as exc:
             raise SolverError(f"osqp: {exc}") from None
 
@@ -421,10 +441,12 @@ class OsqpEngine(QPEngine):
         self._l = np.empty(m + (n if box else 0))
         self._u = np.empty_like(self._l)
         self._data(H, C, lower, upper, lb, ub)
-        P = sp.csc_matrix((self._Px, self._iu[0], np.r_[0, np.cumsum(np.arange(1, n + 1))]),
-                          shape=(n, n))  # fmt: skip
-        A = sp.csc_matrix((self._Ax.ravel(), indices.ravel(), np.arange(n + 1) * k),
-                          shape=(self._l.shape[0], n))  # fmt: skip
+        P = sp.csc_matrix(
+            (self._Px, self._iu[0], np.r_[0, np.cumsum(np.arange(1, n + 1))]), shape=(n, n)
+        )
+        A = sp.csc_matrix(
+            (self._Ax.ravel(), indices.ravel(), np.arange(n + 1) * k), shape=(self._l.shape[0], n)
+        )
         solver = self._osqp.OSQP()
         solver.setup(P, g, A, self._l, self._u, warm_starting=self.warm_start, **self.settings)
         self._solver = solver
@@ -510,10 +532,13 @@ def make_engine(name: str, *, warm_start: bool = True, **settings: Any) -> QPEng
 
         return QpsolversEngine(key[len(PREFIX) :], warm_start=warm_start, **settings)
     if key not in _CLASSES:
-        raise SolverError(f"unknown QP engine {name!r}; expected one of {', '.join(ENGINES)} "
-                          "or 'qpsolvers:<solver>'")  # fmt: skip
+        raise SolverError(
+            f"unknown QP engine {name!r}; expected one of {', '.join(ENGINES)} "
+            "or 'qpsolvers:<solver>'"
+        )
     cls, module = _CLASSES[key]
     if importlib.util.find_spec(module) is None:
-        raise SolverError(f"QP engine {name!r} needs the Python package {module!r}, which is "
-                          "not installed")  # fmt: skip
+        raise SolverError(
+            f"QP engine {name!r} needs the Python package {module!r}, which is not installed"
+        )
     return cls(warm_start=warm_start, **settings)

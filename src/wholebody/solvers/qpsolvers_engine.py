@@ -57,8 +57,10 @@ PREFIX = "qpsolvers:"
 def _qpsolvers() -> Any:
     """The qpsolvers package, or a :class:`SolverError` when it is not installed."""
     if importlib.util.find_spec("qpsolvers") is None:
-        raise SolverError("QP engines 'qpsolvers:<solver>' need the Python package "
-                          "'qpsolvers', which is not installed")  # fmt: skip
+        raise SolverError(
+            "QP engines 'qpsolvers:<solver>' need the Python package "
+            "'qpsolvers', which is not installed"
+        )
     import qpsolvers
 
     return qpsolvers
@@ -114,8 +116,9 @@ class QpsolversEngine(QPEngine):
                 warnings.simplefilter("ignore")
                 self._qp.solve_problem(self._matrices(problem), self.solver, **settings)
         except (TypeError, ValueError, self._qp.QPError) as exc:
-            raise SolverError(f"{self.name}: setting(s) {', '.join(sorted(settings))} "
-                              f"refused: {exc}") from None  # fmt: skip
+            raise SolverError(
+                f"{self.name}: setting(s) {', '.join(sorted(settings))} refused: {exc}"
+            ) from None
 
     def _setup(self, H, g, C, lower, upper, lb, ub) -> None:
         self._x = None  # a new structure: nothing to warm-start from
@@ -141,8 +144,7 @@ class QpsolversEngine(QPEngine):
         initvals = self._x if self.warm_start else None
         with warnings.catch_warnings(), _quiet_stdout(self.settings.get("verbose", False)):
             warnings.simplefilter("ignore")
-            sol = self._qp.solve_problem(problem, self.solver, initvals=initvals,
-                                         **self.settings)  # fmt: skip
+            sol = self._qp.solve_problem(problem, self.solver, initvals=initvals, **self.settings)
         n = problem.q.shape[0]
         x = None if sol.x is None else np.array(sol.x, dtype=float).reshape(-1)
         if sol.found and x is not None and x.shape[0] == n:
@@ -150,12 +152,24 @@ class QpsolversEngine(QPEngine):
             return QPSolution(x, QPStatus.SOLVED, _iterations(sol), f"{self.name}: solved")
         self._x = None
         status = QPStatus.INFEASIBLE if _infeasible(problem) else QPStatus.FAILED
-        return QPSolution(np.full(n, np.nan), status, _iterations(sol),
-                          f"{self.name}: no solution found ({status.name.lower()})")  # fmt: skip
+        return QPSolution(
+            np.full(n, np.nan),
+            status,
+            _iterations(sol),
+            f"{self.name}: no solution found ({status.name.lower()})",
+        )
 
 
-def _problem(qpsolvers: Any, H: np.ndarray, g: np.ndarray, C: np.ndarray, lower: np.ndarray,
-             upper: np.ndarray, lb: np.ndarray | None, ub: np.ndarray | None) -> Any:  # fmt: skip
+def _problem(
+    qpsolvers: Any,
+    H: np.ndarray,
+    g: np.ndarray,
+    C: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    lb: np.ndarray | None,
+    ub: np.ndarray | None,
+) -> Any:
     """The engine's QP as a :class:`qpsolvers.Problem` (see the module docstring)."""
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     rows, bounds = [C], [(lower, upper)]
@@ -174,12 +188,15 @@ def _problem(qpsolvers: Any, H: np.ndarray, g: np.ndarray, C: np.ndarray, lower:
     G = np.vstack((R[up], -R[down]))
     h = np.concatenate((hi[up], -lo[down]))
     return qpsolvers.Problem(
-        H, g,
-        G if h.size else None, h if h.size else None,
-        R[equal] if equal.any() else None, lo[equal] if equal.any() else None,
+        H,
+        g,
+        G if h.size else None,
+        h if h.size else None,
+        R[equal] if equal.any() else None,
+        lo[equal] if equal.any() else None,
         None if lb is None else np.asarray(lb, dtype=float),
         None if ub is None else np.asarray(ub, dtype=float),
-    )  # fmt: skip
+    )
 
 
 def _infeasible(problem: Any) -> bool:
@@ -194,9 +211,15 @@ def _infeasible(problem: Any) -> bool:
     lb = [None] * n if problem.lb is None else [v if np.isfinite(v) else None for v in problem.lb]
     ub = [None] * n if problem.ub is None else [v if np.isfinite(v) else None for v in problem.ub]
     try:
-        lp = linprog(np.zeros(n), A_ub=dense(problem.G), b_ub=problem.h, A_eq=dense(problem.A),
-                     b_eq=problem.b, bounds=list(zip(lb, ub, strict=True)),
-                     method="highs")  # fmt: skip
+        lp = linprog(
+            np.zeros(n),
+            A_ub=dense(problem.G),
+            b_ub=problem.h,
+            A_eq=dense(problem.A),
+            b_eq=problem.b,
+            bounds=list(zip(lb, ub, strict=True)),
+            method="highs",
+        )
     except ValueError:
         return False
     return lp.status == 2
@@ -206,8 +229,9 @@ def _iterations(sol: Any) -> int:
     """The solver's iteration count where qpsolvers reports it (``extras``), else 0."""
     extras = sol.extras if isinstance(sol.extras, dict) else {}
     if "iterations" in extras:
-        return int(extras["iterations"][0] if np.ndim(extras["iterations"]) else
-                   extras["iterations"])  # fmt: skip
+        return int(
+            extras["iterations"][0] if np.ndim(extras["iterations"]) else extras["iterations"]
+        )
     info = extras.get("info")
     for attr in ("iter", "iterations"):
         value = getattr(info, attr, None)

@@ -183,8 +183,9 @@ class _Level:
     def rate_ratio(self, t: int, rate: np.ndarray) -> float:
         """How many times the rate box ``rate`` (2, nu) the velocity that meets task ``t``
         (index in the level) alone needs, at least (its least-change solution; 0 within)."""
-        x = self._least(*self._objective(slice(self.tasks[t, 1] - self.r0,
-                                               self.tasks[t, 2] - self.r0)))  # fmt: skip
+        x = self._least(
+            *self._objective(slice(self.tasks[t, 1] - self.r0, self.tasks[t, 2] - self.r0))
+        )
         with np.errstate(divide="ignore", invalid="ignore"):
             need = np.where(x > 0, x / rate[1], np.where(x < 0, x / rate[0], 0.0))
         return float(np.max(np.nan_to_num(need, nan=0.0), initial=0.0))

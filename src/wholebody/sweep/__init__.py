@@ -22,8 +22,7 @@ from wholebody.sweep.campaign import Axis, Campaign, Case, load_campaign
 from wholebody.sweep.case import run_case
 from wholebody.sweep.store import SweepStore
 
-__all__ = ["Axis", "Campaign", "Case", "SweepResult", "load_campaign", "run_case",
-           "run_sweep"]  # fmt: skip
+__all__ = ["Axis", "Campaign", "Case", "SweepResult", "load_campaign", "run_case", "run_sweep"]
 
 
 @dataclass
@@ -40,10 +39,18 @@ class SweepResult:
     rows: list[dict]
 
 
-def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None,
-              ray: bool = False, address: str | None = None, retry_failed: bool = False,
-              progress: bool = True, ray_public: bool = False,
-              timeout: float | None = None) -> SweepResult:  # fmt: skip
+def run_sweep(
+    campaign: Campaign,
+    out: str | Path,
+    *,
+    workers: int | None = None,
+    ray: bool = False,
+    address: str | None = None,
+    retry_failed: bool = False,
+    progress: bool = True,
+    ray_public: bool = False,
+    timeout: float | None = None,
+) -> SweepResult:
     """Run the campaign's missing cases into ``out``: on ``workers`` local processes
     (default: every core) or, with ``ray``, as Ray tasks (``address`` of a cluster, or a
     local instance on the loopback interface only, unless ``ray_public``: see
@@ -97,9 +104,15 @@ def run_sweep(campaign: Campaign, out: str | Path, *, workers: int | None = None
             files.update(write_report(campaign, rows, store.out))
         except Exception as exc:  # a plot must not hide the sweep's outcome
             warnings.warn(f"the sweep's report was not written: {exc}", stacklevel=2)
-    return SweepResult(len(cases), found, bar.done - found,
-                       sum(r["status"] != "ok" for r in rows), time.perf_counter() - start,
-                       files, rows)  # fmt: skip
+    return SweepResult(
+        len(cases),
+        found,
+        bar.done - found,
+        sum(r["status"] != "ok" for r in rows),
+        time.perf_counter() - start,
+        files,
+        rows,
+    )
 
 
 TABLE_EVERY = 60.0
@@ -147,8 +160,10 @@ class _Progress:
             left = f"about {(self.total - self.done) * elapsed / ran:.0f} s left"
         else:
             left = "time left not known yet"
-        return (f"sweep {self.name}: {self.done}/{self.total} cases, {self.failed} failed, "
-                f"{elapsed:.0f} s, {left}")  # fmt: skip
+        return (
+            f"sweep {self.name}: {self.done}/{self.total} cases, {self.failed} failed, "
+            f"{elapsed:.0f} s, {left}"
+        )
 
     def close(self) -> None:
         if self.bar is not None:

@@ -151,12 +151,21 @@ class Campaign:
 
     def describe(self) -> dict[str, Any]:
         """The campaign as plain data (``campaign.json`` in a sweep's directory)."""
-        return {"name": self.name, "scenario": self.scenario, "builtin": self.builtin,
-                "builtin_options": self.builtin_options, "samples": self.samples,
-                "seed": self.seed, "duration_scale": self.duration_scale, "sim": self.sim,
-                "objective": self.objective,
-                "axes": [{"key": a.key, "kind": a.kind, "values": list(a.values),
-                          "bounds": list(a.bounds)} for a in self.axes]}  # fmt: skip
+        return {
+            "name": self.name,
+            "scenario": self.scenario,
+            "builtin": self.builtin,
+            "builtin_options": self.builtin_options,
+            "samples": self.samples,
+            "seed": self.seed,
+            "duration_scale": self.duration_scale,
+            "sim": self.sim,
+            "objective": self.objective,
+            "axes": [
+                {"key": a.key, "kind": a.kind, "values": list(a.values), "bounds": list(a.bounds)}
+                for a in self.axes
+            ],
+        }
 
     def case_spec(self, case: Case) -> tuple[ScenarioSpec, dict[str, Any]]:
         """The scenario of a case and its run options (``backend``, ``engine``, ``sim``)."""
@@ -189,8 +198,10 @@ def set_key(data: dict[str, Any], key: str, value: Any) -> None:
     last = parts[-1]
     if isinstance(node, list):
         if not last.isdigit() or int(last) >= len(node):
-            raise ConfigError(f"axis {key!r}: {'.'.join(parts[:-1])} has {len(node)} entries; "
-                              f"{last!r} is not one of their indices")  # fmt: skip
+            raise ConfigError(
+                f"axis {key!r}: {'.'.join(parts[:-1])} has {len(node)} entries; "
+                f"{last!r} is not one of their indices"
+            )
         node[int(last)] = value
     elif isinstance(node, dict):
         node[last] = value
@@ -206,14 +217,14 @@ def _child(node: Any, part: str, key: str, where: str, create: bool) -> Any:
         match = [e for e in node if isinstance(e, dict) and e.get("name") == part]
         if not match:
             names = [e.get("name") for e in node if isinstance(e, dict)]
-            raise ConfigError(f"axis {key!r}: no entry named {part!r} in {where} (it has "
-                              f"{names})")  # fmt: skip
+            raise ConfigError(f"axis {key!r}: no entry named {part!r} in {where} (it has {names})")
         return match[0]
     if isinstance(node, dict):
         child = node.setdefault(part, {}) if create else node.get(part)
         if child is None:
-            raise ConfigError(f"axis {key!r}: the scenario has no {where + '.' if where else ''}"
-                              f"{part}")  # fmt: skip
+            raise ConfigError(
+                f"axis {key!r}: the scenario has no {where + '.' if where else ''}{part}"
+            )
         return child
     raise ConfigError(f"axis {key!r}: {where} is a value, not a table")
 
@@ -232,8 +243,22 @@ def load_campaign(path: str | Path) -> Campaign:
     check_format(r, data, CAMPAIGN)
     r.only(data, "", (FORMAT_KEY, "campaign", "axes"))
     head = r.table(data, "campaign", "", required=True)
-    r.only(head, "campaign", ("name", "scenario", "builtin", "robot", "duration", "samples",
-                              "seed", "duration_scale", "objective", "sim"))  # fmt: skip
+    r.only(
+        head,
+        "campaign",
+        (
+            "name",
+            "scenario",
+            "builtin",
+            "robot",
+            "duration",
+            "samples",
+            "seed",
+            "duration_scale",
+            "objective",
+            "sim",
+        ),
+    )
     samples = _count(r, head, "samples", 1)
     seed = _count(r, head, "seed", 0, minimum=0)
     builtin, options, scenario, scenario_path = _base(r, path, head)
@@ -270,18 +295,25 @@ def _check_axes(r: TomlReader, campaign: Campaign) -> None:
     keys = [ALIASES.get(a.key, a.key) for a in campaign.axes]
     for key in set(keys):
         if keys.count(key) > 1:
-            raise r.fail("axes", f"{key} is varied by two axes (backend and robot are "
-                         "scenario.backend and scenario.robot)")  # fmt: skip
+            raise r.fail(
+                "axes",
+                f"{key} is varied by two axes (backend and robot are "
+                "scenario.backend and scenario.robot)",
+            )
     if campaign.builtin is not None and "scenario.robot" in keys:
         raise r.fail("axes", "a built-in campaign's robot is [campaign] robot, not an axis")
     for i, axis in enumerate(campaign.axes):
         plain = [json.dumps(v, sort_keys=True) for v in axis.values]
         if len(set(plain)) != len(plain):
             raise r.fail(f"axes[{i}].values", "a value is repeated")
-    if campaign.samples > 1 and all(a.kind == "grid" for a in campaign.axes) and \
-            campaign.builtin is None:  # fmt: skip
-        raise r.fail("campaign.samples", "several samples but no random axis: they would be "
-                     "the same run")  # fmt: skip
+    if (
+        campaign.samples > 1
+        and all(a.kind == "grid" for a in campaign.axes)
+        and campaign.builtin is None
+    ):
+        raise r.fail(
+            "campaign.samples", "several samples but no random axis: they would be the same run"
+        )
 
 
 def _count(r: TomlReader, head: dict, key: str, default: int, minimum: int = 1) -> int:
@@ -294,20 +326,24 @@ def _count(r: TomlReader, head: dict, key: str, default: int, minimum: int = 1) 
 def _base(r: TomlReader, path: Path, head: dict) -> tuple[str | None, dict, dict, Path]:
     """The base scenario (its content and path) or the built-in campaign and its options."""
     if ("scenario" in head) == ("builtin" in head):
-        raise r.fail("campaign", 'expected either scenario = "FILE or NAME" or builtin = '
-                     f'"{BUILTINS[0]}"')  # fmt: skip
+        raise r.fail(
+            "campaign", f'expected either scenario = "FILE or NAME" or builtin = "{BUILTINS[0]}"'
+        )
     if "builtin" in head:
         builtin = r.string(head, "builtin", "campaign", choices=BUILTINS)
         if "robot" not in head:
             raise r.fail("campaign.robot", f"builtin {builtin!r} needs robot = NAME or DIR")
-        options = {"robot": r.string(head, "robot", "campaign"),
-                   "duration": r.number(head, "duration", "campaign", default=3.0,
-                                        positive=True)}  # fmt: skip
+        options = {
+            "robot": r.string(head, "robot", "campaign"),
+            "duration": r.number(head, "duration", "campaign", default=3.0, positive=True),
+        }
         return builtin, options, {}, path.with_name(f"{builtin}.toml")
     for key in ("robot", "duration"):
         if key in head:
-            raise r.fail(f"campaign.{key}", "only for a builtin campaign (a scenario file "
-                         "names its robot and durations)")  # fmt: skip
+            raise r.fail(
+                f"campaign.{key}",
+                "only for a builtin campaign (a scenario file names its robot and durations)",
+            )
     scenario_path = _scenario_file(r, path, r.string(head, "scenario", "campaign"))
     return None, {}, load_toml(scenario_path, "scenario"), scenario_path
 
@@ -318,8 +354,11 @@ def _scenario_file(r: TomlReader, path: Path, name: str) -> Path:
     found = bundled_file(name, path.parent) or bundled_file(name, tasks_dir())
     if found is not None:
         return found
-    raise r.fail("campaign.scenario", f"no scenario file {name!r} beside the campaign nor a "
-                 "bundled one (wholebody run --help lists them)")  # fmt: skip
+    raise r.fail(
+        "campaign.scenario",
+        f"no scenario file {name!r} beside the campaign nor a "
+        "bundled one (wholebody run --help lists them)",
+    )
 
 
 def _axes(r: TomlReader, raw: Any) -> Iterator[Axis]:
@@ -346,8 +385,11 @@ def _axis(r: TomlReader, where: str, key: str, kind: str, raw: Any) -> Axis:
     if not isinstance(raw, list) or not raw:
         raise r.fail(at, "expected a non-empty array")
     if kind in ("uniform", "log_uniform"):
-        ok = len(raw) == 2 and all(isinstance(v, int | float) and not isinstance(v, bool)
-                                   for v in raw) and raw[0] < raw[1]  # fmt: skip
+        ok = (
+            len(raw) == 2
+            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in raw)
+            and raw[0] < raw[1]
+        )
         if not ok or (kind == "log_uniform" and raw[0] <= 0):
             low = "0 < " if kind == "log_uniform" else ""
             raise r.fail(at, f"expected [low, high] with {low}low < high, got {raw!r}")
@@ -392,8 +434,9 @@ def _try(r: TomlReader, campaign: Campaign, case: Case, where: str):
         raise r.fail(where, f"{values}: {exc}") from None
 
 
-def _check_solver(r: TomlReader, campaign: Campaign, case: Case, backend: str,
-                  options: dict) -> None:  # fmt: skip
+def _check_solver(
+    r: TomlReader, campaign: Campaign, case: Case, backend: str, options: dict
+) -> None:
     from wholebody.scenarios.runner import make_solver
 
     try:
@@ -442,8 +485,10 @@ def random_target_scenario(campaign: Campaign, sample: int) -> dict[str, Any]:
     robot_ref = str(local) if (local / "robot.toml").is_file() else name
     robot = _robot(robot_ref)
     if not robot.arms:
-        raise ConfigError(f"{campaign.path}: robot {robot.name!r} has no [arms] in its "
-                          "robot.toml: random_targets moves the first arm's tool")  # fmt: skip
+        raise ConfigError(
+            f"{campaign.path}: robot {robot.name!r} has no [arms] in its "
+            "robot.toml: random_targets moves the first arm's tool"
+        )
     arm = next(iter(robot.arms.values()))
     rng = np.random.default_rng([campaign.seed, sample, 1])
     lo, hi = (np.clip(v, -np.pi, np.pi) for v in robot.position_limits)
@@ -456,8 +501,17 @@ def random_target_scenario(campaign: Campaign, sample: int) -> dict[str, Any]:
         FORMAT_KEY: SCENARIO.current,
         "scenario": {"name": f"random_target_{sample}", "robot": robot_ref, "start": "home"},
         "hands": {arm.name: {"frame": arm.tool.name}},
-        "phases": [{"name": "reach", "duration": campaign.builtin_options["duration"],
-                    "hands": {arm.name: {"planner": "min_jerk",
-                                         "goal": goal[:3, 3].tolist(),
-                                         "rotate": rotate.tolist()}}}],
-    }  # fmt: skip
+        "phases": [
+            {
+                "name": "reach",
+                "duration": campaign.builtin_options["duration"],
+                "hands": {
+                    arm.name: {
+                        "planner": "min_jerk",
+                        "goal": goal[:3, 3].tolist(),
+                        "rotate": rotate.tolist(),
+                    }
+                },
+            }
+        ],
+    }

@@ -32,9 +32,11 @@ def headline(run) -> dict[str, float]:
     hand to its reference, m), ``mae_max_m`` (the largest per-axis mean absolute error, m),
     ``final_error_m`` (the largest distance at the last step, m)."""
     log, m = run.log, run.metrics
-    final = [float(np.linalg.norm(log.frame_positions[h][-1] - log.reference_positions[h][-1]))
-             for h in log.frame_positions
-             if np.isfinite(log.reference_positions[h][-1]).all()]  # fmt: skip
+    final = [
+        float(np.linalg.norm(log.frame_positions[h][-1] - log.reference_positions[h][-1]))
+        for h in log.frame_positions
+        if np.isfinite(log.reference_positions[h][-1]).all()
+    ]
     mae = [v for axes in m["mae_m"].values() for v in axes.values()]
     return {
         "tracking_error_max_m": _worst(m["max_tracking_error_m"].values()),
@@ -88,8 +90,7 @@ class _Limit:
             signal.setitimer(signal.ITIMER_REAL, _RETRY)  # raise once it is loaded
             return
         self.armed, self.expired = False, True
-        raise CaseTimeoutError(f"ran longer than the time limit of {self.seconds:g} s "
-                               "(--timeout)")  # fmt: skip
+        raise CaseTimeoutError(f"ran longer than the time limit of {self.seconds:g} s (--timeout)")
 
     def stop(self) -> None:
         self.armed = False
@@ -113,18 +114,20 @@ def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> di
     try:
         limit.start()
         spec, options = campaign.case_spec(case)
-        run = run_scenario(spec, backend=options.get("backend"), sim=options["sim"],
-                           engine=options.get("engine"),
-                           duration_scale=campaign.duration_scale)  # fmt: skip
+        run = run_scenario(
+            spec,
+            backend=options.get("backend"),
+            sim=options["sim"],
+            engine=options.get("engine"),
+            duration_scale=campaign.duration_scale,
+        )
         limit.stop()
         if limit.expired:  # the timeout, swallowed by code it crossed: the run went on
-            raise CaseTimeoutError(f"ran longer than the time limit of {timeout:g} s "
-                                   "(--timeout)")  # fmt: skip
+            raise CaseTimeoutError(f"ran longer than the time limit of {timeout:g} s (--timeout)")
         metrics = json.loads(json.dumps(run.metrics, default=json_default))
         metrics.update(headline(run))
         stopped = metrics.get("stopped")  # a physics run the plant ended early
-        result.update(status="stopped" if stopped else "ok", metrics=metrics,
-                      error=stopped or "")  # fmt: skip
+        result.update(status="stopped" if stopped else "ok", metrics=metrics, error=stopped or "")
     except CaseTimeoutError as exc:
         result.update(status="timeout", metrics={}, error=str(exc))
     except Exception as exc:  # recorded, not raised: the sweep goes on
@@ -133,8 +136,9 @@ def run_case(campaign: Campaign, case: Case, timeout: float | None = None) -> di
         error = f"{type(exc).__name__}: {exc}"
         if limit.expired:  # the timeout, turned into another error by code it crossed
             error = f"ran longer than the time limit of {timeout:g} s (--timeout): {error}"
-        result.update(status="timeout" if limit.expired else "error", metrics={}, error=error,
-                      traceback=tail)  # fmt: skip
+        result.update(
+            status="timeout" if limit.expired else "error", metrics={}, error=error, traceback=tail
+        )
     finally:
         limit.stop()
     result["wall_s"] = time.perf_counter() - start

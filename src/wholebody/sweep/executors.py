@@ -44,20 +44,32 @@ OnResult = Callable[[dict[str, Any]], None]
 def _lost(case: Case, why: str) -> dict[str, Any]:
     """The result of a case whose worker died (not the case's own error: a crash, the
     machine's memory): recorded, so that ``--retry-failed`` runs it again."""
-    return {"index": case.index, "values": case.values, "status": "error", "metrics": {},
-            "error": f"worker lost: {why}", "wall_s": 0.0}  # fmt: skip
+    return {
+        "index": case.index,
+        "values": case.values,
+        "status": "error",
+        "metrics": {},
+        "error": f"worker lost: {why}",
+        "wall_s": 0.0,
+    }
 
 
-def run_local(campaign: Campaign, cases: Sequence[Case], workers: int,
-              on_result: OnResult, timeout: float | None = None) -> None:  # fmt: skip
+def run_local(
+    campaign: Campaign,
+    cases: Sequence[Case],
+    workers: int,
+    on_result: OnResult,
+    timeout: float | None = None,
+) -> None:
     """Run ``cases`` on ``workers`` local processes, at most two cases a worker queued at a
     time, each stopped after ``timeout`` s (:func:`~wholebody.sweep.case.run_case`);
     ``on_result`` for each as it ends. A worker that dies (a crash, out of memory) fails the
     cases it held, the pool is started again and the sweep goes on."""
     todo = list(reversed(cases))
     while todo:
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)),
-                                   mp_context=multiprocessing.get_context("spawn"))  # fmt: skip
+        pool = ProcessPoolExecutor(
+            max_workers=min(workers, len(todo)), mp_context=multiprocessing.get_context("spawn")
+        )
         try:
             _drain(pool, campaign, todo, 2 * workers, on_result, timeout)
         except BaseException:
@@ -68,8 +80,14 @@ def run_local(campaign: Campaign, cases: Sequence[Case], workers: int,
         pool.shutdown()
 
 
-def _drain(pool: ProcessPoolExecutor, campaign: Campaign, todo: list[Case], window: int,
-           on_result: OnResult, timeout: float | None) -> None:  # fmt: skip
+def _drain(
+    pool: ProcessPoolExecutor,
+    campaign: Campaign,
+    todo: list[Case],
+    window: int,
+    on_result: OnResult,
+    timeout: float | None,
+) -> None:
     """Feed ``todo`` (popped from its end) to ``pool``, ``window`` cases in flight; return
     when it is empty or the pool broke (its cases in flight recorded as lost)."""
     pending: dict = {}
@@ -97,9 +115,15 @@ on the network (measured with Ray 2.60: GCS, raylet and workers on every interfa
 runtime-env agent on the host's address)."""
 
 
-def run_ray(campaign: Campaign, cases: Sequence[Case], address: str | None,
-            on_result: OnResult, workers: int | None = None, public: bool = False,
-            timeout: float | None = None) -> None:  # fmt: skip
+def run_ray(
+    campaign: Campaign,
+    cases: Sequence[Case],
+    address: str | None,
+    on_result: OnResult,
+    workers: int | None = None,
+    public: bool = False,
+    timeout: float | None = None,
+) -> None:
     """Run ``cases`` as Ray tasks on the cluster at ``address`` (``"HOST:PORT"``) or, with
     None, on a new local Ray instance (:func:`start_local_ray`; ``workers`` CPUs, ``public``
     as there); at most 1000 in flight, each stopped after ``timeout`` s; ``on_result`` for
@@ -165,8 +189,7 @@ def start_local_ray(workers: int | None = None, public: bool = False) -> Any:
     if saved is not None:
         constants.ENABLE_RAY_CLUSTER = public
     try:
-        ray.init(address="local", num_cpus=workers, include_dashboard=False,
-                 log_to_driver=False)  # fmt: skip
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
     finally:  # (a later ray.init in this process: Ray's own default again)
         if saved_env is None:
             os.environ.pop(LOCAL_ONLY, None)
@@ -203,8 +226,9 @@ def exposed_listeners() -> list[str]:
     try:
         import psutil
     except ImportError:
-        raise ConfigError("--ray needs psutil to check what Ray listens on: "
-                          'pip install "wholebody[cluster]"') from None  # fmt: skip
+        raise ConfigError(
+            '--ray needs psutil to check what Ray listens on: pip install "wholebody[cluster]"'
+        ) from None
     me = psutil.Process()
     out = []
     for proc in [me, *me.children(recursive=True)]:

@@ -24,14 +24,20 @@ from wholebody.sweep.campaign import Campaign
 
 __all__ = ["best_cases", "write_report"]
 
-SHOWN = ("tracking_error_max_m", "final_error_m", "closed_chain_error_max_m",
-         "solver_failures", "limit_violations")  # fmt: skip
+SHOWN = (
+    "tracking_error_max_m",
+    "final_error_m",
+    "closed_chain_error_max_m",
+    "solver_failures",
+    "limit_violations",
+)
 
 
 def _value(row: dict[str, Any], key: str) -> float:
     value = row.get(key)
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) \
-        else math.nan  # fmt: skip
+    return (
+        float(value) if isinstance(value, int | float) and not isinstance(value, bool) else math.nan
+    )
 
 
 def _mean(values: np.ndarray) -> float:
@@ -54,8 +60,9 @@ def write_report(campaign: Campaign, rows: Sequence[dict[str, Any]], out: Path) 
         files["axes"] = save_figure(_axes_figure(rows, campaign), out / "axes.png")
     grid = [a for a in campaign.axes if a.kind == "grid"]
     if len(grid) == 2 and rows:
-        files["heatmap"] = save_figure(_heatmap(rows, grid, campaign.objective),
-                                       out / "heatmap.png")  # fmt: skip
+        files["heatmap"] = save_figure(
+            _heatmap(rows, grid, campaign.objective), out / "heatmap.png"
+        )
     return files
 
 
@@ -75,9 +82,14 @@ def _best_markdown(campaign: Campaign, rows: Sequence[dict], keys: list[str]) ->
         missing = f" No case has the metric {campaign.objective!r}: see results.csv's columns."
     else:
         missing = ""
-    lines = [f"# {campaign.name}: the best of {len(rows)} cases by {campaign.objective}",
-             "", f"{failed} failed or stopped (results.csv has why).{missing}", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]  # fmt: skip
+    lines = [
+        f"# {campaign.name}: the best of {len(rows)} cases by {campaign.objective}",
+        "",
+        f"{failed} failed or stopped (results.csv has why).{missing}",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
     for r in best:
         cells = [str(r["index"]), *(str(r.get(k, "")) for k in keys)]
         cells += [f"{_value(r, m):.6g}" for m in (campaign.objective, *shown)]
@@ -99,14 +111,27 @@ def _axes_figure(rows: Sequence[dict], campaign: Campaign):
             labels = None
         else:  # categories, in the campaign's order
             order = [_key(v) for v in (axis.values or axis.bounds)]
-            x = np.array([order.index(_key(r.get(axis.key))) if _key(r.get(axis.key)) in order
-                          else math.nan for r in rows], dtype=float)  # fmt: skip
+            x = np.array(
+                [
+                    order.index(_key(r.get(axis.key)))
+                    if _key(r.get(axis.key)) in order
+                    else math.nan
+                    for r in rows
+                ],
+                dtype=float,
+            )
             labels = [str(v) for v in (axis.values or axis.bounds)]
         ax.plot(x, y, "o", ms=3, alpha=0.5, color="#1f77b4")
         if axis.kind == "grid" or labels is not None:
             values = np.unique(x[np.isfinite(x)])
-            ax.plot(values, [_mean(y[x == v]) for v in values], "-", color="#d62728", lw=1.5,
-                    label="mean")  # fmt: skip
+            ax.plot(
+                values,
+                [_mean(y[x == v]) for v in values],
+                "-",
+                color="#d62728",
+                lw=1.5,
+                label="mean",
+            )
             ax.legend(fontsize=8, frameon=False)
         if labels is not None:
             ax.set_xticks(range(len(labels)), labels, rotation=20, fontsize=7)
@@ -123,8 +148,11 @@ def _heatmap(rows: Sequence[dict], grid: list, objective: str):
     mean = np.full((len(ys), len(xs)), np.nan)
     for i, yv in enumerate(ys):
         for j, xv in enumerate(xs):
-            cell = [_value(r, objective) for r in rows
-                    if _key(r.get(a.key)) == xv and _key(r.get(b.key)) == yv]  # fmt: skip
+            cell = [
+                _value(r, objective)
+                for r in rows
+                if _key(r.get(a.key)) == xv and _key(r.get(b.key)) == yv
+            ]
             mean[i, j] = _mean(np.array(cell, dtype=float))
     fig = _figure(figsize=(1.2 * len(xs) + 3, 0.6 * len(ys) + 2.5), layout="constrained")
     ax = fig.subplots()
@@ -136,7 +164,6 @@ def _heatmap(rows: Sequence[dict], grid: list, objective: str):
     for i in range(len(ys)):
         for j in range(len(xs)):
             if np.isfinite(mean[i, j]):
-                ax.text(j, i, f"{mean[i, j]:.3g}", ha="center", va="center", fontsize=8,
-                        color="w")  # fmt: skip
+                ax.text(j, i, f"{mean[i, j]:.3g}", ha="center", va="center", fontsize=8, color="w")
     fig.colorbar(image, ax=ax, label=f"{objective} (mean)")
     return fig

@@ -45,9 +45,11 @@ class SweepStore:
         if described.is_file():
             theirs = json.loads(described.read_text())
             if theirs.get("fingerprint") != mine["fingerprint"]:
-                raise ConfigError(f"{self.out} holds the results of another campaign "
-                                  f"({theirs.get('campaign', {}).get('name')!r}, or this one "
-                                  "changed since): give another --out")  # fmt: skip
+                raise ConfigError(
+                    f"{self.out} holds the results of another campaign "
+                    f"({theirs.get('campaign', {}).get('name')!r}, or this one "
+                    "changed since): give another --out"
+                )
         else:
             write_json(described, mine, indent=2, default=str)
 
@@ -67,12 +69,16 @@ class SweepStore:
                 case = by_index.get(int(result["index"]))
                 known = case is not None and result["values"] == _plain(case.values)
             except (OSError, ValueError, KeyError, TypeError) as exc:
-                warnings.warn(f"{path}: not a case result ({exc}); its case runs again",
-                              stacklevel=2)  # fmt: skip
+                warnings.warn(
+                    f"{path}: not a case result ({exc}); its case runs again", stacklevel=2
+                )
                 continue
             if not known:
-                warnings.warn(f"{path}: its values are not those of this campaign's case "
-                              f"{result['index']}; it runs again", stacklevel=2)  # fmt: skip
+                warnings.warn(
+                    f"{path}: its values are not those of this campaign's case "
+                    f"{result['index']}; it runs again",
+                    stacklevel=2,
+                )
                 continue
             if retry_failed and result.get("status") != "ok":
                 continue

@@ -66,8 +66,9 @@ class _ArmAngleObjective(Objective):
     """What both objectives share: the arm's frames, the fade and the arm angle's and the
     canonical wrist's derivatives at a state."""
 
-    def __init__(self, robot: Robot, arm: str | ArmChain, name: str, weight: float,
-                 fade: float) -> None:  # fmt: skip
+    def __init__(
+        self, robot: Robot, arm: str | ArmChain, name: str, weight: float, fade: float
+    ) -> None:
         self.robot = robot
         self.arm = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(name, weight)
@@ -132,21 +133,30 @@ class HumanArmAngle(_ArmAngleObjective):
         ``eps`` (m) of the fade where the arm angle is undefined.
     """
 
-    def __init__(self, robot: Robot, arm: str | ArmChain, model: ArmAngleModel, *,
-                 weight: float = 1.0, fade: float = 0.01,
-                 name: str | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        arm: str | ArmChain,
+        model: ArmAngleModel,
+        *,
+        weight: float = 1.0,
+        fade: float = 0.01,
+        name: str | None = None,
+    ) -> None:
         chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(robot, chain, name or f"{chain.name}_human_arm_angle", weight, fade)
         if isinstance(model, StiffnessModel) or not callable(getattr(model, "evaluate", None)):
-            raise DimensionError(f"{self.name}: model must have evaluate(p) -> (alpha, "
-                                 f"gradient), got {model!r}")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: model must have evaluate(p) -> (alpha, gradient), got {model!r}"
+            )
         self.model = model
 
     def target(self, state: RobotState) -> float:
         """``alpha_h`` (rad) at ``state``'s wrist."""
         S, W = state.position(self._frames[0]), state.position(self._frames[2])
-        return self._model_at(self.mirror * (state.rotation(self._frames[3]).T @ (W - S))
-                              / self.reach)[0]  # fmt: skip
+        return self._model_at(
+            self.mirror * (state.rotation(self._frames[3]).T @ (W - S)) / self.reach
+        )[0]
 
     def residual(self, state: RobotState) -> tuple[float, float, np.ndarray, np.ndarray]:
         """``(e, w, w de, dw)``: the wrapped residual ``e = alpha - alpha_h`` (rad), the fade
@@ -166,9 +176,11 @@ class HumanArmAngle(_ArmAngleObjective):
         g = np.asarray(g_h, dtype=float)
         alpha = float(alpha_h)
         if g.shape != (3,) or not (math.isfinite(alpha) and np.all(np.isfinite(g))):
-            raise DimensionError(f"{self.name}: the arm-angle model must return a finite "
-                                 f"angle (rad) and gradient of shape (3,) at p = {p}, got "
-                                 f"{alpha_h!r} and shape {g.shape}")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: the arm-angle model must return a finite "
+                f"angle (rad) and gradient of shape (3,) at p = {p}, got "
+                f"{alpha_h!r} and shape {g.shape}"
+            )
         return alpha, g
 
     def evaluate(self, state: RobotState) -> ObjectiveValue:
@@ -201,22 +213,34 @@ class HumanArmAngleTask(Task):
     joint.
     """
 
-    def __init__(self, robot: Robot, arm: str | ArmChain, model: ArmAngleModel, *,
-                 kp: float = 10.0, max_rate: float = 1.0, arm_only: bool = True,
-                 weight: float = 1.0, fade: float = 0.03,
-                 name: str | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        arm: str | ArmChain,
+        model: ArmAngleModel,
+        *,
+        kp: float = 10.0,
+        max_rate: float = 1.0,
+        arm_only: bool = True,
+        weight: float = 1.0,
+        fade: float = 0.03,
+        name: str | None = None,
+    ) -> None:
         self.pull = HumanArmAngle(robot, arm, model, fade=fade)
         super().__init__(name or f"{self.pull.arm.name}_human_arm_angle", weight)
         group = self.pull.arm.group
         if arm_only and group is None:
-            raise DimensionError(f"{self.name}: arm_only needs the arm's joint group (arms."
-                                 f"{self.pull.arm.name}.group in robot.toml); or pass "
-                                 "arm_only=False")  # fmt: skip
+            raise DimensionError(
+                f"{self.name}: arm_only needs the arm's joint group (arms."
+                f"{self.pull.arm.name}.group in robot.toml); or pass "
+                "arm_only=False"
+            )
         self.columns = group.indices if arm_only else None
         for what, value in (("kp", kp), ("max_rate", max_rate)):
             if not (math.isfinite(value) and value >= 0):
-                raise DimensionError(f"{self.name}: {what} must be a finite number >= 0, got "
-                                     f"{value}")  # fmt: skip
+                raise DimensionError(
+                    f"{self.name}: {what} must be a finite number >= 0, got {value}"
+                )
         self.kp, self.max_rate = float(kp), float(max_rate)
 
     @property
@@ -245,15 +269,25 @@ class ArmAngleSpring(_ArmAngleObjective):
     a constant (N m/rad) or a :class:`~wholebody.arm.StiffnessModel` of the canonical wrist
     (m), as the arm energy takes."""
 
-    def __init__(self, robot: Robot, arm: str | ArmChain, stiffness: float | StiffnessModel, *,
-                 signed: bool = True, weight: float = 1.0, fade: float = 0.01,
-                 name: str | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        robot: Robot,
+        arm: str | ArmChain,
+        stiffness: float | StiffnessModel,
+        *,
+        signed: bool = True,
+        weight: float = 1.0,
+        fade: float = 0.01,
+        name: str | None = None,
+    ) -> None:
         chain = arm if isinstance(arm, ArmChain) else robot.arm(arm)
         super().__init__(robot, chain, name or f"{chain.name}_arm_angle_spring", weight, fade)
         if not isinstance(stiffness, StiffnessModel):
             if isinstance(stiffness, (str, bool)) or not isinstance(stiffness, numbers.Real):
-                raise DimensionError(f"{self.name}: stiffness must be a number (N m/rad) or a "
-                                     f"StiffnessModel, got {stiffness!r}")  # fmt: skip
+                raise DimensionError(
+                    f"{self.name}: stiffness must be a number (N m/rad) or a "
+                    f"StiffnessModel, got {stiffness!r}"
+                )
             stiffness = ConstantStiffness(float(stiffness))
         self.stiffness, self.signed = stiffness, bool(signed)
 

@@ -234,9 +234,11 @@ class Scene:
             p = near[i]
             points = np.array([p.point_a, p.point_b], dtype=np.float32).T
             color = "#d62728" if p.distance <= safety + 1e-3 else "#ff7f0e"
-            node[f"pair_{i}"].set_object(mg.Line(mg.PointsGeometry(points),
-                                                 mg.LineBasicMaterial(color=rgb(color),
-                                                                      linewidth=4)))  # fmt: skip
+            node[f"pair_{i}"].set_object(
+                mg.Line(
+                    mg.PointsGeometry(points), mg.LineBasicMaterial(color=rgb(color), linewidth=4)
+                )
+            )
 
     def box(
         self,

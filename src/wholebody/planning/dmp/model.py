@@ -245,8 +245,15 @@ class DMP:
         max_substeps: int = 256,
     ) -> DMPStepper:
         """An online integrator of this DMP (see :class:`DMPStepper`)."""
-        return DMPStepper(self, duration=duration, start=start, goal=goal, obstacles=obstacles,
-                          tolerance=tolerance, max_substeps=max_substeps)  # fmt: skip
+        return DMPStepper(
+            self,
+            duration=duration,
+            start=start,
+            goal=goal,
+            obstacles=obstacles,
+            tolerance=tolerance,
+            max_substeps=max_substeps,
+        )
 
 
 def _check_samples(N: int, polyorder: int, cfg: DMPConfig) -> int:

@@ -76,8 +76,9 @@ class DMPTrajectory(Trajectory):
         T1 = as_pose(goal_pose, "DMPTrajectory: goal_pose")
         T = dmp.duration if duration is None else as_positive(duration, "DMPTrajectory: duration")
         n = max(160, math.ceil(T / 0.01) + 1) if samples is None else int(samples)
-        self.rollout = dmp.rollout(n, duration=T, start=T0[:3, 3], goal=T1[:3, 3],
-                                   obstacles=obstacles)  # fmt: skip
+        self.rollout = dmp.rollout(
+            n, duration=T, start=T0[:3, 3], goal=T1[:3, 3], obstacles=obstacles
+        )
         self._duration = T
         self._R0, self._R1 = T0[:3, :3].copy(), T1[:3, :3].copy()
         self._slerp = Slerp(self._R0, self._R1)

@@ -12,9 +12,11 @@ from pathlib import Path
 
 import pytest
 
+import wholebody
 from wholebody.robot.urdf import example_robot_data_share
 
 ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_ROOT = Path(wholebody.__file__).resolve().parents[1]  # (site-packages, or src)
 EXAMPLES = ROOT / "examples"
 ROBOTS = pytest.mark.skipif(
     example_robot_data_share() is None,
@@ -42,12 +44,13 @@ CASES = {
 
 
 def _run(name: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    """``python examples/NAME.py ARGS`` in ``cwd`` with this checkout's ``src`` first (and its
-    temporary files, such as a replay page, in ``cwd``)."""
+    """``python examples/NAME.py ARGS`` in ``cwd``, on the wholebody this suite tests (the
+    installed package, or the checkout's ``src``: the same compiled kernels' cache, so that
+    no example compiles them again), its temporary files (a replay page) in ``cwd``."""
     env = {
         **os.environ,
         "TMPDIR": str(cwd),
-        "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]),
+        "PYTHONPATH": os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")]),
     }
     return subprocess.run(
         [sys.executable, str(EXAMPLES / f"{name}.py"), *args],

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
@@ -45,7 +46,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 import wholebody
-from wholebody.ros.messages import quaternion_of, stamp_ns, yaw_of
+from wholebody.ros.messages import pose_stamped, stamp_ns, yaw_of
 
 RATES = (100.0, 500.0, 1000.0)
 SIMS = ("kinematic", "mujoco")
@@ -131,12 +132,7 @@ class Case:
         return robot.frame_pose(q, self.frame)
 
     def send(self, T: np.ndarray) -> None:
-        msg = PoseStamped()
-        msg.header.frame_id = "world"
-        p, o = msg.pose.position, msg.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in T[:3, 3])
-        o.x, o.y, o.z, o.w = quaternion_of(T[:3, :3])
-        self.target.publish(msg)
+        self.target.publish(pose_stamped(T, "world", Time()))
 
     def measure(self, seconds: float) -> dict[str, float]:
         """Start tracking, then listen for ``seconds`` (module docstring)."""

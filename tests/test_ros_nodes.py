@@ -29,6 +29,7 @@ import wholebody
 
 rclpy = pytest.importorskip("rclpy", reason="rclpy is not importable: pip install '.[ros]'")
 
+from builtin_interfaces.msg import Time  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -37,7 +38,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from wholebody.robot.urdf import example_robot_data_share  # noqa: E402
-from wholebody.ros.messages import quaternion_of, stamp_ns, yaw_of  # noqa: E402
+from wholebody.ros.messages import pose_stamped, stamp_ns, yaw_of  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
@@ -128,12 +129,7 @@ class Robot:
         return self.robot.frame_pose(self.q(), self.frame)
 
     def send(self, T: np.ndarray) -> None:
-        msg = PoseStamped()
-        msg.header.frame_id = "world"
-        p, o = msg.pose.position, msg.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in T[:3, 3])
-        o.x, o.y, o.z, o.w = quaternion_of(T[:3, :3])
-        self.target.publish(msg)
+        self.target.publish(pose_stamped(T, "world", Time()))
 
     def last_status(self) -> tuple[int, str, dict[str, str]]:
         s = self.status[-1].status[0]

@@ -28,7 +28,6 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
-from rclpy.experimental import EventsExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
@@ -39,6 +38,7 @@ from wholebody.collision import CollisionModel
 from wholebody.ros import interface as topics
 from wholebody.ros import messages as msgs
 from wholebody.ros.core import ControlCore
+from wholebody.ros.spinner import Spinner
 from wholebody.ros.timing import Metronome, Window, phase_error
 
 __all__ = ["WholebodyNode", "run_node"]
@@ -71,10 +71,7 @@ class WholebodyNode:
         self.command_period, self.latency = Window(), Window()
         self._last_publish: float | None = None
         self._status_due = self._telemetry_due = 0.0
-        self.executor = EventsExecutor()
-        self.executor.add_node(self.node)
-        self._closing = threading.Event()
-        self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")
+        self.spinner = Spinner(self.node)
 
     # ------------------------------------------------------------------ topics
     def _subscribe(self) -> None:
@@ -146,14 +143,10 @@ class WholebodyNode:
         if why:
             self.node.get_logger().warning(why)
 
-    def _spin(self) -> None:
-        while not self._closing.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
-
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
         """The control loop until ``stop`` is set, then one zero command."""
-        self._spinner.start()
+        self.spinner.start()
         self._publish_status(time.monotonic())
         arrived = -math.inf
         while not stop.is_set():
@@ -231,12 +224,8 @@ class WholebodyNode:
         self._status_due = now + STATUS_PERIOD
 
     def close(self) -> None:
-        """Stop the executor thread (it ends within its 0.05 s wait), then the node."""
-        self._closing.set()
-        if self._spinner.is_alive():
-            self._spinner.join()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
+        """Stop the executor thread, then the node."""
+        self.spinner.close()
 
 
 def _stop_on_signals(stop: threading.Event) -> None:

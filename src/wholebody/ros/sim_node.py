@@ -18,7 +18,6 @@ from collections.abc import Sequence
 
 import rclpy
 from nav_msgs.msg import Odometry
-from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -27,6 +26,7 @@ from wholebody.ros import interface as topics
 from wholebody.ros import messages as msgs
 from wholebody.ros.node import COMMAND_QOS
 from wholebody.ros.simulated import SimulatedRobot
+from wholebody.ros.spinner import Spinner
 from wholebody.ros.timing import Metronome
 
 __all__ = ["run_sim", "start"]
@@ -51,10 +51,7 @@ class SimNode:
         model = self.robot.model
         self.names = [n for n in self.robot.actuated_joints if model.existJointName(n)]
         self.index = [self.robot.index(n) for n in self.names]
-        self.executor = EventsExecutor()
-        self.executor.add_node(node)
-        self._closing = threading.Event()
-        self._spinner = threading.Thread(target=self._spin, daemon=True, name="ros-executor")
+        self.spinner = Spinner(node)
 
     def _on_command(self, msg: JointState) -> None:
         with self.lock:
@@ -67,10 +64,6 @@ class SimNode:
             why = self.sim.on_array(msg.data, time.monotonic())
         if why:
             self.node.get_logger().warning(why)
-
-    def _spin(self) -> None:
-        while not self._closing.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
 
     def publish(self) -> None:
         """The state now: joint positions and applied velocities, and the odometry."""
@@ -90,7 +83,7 @@ class SimNode:
 
     def run(self, stop: threading.Event, period: float) -> int:
         """Publish and integrate every ``period`` until ``stop``; the exit status."""
-        self._spinner.start()
+        self.spinner.start()
         self.publish()
         metronome = Metronome(period)
         while not stop.is_set():
@@ -104,12 +97,8 @@ class SimNode:
         return 0
 
     def close(self) -> None:
-        """Stop the executor thread (it ends within its 0.05 s wait), then the node."""
-        self._closing.set()
-        if self._spinner.is_alive():
-            self._spinner.join()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
+        """Stop the executor thread, then the node."""
+        self.spinner.close()
 
 
 def run_sim(sim: SimulatedRobot, rate: float, ros_args: Sequence[str] = ()) -> int:

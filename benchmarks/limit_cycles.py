@@ -50,11 +50,11 @@ def stalled_run(
     shift: tuple[float, float, float] = (0.0, 0.0, 0.05),
     duration: float = 3.0,
     dt: float = 0.01,
-) -> wb.RunLog:
+) -> tuple[wb.RunLog, wb.Controller]:
     """The closed chain on level 1, the right hand's pose on level 2 sent to the home pose
     turned by ``rotation`` rad about the world ``axis`` (a unit vector) and moved by ``shift``
     (m, world); position and velocity limits. Returns the run's log (the tasks are named
-    ``"chain"`` and ``"hand"``)."""
+    ``"chain"`` and ``"hand"``) and the controller."""
     left, right = robot.arms["left"].tool, robot.arms["right"].tool
     q0 = robot.home()
     chain = wb.RelativeFrameTask(robot, left, right, name="chain", kp=10.0)
@@ -67,7 +67,8 @@ def stalled_run(
     hand.set_target(goal)
     limits = [wb.JointPositionLimits(robot), wb.VelocityLimits(robot)]
     stack = wb.Stack(robot, [[chain], [hand]], limits)
-    return wb.Controller(robot, stack, solver, dt=dt, recovery=False).run(q0, duration)
+    controller = wb.Controller(robot, stack, solver, dt=dt, recovery=False)  # (the solver alone)
+    return controller.run(q0, duration), controller
 
 
 def report(log: wb.RunLog, settle: float) -> dict[str, float]:
@@ -107,7 +108,7 @@ def sweep(robot: wb.Robot, make: Callable[[], Solver], cases: list, duration: fl
     reached = cycling = 0
     u_end, chain_end = [], []
     for rotation, axis, shift in cases:
-        log = stalled_run(
+        log, _ = stalled_run(
             robot, make(), rotation=rotation, axis=axis, shift=shift, duration=duration
         )
         error = log.task_errors["hand"][-1]
@@ -157,7 +158,7 @@ def main() -> None:
         f"{'chain end m':>11} {'chain max m':>11} {'overshoot':>9} {'step us':>7}"
     )
     for name, solver in runs:
-        log = stalled_run(
+        log, _ = stalled_run(
             robot,
             solver,
             rotation=args.rotation,

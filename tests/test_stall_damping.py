@@ -10,10 +10,11 @@ millimetre; damped, the lower level's ``u`` decays and the chain holds.
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
+from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 import wholebody as wb
@@ -32,25 +33,31 @@ DT = 0.01
 ENGINES = ["daqp", pytest.param("proxsuite", marks=pytest.mark.slow)]  # (the other: slow)
 
 
+def _load_limit_cycles():
+    """``benchmarks/limit_cycles.py``, whose setup this file tests."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "limit_cycles.py"
+    spec = importlib.util.spec_from_file_location("wholebody_bench_limit_cycles", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+limit_cycles = _load_limit_cycles()
+
+
 def stalled_run(robot, solver, *, rotation, axis=(1.0, 0.0, 0.0), lift=0.05, duration=4.0):
-    """The chain on level 1, the right hand on level 2 sent to its home pose turned by
-    ``rotation`` rad about the world ``axis`` and lifted by ``lift`` m. Returns the log and
-    the controller."""
-    left, right = robot.arms["left"].tool, robot.arms["right"].tool
-    q0 = robot.home()
-    chain = wb.RelativeFrameTask(robot, left, right, name="chain", kp=10.0)
-    hand = wb.FrameTask(robot, right, name="hand", kp=10.0)
-    TL, TR = robot.frame_pose(q0, left), robot.frame_pose(q0, right)
-    chain.set_target(np.linalg.solve(TL, TR))
-    goal = TR.copy()
-    goal[:3, :3] = pin.exp3(rotation * np.asarray(axis)) @ TR[:3, :3]
-    goal[:3, 3] += (0.0, 0.0, lift)
-    hand.set_target(goal)
-    stack = wb.Stack(
-        robot, [[chain], [hand]], [wb.JointPositionLimits(robot), wb.VelocityLimits(robot)]
+    """The benchmark's run (the chain on level 1, the right hand on level 2 sent to its home
+    pose turned by ``rotation`` rad about the world ``axis`` and lifted by ``lift`` m): the
+    log and the controller."""
+    return limit_cycles.stalled_run(
+        robot,
+        solver,
+        rotation=rotation,
+        axis=axis,
+        shift=(0.0, 0.0, lift),
+        duration=duration,
+        dt=DT,
     )
-    controller = wb.Controller(robot, stack, solver, dt=DT, recovery=False)  # (the solver alone)
-    return controller.run(q0, duration), controller
 
 
 def window(log, start, stop=None):

@@ -458,23 +458,29 @@ class Plan(Arena):
         self._boxes = v(lay.F_BOXES)
         self._scalars = v(lay.F_SCALARS)
 
+    def _compiled(self, entry: object) -> int:
+        """The row of ``entry`` in the entry table if it is a compiled entry of the stack,
+        else -1."""
+        for e, rec in enumerate(self.records):
+            if rec.entry is entry and rec.packed is not None:
+                return e
+        return -1
+
     def follow(self, task: object, reference: int) -> bool:
         """Let ``task``, if it is a compiled pose task of the stack, take its target and
         twist from row ``reference`` of the references' samples each step (-1: no longer);
         whether it is one."""
-        for e, rec in enumerate(self.records):
-            if rec.entry is task and rec.packed is not None and rec.packed.kind == lay.KIND_POSE:
-                self._table[e, lay.E_REF] = reference
-                return True
-        return False
+        e = self._compiled(task)
+        if e < 0 or self.records[e].packed.kind != lay.KIND_POSE:  # type: ignore[union-attr]
+            return False
+        self._table[e, lay.E_REF] = reference
+        return True
 
     def block_start(self, entry: object) -> int:
         """Where the parameter block of ``entry``, a compiled entry of the stack, starts in
         the arena's ``F_PAR`` (-1 if it is not one)."""
-        for e, rec in enumerate(self.records):
-            if rec.entry is entry and rec.packed is not None:
-                return int(self._table[e, lay.E_F0])
-        return -1
+        e = self._compiled(entry)
+        return -1 if e < 0 else int(self._table[e, lay.E_F0])
 
     # ------------------------------------------------------------------ each step
     def sync(self, state: RobotState | None, dt: float) -> None:

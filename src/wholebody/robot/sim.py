@@ -6,12 +6,17 @@ Kept apart from the simulator so that reading a robot needs no MuJoCo.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
+import pinocchio as pin
 
 from wholebody.errors import ModelError
 
-__all__ = ["SimSettings"]
+if TYPE_CHECKING:
+    from wholebody.robot.robot import Robot
+
+__all__ = ["SimSettings", "effort_limits", "joint_kind", "wheel_dofs"]
 
 
 @dataclass(frozen=True)
@@ -92,3 +97,48 @@ class SimSettings:
     def keys(cls) -> tuple[str, ...]:
         """The setting names (``robot.toml [sim]``'s keys)."""
         return tuple(f.name for f in fields(cls))
+
+
+def joint_kind(joint: pin.JointModel) -> str:
+    """A Pinocchio joint's kind: ``"FreeFlyer"``, ``"Planar"``, ``"RZ"``, ..."""
+    return joint.shortname().removeprefix("JointModel")
+
+
+def wheel_dofs(robot: Robot) -> list[int]:
+    """The velocity index of each wheel joint of the robot's base."""
+    return [robot.model.joints[robot.model.getJointId(w)].idx_v for w in robot.base.wheel_joints]
+
+
+def effort_limits(robot: Robot, settings: SimSettings) -> np.ndarray:
+    """The limit of each Pinocchio velocity (N m, N): the URDF's effort times
+    ``effort_scale``; a planar root's from its wheels through the base matrix (``tau = B^T
+    W``, so ``|W_i| <= tau_max / max_j |B_ij|``) or, without wheels, ``base_force`` and
+    ``base_torque``; a free flyer's infinite (it has no motor: nothing is applied there)."""
+    raw = np.array(robot.model.effortLimit, dtype=float)
+    limit = np.where(np.isfinite(raw) & (raw < 1e30), raw, np.nan) * settings.effort_scale
+    root = robot.model.joints[1] if robot.model.njoints > 1 else None
+    free = np.zeros(limit.size, dtype=bool)
+    if root is not None and joint_kind(root) == "FreeFlyer":
+        free[:6] = True
+    if root is not None and joint_kind(root) == "Planar":
+        base = robot.base
+        wheels = wheel_dofs(robot)
+        if wheels:
+            gain = np.abs(base.matrix).max(axis=1)  # 0: a direction no wheel drives
+            fallback = [settings.base_force, settings.base_force, settings.base_torque]
+            limit[:3] = np.where(gain > 0, limit[wheels].min() / np.maximum(gain, 1e-300), fallback)
+        else:
+            limit[:3] = [settings.base_force, settings.base_force, settings.base_torque]
+    bad = (~np.isfinite(limit) | (limit <= 0)) & ~free
+    if bad.any():
+        names = [
+            robot.model.names[j]
+            for j in range(1, robot.model.njoints)
+            if bad[robot.model.joints[j].idx_v]
+        ]
+        raise ModelError(
+            f"robot {robot.name!r}: joints without an effort limit in the URDF "
+            f"({', '.join(names)}); a physics run needs one per joint"
+        )
+    limit[free] = np.inf
+    return limit

@@ -43,7 +43,7 @@ import pinocchio as pin
 
 from wholebody.errors import ModelError
 from wholebody.robot import Robot
-from wholebody.robot.sim import SimSettings
+from wholebody.robot.sim import SimSettings, effort_limits, joint_kind, wheel_dofs
 
 if TYPE_CHECKING:
     from wholebody.scenarios.spec import ObjectSpec
@@ -99,15 +99,11 @@ def _quat(R: np.ndarray) -> list[float]:
     return [w, x, y, z]
 
 
-def _kind(joint) -> str:
-    return joint.shortname().removeprefix("JointModel")
-
-
 def _add_joint(body, robot: Robot, index: int, settings: SimSettings) -> tuple[str, ...]:
     """The MuJoCo joint(s) of Pinocchio joint ``index`` in ``body``; their names."""
     model = robot.model
     joint, name = model.joints[index], model.names[index]
-    kind = _kind(joint)
+    kind = joint_kind(joint)
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     if kind == "Planar":
         names = (f"{name}_x", f"{name}_y", f"{name}_yaw")
@@ -261,7 +257,7 @@ def build_world(
     spec.option.o_friction = [settings.friction, settings.friction, 0.005, 1e-4, 1e-4]
     spec.option.o_solref = [settings.contact_time, 1.0]
     spec.option.o_margin = 0.0
-    effort = _effort(robot, settings)
+    effort = effort_limits(robot, settings)
     joints = _add_robot(spec, robot, settings, effort)
     spec.worldbody.add_geom(
         name="floor",
@@ -295,7 +291,7 @@ def build_world(
         if jm.nv == 6 and len(names) == 1:  # the free joint: its six dofs in a row
             adr = list(range(adr[0], adr[0] + 6))
         dofs[jm.idx_v : jm.idx_v + jm.nv] = adr
-    wheels = _wheel_dofs(robot)
+    wheels = wheel_dofs(robot)
     return World(
         model,
         robot,
@@ -325,7 +321,7 @@ def _add_robot(
         _set_inertia(body, model.inertias[i])
         joints[i] = _add_joint(body, robot, i, settings)
         bodies[i] = body
-        if _kind(model.joints[i]) == "FreeFlyer":
+        if joint_kind(model.joints[i]) == "FreeFlyer":
             continue  # a floating base: nothing drives it
         for k, name in enumerate(joints[i]):
             limit = float(effort[model.joints[i].idx_v + k])
@@ -355,43 +351,3 @@ def _add_object(spec: mujoco.MjSpec, obj: ObjectSpec) -> bool:
     body.inertia = _box_inertia(obj, obj.mass)
     _object_geom(body, obj, (2, 2), [0, 0, 0])
     return True
-
-
-def _wheel_dofs(robot: Robot) -> list[int]:
-    """The velocity index of each wheel joint of the robot's base."""
-    return [robot.model.joints[robot.model.getJointId(w)].idx_v for w in robot.base.wheel_joints]
-
-
-def _effort(robot: Robot, settings: SimSettings) -> np.ndarray:
-    """The limit of each Pinocchio velocity (N m, N): the URDF's effort times
-    ``effort_scale``; a planar root's from its wheels through the base matrix (``tau = B^T
-    W``, so ``|W_i| <= tau_max / max_j |B_ij|``) or, without wheels, ``base_force`` and
-    ``base_torque``; a free flyer's infinite (it has no motor: nothing is applied there)."""
-    raw = np.array(robot.model.effortLimit, dtype=float)
-    limit = np.where(np.isfinite(raw) & (raw < 1e30), raw, np.nan) * settings.effort_scale
-    root = robot.model.joints[1] if robot.model.njoints > 1 else None
-    free = np.zeros(limit.size, dtype=bool)
-    if root is not None and _kind(root) == "FreeFlyer":
-        free[:6] = True
-    if root is not None and _kind(root) == "Planar":
-        base = robot.base
-        wheels = _wheel_dofs(robot)
-        if wheels:
-            gain = np.abs(base.matrix).max(axis=1)  # 0: a direction no wheel drives
-            fallback = [settings.base_force, settings.base_force, settings.base_torque]
-            limit[:3] = np.where(gain > 0, limit[wheels].min() / np.maximum(gain, 1e-300), fallback)
-        else:
-            limit[:3] = [settings.base_force, settings.base_force, settings.base_torque]
-    bad = (~np.isfinite(limit) | (limit <= 0)) & ~free
-    if bad.any():
-        names = [
-            robot.model.names[j]
-            for j in range(1, robot.model.njoints)
-            if bad[robot.model.joints[j].idx_v]
-        ]
-        raise ModelError(
-            f"robot {robot.name!r}: joints without an effort limit in the URDF "
-            f"({', '.join(names)}); a physics run needs one per joint"
-        )
-    limit[free] = np.inf
-    return limit

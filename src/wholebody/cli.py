@@ -20,7 +20,7 @@ from wholebody.errors import ConfigError, WholebodyError
 
 __all__ = ["BACKENDS", "build_parser", "main"]
 
-BACKENDS = ("projection", "pinv", "hqp")
+BACKENDS = ("projection", "pinv", "hqp", "dynamics")
 """The scenario backends (:data:`wholebody.scenarios.spec.BACKENDS`, repeated here so that
 building the parser imports no solver; a test keeps the two equal)."""
 
@@ -349,8 +349,23 @@ def _report_run(run, files: dict[str, Path]) -> None:
             print(f"  {entry['pair']} held {entry['task']} back for {entry['steps']} steps")
     if m.get("sim") == "mujoco":
         _report_physics(m)
+    if "fell" in m:
+        _report_torque(m)
     for name, f in files.items():
         print(f"  {name:17s} {f}")
+
+
+def _report_torque(m: dict) -> None:
+    """A torque-level run's line: the bounds, and whether the robot stood."""
+    cop = m.get("cop_margin_min_m")
+    parts = [
+        f"bounds exceeded by at most {m['violation_max']:.2g} N m or N",
+        *([f"CoP at least {cop * 1e3:.1f} mm inside the soles"] if cop is not None else []),
+        f"contacts slid {m['foot_slip_max_m_all'] * 1e3:.2f} mm",
+        f"CoM moved {m['com_excursion_max_m'] * 1e3:.1f} mm",
+        "FELL" if m["fell"] else "stood",
+    ]
+    print("  torque level     " + "; ".join(parts))
 
 
 def _output_dir(out: Path) -> Path:

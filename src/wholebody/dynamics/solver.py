@@ -36,7 +36,8 @@ more than ``1e-5``; its error is below 1e-9 relative, checked against Pinocchio'
 accelerations in the tests). An inequality row ``l <= C u' <= h`` on the next velocity
 ``u' = u + a dt`` becomes ``(l - C u)/dt <= C a <= (h - C u)/dt``; so does the stack's box
 (velocity limits, position limits for one step), intersected with the braking bounds of the
-joint position limits (:mod:`wholebody.dynamics.braking`).
+joint position limits (:mod:`wholebody.dynamics.braking`) and the robot's acceleration
+limits; a floating base's six are left free (the contacts and the joints move them).
 
 Priorities
 ----------
@@ -78,6 +79,7 @@ from wholebody.robot.sim import effort_limits
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import OBJECTIVES, LevelProblem, Stack, StackProblem
+from wholebody.tasks.limits import AccelerationLimits
 
 __all__ = ["DynamicsResult", "DynamicsSolver"]
 
@@ -176,6 +178,12 @@ class DynamicsSolver:
         ``K_d`` (1/s) of the tasks' acceleration form.
     braking
         Deceleration (rad/s^2, m/s^2) the joint position limits keep in reserve.
+    acceleration_limits
+        Bound each actuated acceleration by the robot's acceleration limits
+        (:attr:`~wholebody.robot.Robot.acceleration_limits`, robot.toml ``[acceleration]``).
+        A stack's own :class:`~wholebody.tasks.AccelerationLimits` are refused: they bound
+        the next velocity about the last command, which at the torque level is not the
+        measured velocity.
     level_weights
         ``mode="weighted"``: the weight of each stack level's rows (default 1 for every
         level: the tasks' own weights decide).
@@ -195,6 +203,7 @@ class DynamicsSolver:
         mode: str = "strict",
         velocity_gain: float = 20.0,
         braking: float = 10.0,
+        acceleration_limits: bool = True,
         level_weights: Sequence[float] | None = None,
         tolerance: float = 1e-4,
         engine: str = "daqp",
@@ -204,6 +213,7 @@ class DynamicsSolver:
         self.robot, self.mode = robot, mode
         self.velocity_gain = _checked_gain("velocity_gain", velocity_gain)
         self.braking = _checked_gain("braking", braking)
+        self.acceleration_limits = bool(acceleration_limits)
         self.level_weights = None if level_weights is None else [float(w) for w in level_weights]
         self.tolerance = _checked_gain("tolerance", tolerance)
         model = robot.model
@@ -237,6 +247,11 @@ class DynamicsSolver:
                 return self.contacts.pop(i)
         raise ConfigError(f"DynamicsSolver: no active contact on {frame!r}")
 
+    @property
+    def contacts_made(self) -> bool:
+        """Whether every active contact has been made (:meth:`make_contacts`)."""
+        return all(c.reference is not None for c in self.contacts)
+
     def make_contacts(self, q: np.ndarray) -> None:
         """Hold every active contact where its frame is at ``q``."""
         model, data = self.robot.model, self._data
@@ -267,6 +282,12 @@ class DynamicsSolver:
     ) -> tuple[np.ndarray, np.ndarray]:
         if stack.robot is not self.robot:
             raise ConfigError("DynamicsSolver: the stack is over another robot")
+        if any(isinstance(c, AccelerationLimits) for c in stack.constraints):
+            raise ConfigError(
+                "DynamicsSolver: the stack has AccelerationLimits; the torque level bounds "
+                "the accelerations itself (DynamicsSolver(acceleration_limits=True)): leave "
+                "them out of the stack"
+            )
         q, u = np.asarray(q, dtype=float), np.asarray(u, dtype=float)
         if q.shape != (self.robot.nq,) or u.shape != (self.robot.nu,):
             raise DimensionError(
@@ -386,8 +407,13 @@ class DynamicsSolver:
             self.robot.joint_positions(q)[s], u[s], lower[s], upper[s], dt, self.braking
         )
         lo[s], hi[s] = np.maximum(lo[s], b_lo), np.minimum(hi[s], b_hi)
+        if self.acceleration_limits:
+            amax = self.robot.acceleration_limits
+            lo, hi = np.maximum(lo, -amax), np.minimum(hi, amax)
         crossed = lo > hi
         lo[crossed] = hi[crossed] = 0.5 * (lo[crossed] + hi[crossed])
+        # a floating base moves as the contacts and the joints make it: no bound of its own
+        lo[self._unactuated], hi[self._unactuated] = -np.inf, np.inf
         return lo, hi
 
     def _cascade(

@@ -75,6 +75,8 @@ def write_run(run: ScenarioRun, out: Path, *, figures: bool = True) -> dict[str,
     ]
     if run.physics is not None:
         jobs.append(("physics", partial(write_npz, out / "physics.npz", physics_arrays(run))))
+    if run.torque is not None:
+        jobs.append(("torque", partial(write_npz, out / "torque.npz", run.torque)))
     return _write_all(jobs + (_figure_jobs(run, out) if figures else []))
 
 

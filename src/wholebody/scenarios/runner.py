@@ -39,6 +39,8 @@ from wholebody.control import Controller, JointSensor, RunLog, summary
 from wholebody.control.controller import _progress
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
+from wholebody.dynamics import DynamicsSolver
+from wholebody.dynamics.controller import TorqueLog
 from wholebody.errors import ConfigError, DataError, FrameError
 from wholebody.files import read_npz
 from wholebody.planning import obstacles as ob
@@ -61,7 +63,9 @@ from wholebody.scenarios.physics import (
     true_tracking,
 )
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
-from wholebody.solvers import ProjectionSolver, Solver
+from wholebody.scenarios.standing import torque_arrays, torque_metrics
+from wholebody.scenarios.torque_run import torque_phase, torque_solver
+from wholebody.solvers import ProjectionSolver, Solver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, CollisionAvoidance, FrameTask, RelativeFrameTask
 
@@ -89,6 +93,9 @@ class ScenarioRun:
     wall_time: float = 0.0
     physics: dict | None = None
     """A physics run's records (:meth:`wholebody.sim.PhysicsLog.arrays`), else None."""
+    torque: dict[str, np.ndarray] | None = None
+    """A torque-level run's torques and wrenches
+    (:func:`~wholebody.scenarios.standing.torque_arrays`), else None."""
 
 
 def make_solver(backend: str, engine: str | None = None) -> Solver:
@@ -282,20 +289,21 @@ def run_scenario(
     collision, collision_model = _collision(spec, robot)
     held: dict[str, tuple[str, np.ndarray]] = {}  # carried object -> (frame, pose there)
     phase_models: list[tuple[str, CollisionModel]] = []
-    solver = make_solver(backend, engine)
+    solver, dt = _solver(spec, robot, backend, engine)
     planners = _Planners(spec)
+    shared = _Phase(spec, robot, solver, plant, latency, monitors)
     q = start_configuration(spec, robot)
     if plant is not None:
         plant.reset(q)
     state = robot.update(q)
     starts = {h: state.pose(t.frame) for h, t in tasks.items()}
     logs, start_wall, t0 = [], time.perf_counter(), 0.0
-    steps = [max(1, round(p.duration * duration_scale / spec.dt)) for p in spec.phases]
+    steps = [max(1, round(p.duration * duration_scale / dt)) for p in spec.phases]
     bar = _progress_bar(sum(steps), spec.name) if progress else None
     carries: dict[str, list[tuple[str, float, float]]] = {}  # object -> (hand, start, end)
     phases: dict[str, list[float]] = {}  # name -> [start, end] (s)
     for phase, n in zip(spec.phases, steps, strict=True):
-        duration = n * spec.dt
+        duration = n * dt
         phases[phase.name] = [t0, t0 + duration]
         refs = planners.phase(_scaled(phase, duration), starts)
         entries = [tasks[h] for h in refs]
@@ -312,18 +320,8 @@ def run_scenario(
             weights=weights,
             stiffness=stiffness,
             first=first,
-            acceleration=weights.acceleration,
+            acceleration=weights.acceleration and backend != "dynamics",
             collision=phase_collision,
-        )
-        controller = Controller(
-            robot,
-            stack,
-            solver,
-            dt=spec.dt,
-            references={tasks[h]: r for h, r in refs.items()},
-            monitors=monitors,
-            plant=plant,
-            latency=latency,
         )
         if plant is not None:
             plant.hold(_grips(phase, tasks))
@@ -331,12 +329,16 @@ def run_scenario(
             bar.set_postfix_str(phase.name)
         objects = on_objects if plant is not None else None
         callback = _callback(bar, on_step, objects, plant, t0, sum(len(x) for x in logs))
-        log = controller.run(
+        log = _run_phase(
+            shared,
+            stack,
+            {tasks[h]: r for h, r in refs.items()},
             q,
             duration,
-            callback=callback,
-            meta={"phase": phase.name},
-            u0=logs[-1].u[-1] if logs else None,
+            callback,
+            {"phase": phase.name},
+            _final_u(logs[-1]) if logs else None,
+            t0,
         )
         logs.append(log)
         q = np.asarray(log.meta["final_q"])
@@ -375,10 +377,107 @@ def run_scenario(
         masks = [(model, log.phase_mask(name)) for name, model in phase_models]
         metrics.update(closest_approach(masks, log, spec.collision.safety))
         metrics["collision_pairs"] = collision_model.summary()
+    torque = _torque_outcome(shared, log, physics, metrics)
     wall = time.perf_counter() - start_wall
     if plant is not None:  # simulated time per wall second, the controller's time included
-        metrics["real_time_factor"] = len(log) * spec.dt / wall
-    return ScenarioRun(spec, backend, log, metrics, poses, wall, physics)
+        metrics["real_time_factor"] = len(log) * dt / wall
+    return ScenarioRun(spec, backend, log, metrics, poses, wall, physics, torque)
+
+
+def _solver(
+    spec: ScenarioSpec, robot: Robot, backend: str, engine: str | None
+) -> tuple[Solver | DynamicsSolver, float]:
+    """The run's solver and control period (s): ``[torque]``'s for ``dynamics``."""
+    if backend != "dynamics":
+        return make_solver(backend, engine), spec.dt
+    if engine is not None:
+        raise ConfigError(f"engine {engine!r} is for the hqp backend, not dynamics")
+    return torque_solver(spec, robot), spec.torque.dt
+
+
+@dataclass
+class _Phase:
+    """What every phase of a run shares."""
+
+    spec: ScenarioSpec
+    robot: Robot
+    solver: Solver | DynamicsSolver
+    plant: object
+    latency: int
+    monitors: list
+    torque: list[TorqueLog] = field(default_factory=list)
+    """The torque-level phases' torques and wrenches, in order."""
+
+
+def _run_phase(
+    p: _Phase,
+    stack: Stack,
+    refs: dict[FrameTask, Trajectory],
+    q: np.ndarray,
+    duration: float,
+    callback: Callable[[int, float, np.ndarray], None],
+    meta: dict,
+    u0: np.ndarray | None,
+    t0: float,
+) -> RunLog:
+    """One phase's run: the velocity controller, or the torque-level one (``dynamics``)."""
+    if isinstance(p.solver, DynamicsSolver):
+        log, torques = torque_phase(
+            p.spec,
+            p.robot,
+            stack,
+            p.solver,
+            refs,
+            p.plant,
+            q,
+            duration,
+            t0=t0,
+            u0=u0,
+            monitors=p.monitors,
+            callback=callback,
+            meta=meta,
+        )
+        p.torque.append(torques)
+        return log
+    controller = Controller(
+        p.robot,
+        stack,
+        p.solver,
+        dt=p.spec.dt,
+        references=refs,
+        monitors=p.monitors,
+        plant=p.plant,  # type: ignore[arg-type]
+        latency=p.latency,
+    )
+    return controller.run(q, duration, callback=callback, meta=meta, u0=u0)
+
+
+def _torque_outcome(
+    shared: _Phase, log: RunLog, physics: dict | None, metrics: dict
+) -> dict[str, np.ndarray] | None:
+    """A torque-level run's records, its metrics added to ``metrics``
+    (:mod:`wholebody.scenarios.standing`); None for a velocity-level run."""
+    if not shared.torque:
+        return None
+    torque = torque_arrays(shared.torque)
+    metrics.update(
+        torque_metrics(
+            shared.robot,
+            shared.solver,  # type: ignore[arg-type]
+            torque,
+            log.q if physics is None else physics["configuration"],
+            log.t,
+            shared.spec.torque.pushes if shared.plant is not None else (),
+            bool(metrics.get("stopped")),
+        )
+    )
+    return torque
+
+
+def _final_u(log: RunLog) -> np.ndarray:
+    """The velocity a phase ends with: the torque run's measured one, else the last
+    command."""
+    return np.asarray(log.meta["final_u"]) if "final_u" in log.meta else log.u[-1]
 
 
 def _chain(

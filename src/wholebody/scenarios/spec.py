@@ -67,6 +67,10 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     influence = 0.05                   # m, d_i
     speed = 0.5                        # m/s allowed at d_i
 
+    [torque]                           # optional: the torque-level backend (--backend
+                                       # dynamics): rate, contacts, pushes
+                                       # (wholebody.scenarios.torque_spec)
+
     [[phases]]
     name = "reach"
     duration = 5.0                     # s
@@ -102,6 +106,7 @@ import numpy as np
 from wholebody.errors import ConfigError
 from wholebody.formats import FORMAT_KEY, SCENARIO, check_format
 from wholebody.presets import SPRINGS, PaperWeights
+from wholebody.scenarios.torque_spec import TorqueSpec, parse_torque
 from wholebody.tomlreader import TomlReader, config_error, load_toml
 
 __all__ = [
@@ -118,7 +123,7 @@ __all__ = [
     "parse_scenario",
 ]
 
-BACKENDS = ("projection", "pinv", "hqp")
+BACKENDS = ("projection", "pinv", "hqp", "dynamics")
 PLANNERS = ("dmp", "min_jerk", "hold", "follow", "free")
 KINDS = ("box", "cylinder", "sphere")
 
@@ -224,6 +229,8 @@ class ScenarioSpec:
     extra: dict[str, Any] = field(default_factory=dict)
     collision: CollisionSpec | None = None
     """``[collision]``, if the file has one."""
+    torque: TorqueSpec = field(default_factory=TorqueSpec)
+    """``[torque]``: the torque-level backend's rate, contacts and pushes."""
     start: str | dict[str, float] = "home"
     """The start posture: ``"home"``, ``"neutral"`` or joint positions by name (rad, m; the
     joints and their limits are checked against the robot when it is loaded)."""
@@ -276,7 +283,17 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
     r.only(
         data,
         "",
-        (FORMAT_KEY, "scenario", "stack", "hands", "planner", "objects", "phases", "collision"),
+        (
+            FORMAT_KEY,
+            "scenario",
+            "stack",
+            "hands",
+            "planner",
+            "objects",
+            "phases",
+            "collision",
+            "torque",
+        ),
     )
 
     head = r.table(data, "scenario", "", required=True)
@@ -304,6 +321,7 @@ def parse_scenario(data: dict, path: str | Path) -> ScenarioSpec:
             r, r.table(data, "collision", "", required=True), objects, phases, rate
         )
     return ScenarioSpec(
+        torque=parse_torque(r, r.table(data, "torque", "", required=False)),
         collision=collision,
         path=path,
         name=name,

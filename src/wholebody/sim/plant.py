@@ -280,17 +280,7 @@ class MujocoPlant:
         unusable (a NaN or a huge value: it then resets its data), the run stops there
         (:attr:`stop_reason`) and the configuration given before the step is returned."""
         now = self.configuration()
-        if not np.allclose(np.asarray(q, dtype=float), self._seen, atol=1e-6):
-            raise ModelError(
-                "the plant is not at the controller's configuration: call "
-                "plant.reset(q0) before running from q0"
-            )
-        n = round(dt / self.settings.timestep)
-        if n < 1 or abs(n * self.settings.timestep - dt) > 1e-9:
-            raise DimensionError(
-                f"the control period {dt} s must be a whole number of physics "
-                f"steps of {self.settings.timestep} s"
-            )
+        n = self._periods(q, dt)
         v = self._A @ np.asarray(u, dtype=float)
         m, d = self.model, self.data
         self._record_poses()
@@ -310,15 +300,111 @@ class MujocoPlant:
             saturated |= at_limit
             self._stalled = np.where(at_limit, self._stalled + 1, 0)
             mujoco.mj_step2(m, d)
+        return self._finish(n, peak, saturated, wheels, demand, warnings)
+
+    def body_of(self, frame: str) -> int:
+        """The MuJoCo body that carries the robot frame ``frame`` (its parent joint's)."""
+        model = self.robot.model
+        if not model.existFrame(frame):
+            raise ModelError(f"robot {self.robot.name!r} has no frame {frame!r}")
+        joint = model.frames[model.getFrameId(frame)].parentJoint
+        if joint == 0:
+            return 0  # the world
+        name = self.world.joints[joint][0]
+        return int(self.model.jnt_bodyid[self.model.joint(name).id])
+
+    def velocity(self) -> np.ndarray:
+        """The simulated robot's Pinocchio velocity ``v`` (nv): a planar root's in the base
+        frame, a free flyer's linear and angular velocity in its own frame (MuJoCo keeps the
+        linear one in the world's)."""
+        v = self.data.qvel[self._dofs].copy()
+        if self._planar is not None:
+            yaw = self.data.qpos[self._planar[3]]
+            c, s = np.cos(yaw), np.sin(yaw)
+            v[0], v[1] = c * v[0] + s * v[1], -s * v[0] + c * v[1]
+        if self._free is not None:
+            R = np.empty(9)
+            a = self._free[1]
+            mujoco.mju_quat2Mat(R, self.data.qpos[a + 3 : a + 7])
+            v[:3] = R.reshape(3, 3).T @ v[:3]
+        return v
+
+    def torque_step(self, q: np.ndarray, force: np.ndarray, dt: float) -> np.ndarray:
+        """Run the physics for ``dt`` (s) from ``q`` (the configuration the plant gave last)
+        under the actuators' generalised force ``force`` (nv, Pinocchio's velocity order:
+        N m, N; a planar root's force and torque in the base frame), held over the period
+        as a torque-controlled drive holds its command; the configuration reached, as the
+        sensor reads it (:meth:`velocity` gives the velocity). No servo and no gravity
+        compensation act: ``force`` is all the motors apply. A floating base's six have no
+        motor (a nonzero force there raises :class:`ModelError`); a force beyond a joint's
+        limit is clamped there and recorded in :attr:`log` (``saturated``), never silently;
+        a joint held at its limit for ``stall_time`` stops the run (:attr:`stop_reason`)."""
+        force = np.asarray(force, dtype=float)
+        if force.shape != (self.robot.nv,) or not np.isfinite(force).all():
+            raise DimensionError(f"force must be {self.robot.nv} finite numbers")
+        if self._free is not None and np.abs(force[:6]).max() > 1e-6 * (1.0 + np.abs(force).max()):
+            raise ModelError("a floating base has no motor: force[:6] must be 0")
+        n = self._periods(q, dt)
+        tau = force.copy()
+        if self._free is not None:
+            tau[:6] = 0.0
+        self._record_poses()
+        self.log.configuration.append(self.configuration())
+        wheels = np.zeros(self._wheels.shape[1])
+        if self._planar is not None:  # the base's force and torque into the world
+            yaw = self.data.qpos[self._planar[3]]
+            c, s = np.cos(yaw), np.sin(yaw)
+            tau[0], tau[1] = c * force[0] - s * force[1], s * force[0] + c * force[1]
+        limit = self.world.effort
+        at_limit = np.abs(tau) > limit * (1.0 + 1e-9)
+        demand = np.abs(tau)
+        np.clip(tau, -limit, limit, out=tau)
+        if self._wheels.size:
+            wheels, limited = self._wheel_limited(tau)
+            at_limit[:3] |= limited
+        self.data.ctrl[self._actuators] = tau[self._driven]
+        self._stalled = np.where(at_limit, self._stalled + n, 0)
+        warnings = self._warnings()
+        for _ in range(n):
+            mujoco.mj_step(self.model, self.data)
+        return self._finish(n, np.abs(tau), at_limit, wheels, demand, warnings)
+
+    def _periods(self, q: np.ndarray, dt: float) -> int:
+        """The physics steps of a control period of ``dt`` s from ``q`` (checked to be where
+        the plant is)."""
+        if not np.allclose(np.asarray(q, dtype=float), self._seen, atol=1e-6):
+            raise ModelError(
+                "the plant is not at the controller's configuration: call "
+                "plant.reset(q0) before running from q0"
+            )
+        n = round(dt / self.settings.timestep)
+        if n < 1 or abs(n * self.settings.timestep - dt) > 1e-9:
+            raise DimensionError(
+                f"the control period {dt} s must be a whole number of physics "
+                f"steps of {self.settings.timestep} s"
+            )
+        return n
+
+    def _finish(
+        self,
+        n: int,
+        peak: np.ndarray,
+        saturated: np.ndarray,
+        wheels: np.ndarray,
+        demand: np.ndarray,
+        warnings: tuple[int, ...],
+    ) -> np.ndarray:
+        """After a period's ``n`` physics steps: the time, the log, the divergence and stall
+        checks; the configuration as the sensor reads it."""
         self.time += n * self.settings.timestep
-        mujoco.mj_kinematics(m, d)  # the bodies' poses at the new state, not the last step's
+        mujoco.mj_kinematics(self.model, self.data)  # the bodies' poses at the new state
         self._record(peak, saturated, wheels)
         if self._warnings() != warnings:
             self.stop_reason = (
                 f"the simulation diverged at t = {self.time:.3f} s (MuJoCo "
                 f"found a bad position, velocity or acceleration)"
             )
-            self.data.qpos[:] = self.qpos(now)
+            self.data.qpos[:] = self.qpos(self.log.configuration[-1])
             return self._seen.copy()
         self._check(demand)
         self._seen = self._readout.read(self.configuration())

@@ -1,0 +1,94 @@
+"""What a torque-level run adds to a scenario's metrics: the bounds held, and for a robot on
+its contacts whether it stood.
+
+Read from the controller's records (:class:`~wholebody.dynamics.controller.TorqueLog`: the
+torques and the wrenches it commanded) and from the true configurations (a physics run's
+simulated ones, else the integrated ones):
+
+``violation_max``
+    The largest excess of a commanded torque, wrench or the equations of motion over its
+    bound (N m, N): 0 when every bound held.
+``cop_margin_min_m``
+    The least distance from a patch contact's centre of pressure (of the commanded wrench)
+    to its sole's edge (m); negative outside.
+``foot_slip_max_m``
+    Per contact frame, its largest horizontal displacement (m, world) from where the run
+    began, and ``foot_slip_max_m_all`` the largest of them.
+``com_excursion_max_m``
+    The largest horizontal distance (m) of the centre of mass from where it began.
+``fell``
+    The base dropped more than 0.2 m below where it began, a contact slid more than 5 cm, or
+    the simulation stopped.
+``com_after_push_m``
+    With pushes: the centre of mass's horizontal distance at the run's end from where it was
+    when the first push began (m): it recovered when that is small.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from wholebody.dynamics import DynamicsSolver, PatchContact
+from wholebody.dynamics.controller import TorqueLog
+from wholebody.robot import Robot
+from wholebody.scenarios.torque_spec import PushSpec
+
+__all__ = ["torque_arrays", "torque_metrics"]
+
+FALL_DROP = 0.2
+"""m: a base lower than this below its start has fallen."""
+FALL_SLIP = 0.05
+"""m: a contact that slid this far has been lost."""
+
+
+def torque_arrays(logs: Sequence[TorqueLog]) -> dict[str, np.ndarray]:
+    """The torque-level records of consecutive phases (``torque.npz``): ``tau`` (N, nu; N m,
+    N, in ``u``'s order), ``wrench/FRAME`` (N, 6 or 3), ``violation`` (N; N m or N)."""
+    out = {
+        "tau": np.concatenate([g.tau for g in logs]),
+        "violation": np.concatenate([g.violation for g in logs]),
+    }
+    for frame in logs[0].wrenches:
+        out[f"wrench/{frame}"] = np.concatenate([g.wrenches[frame] for g in logs])
+    return out
+
+
+def torque_metrics(
+    robot: Robot,
+    solver: DynamicsSolver,
+    arrays: dict[str, np.ndarray],
+    q: np.ndarray,
+    t: np.ndarray,
+    pushes: Sequence[PushSpec] = (),
+    stopped: bool = False,
+) -> dict:
+    """The module docstring's metrics; ``q`` (N, nq) the true configurations at times ``t``
+    (s)."""
+    m: dict = {"violation_max": float(arrays["violation"].max(initial=0.0))}
+    patches = [c for c in solver.contacts if isinstance(c, PatchContact)]
+    if patches:
+        m["cop_margin_min_m"] = float(
+            min(min(c.cop_margin(w) for w in arrays[f"wrench/{c.frame}"]) for c in patches)
+        )
+    slip = {c.frame: _slip(robot, q, c.frame) for c in solver.contacts}
+    com = np.array([robot.com_position(qk)[:2] for qk in q])
+    m["foot_slip_max_m"] = slip
+    m["foot_slip_max_m_all"] = max(slip.values(), default=0.0)
+    m["com_excursion_max_m"] = float(np.linalg.norm(com - com[0], axis=1).max())
+    drop = 0.0
+    if robot.base.floating:
+        height = np.array([robot.frame_pose(qk, robot.base_frame)[2, 3] for qk in q])
+        drop = float(height[0] - height.min())
+    m["fell"] = bool(stopped or drop > FALL_DROP or m["foot_slip_max_m_all"] > FALL_SLIP)
+    if pushes:
+        k = min(int(np.searchsorted(t, min(p.start for p in pushes))), len(t) - 1)
+        m["com_after_push_m"] = float(np.linalg.norm(com[-1] - com[k]))
+    return m
+
+
+def _slip(robot: Robot, q: np.ndarray, frame: str) -> float:
+    """The largest horizontal displacement (m) of ``frame`` from its first position."""
+    p = np.array([robot.frame_pose(qk, frame)[:2, 3] for qk in q])
+    return float(np.linalg.norm(p - p[0], axis=1).max())

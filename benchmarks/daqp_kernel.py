@@ -45,11 +45,11 @@ SETTINGS = {"primal_tol": 1e-9, "iter_limit": 2000}  # the daqp engine's
 # The kept-workspace prototype (measurement only). DAQPWorkspace is 328 bytes (41 words); its
 # sense pointer is word 8 (offset 64), its settings pointer word 28 (offset 224).
 _P = types.uintp
-_setup = dk._external("setup_daqp", types.int32, _P, _P, _P)
-_update = dk._external("daqp_update_ldp", types.int32, types.int32, _P, _P)
-_solve = dk._external("daqp_solve", types.void, _P, _P)
-_free_work = dk._external("free_daqp_workspace", types.void, _P)
-_free_ldp = dk._external("free_daqp_ldp", types.void, _P)
+_setup = dk.external_function("setup_daqp", types.int32, _P, _P, _P)
+_update = dk.external_function("daqp_update_ldp", types.int32, types.int32, _P, _P)
+_solve = dk.external_function("daqp_solve", types.void, _P, _P)
+_free_work = dk.external_function("free_daqp_workspace", types.void, _P)
+_free_ldp = dk.external_function("free_daqp_ldp", types.void, _P)
 _UPDATE = 1 | 2 | 4 | 8 | 16  # DAQP_UPDATE_Rinv | _M | _v | _d | _sense
 
 
@@ -64,7 +64,7 @@ def kept(ws, H, f, A, bu, bl, sense, settings, x, lam):
     qp[2], qp[3], qp[4] = H.ctypes.data, f.ctypes.data, A.ctypes.data
     qp[5], qp[6], qp[7] = bu.ctypes.data, bl.ctypes.data, sense.ctypes.data
     if work[28] == 0:
-        dk._fill_settings(st, settings)
+        dk.fill_settings(st, settings)
         work[28] = st.ctypes.data  # daqp uses (and does not free) our settings
         flag = _setup(qp.ctypes.data, work.ctypes.data, 0)
     else:

@@ -328,7 +328,7 @@ class CollisionModel:
         """Every checked pair closer than ``within`` (m) at ``state``, closest first, with its
         row: the kernel :func:`~wholebody.kernels.collision.collision_rows` (bounding spheres
         first, then the exact distance), after coal for the pairs with a mesh."""
-        state._data()  # a stale state raises
+        state.require_valid()
         J, oMf = self.robot.kinematics.views()
         within = float(within)
         external = self.external(oMf, within)

@@ -24,7 +24,7 @@ from shlex import quote
 import numpy as np
 
 from wholebody.files import write_json, write_text
-from wholebody.humanlike.cli import _count, _ints, _names
+from wholebody.humanlike.cli import int_at_least, int_list, name_list
 
 __all__ = ["add_arm_angle_parser"]
 
@@ -103,9 +103,9 @@ def _print(cv: dict) -> None:
 
 
 def _score(args: argparse.Namespace) -> int:
-    from wholebody.humanlike.training import _torch
+    from wholebody.humanlike.training import import_torch
 
-    _torch().set_num_threads(args.threads)
+    import_torch().set_num_threads(args.threads)
     _, records = _records(args)
     cv = _cross_validate(args, records, _config(args), hand=args.hand)
     _print(cv)
@@ -177,9 +177,9 @@ def _fit(args: argparse.Namespace) -> int:
     from wholebody.humanlike.arm_angle_fit import train_arm_angle
     from wholebody.humanlike.arm_angle_scores import kim_calibration_scatter
     from wholebody.humanlike.recordings import load_participants
-    from wholebody.humanlike.training import _torch
+    from wholebody.humanlike.training import import_torch
 
-    _torch().set_num_threads(args.threads)
+    import_torch().set_num_threads(args.threads)
     recs, records = _records(args)
     config = _config(args)
     cv = _cross_validate(args, records, config)
@@ -232,37 +232,37 @@ def _options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--tasks",
-        type=_names,
+        type=name_list,
         default=None,
         metavar="NAMES",
         help="only these tasks (default: all: forward,across,drinking,combing)",
     )
     p.add_argument(
         "--records",
-        type=_count(100),
+        type=int_at_least(100),
         default=20000,
         help="about this many records, every trial alike (default: %(default)s)",
     )
     p.add_argument(
         "--hidden",
-        type=_ints,
+        type=int_list,
         default=(8,),
         metavar="SIZES",
         help="hidden layer sizes (default: 8)",
     )
-    p.add_argument("--epochs", type=_count(1), default=100)
+    p.add_argument("--epochs", type=int_at_least(1), default=100)
     p.add_argument("--lr", type=float, default=0.01)
-    p.add_argument("--batch-size", type=_count(1), default=256)
+    p.add_argument("--batch-size", type=int_at_least(1), default=256)
     p.add_argument("--weight-decay", type=float, default=0.01, help="AdamW weight decay")
     p.add_argument("--seed", type=int, default=0, help="training and bootstrap seed")
     p.add_argument(
         "--bootstrap",
-        type=_count(10),
+        type=int_at_least(10),
         default=2000,
         metavar="N",
         help="bootstrap resamples for the intervals (default: %(default)s)",
     )
-    p.add_argument("--threads", type=_count(1), default=1, help="torch CPU threads")
+    p.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -289,7 +289,7 @@ def add_arm_angle_parser(subparsers: argparse._SubParsersAction) -> None:
         "--compare-hidden",
         default=None,
         metavar="CANDIDATES",
-        type=lambda t: tuple(_ints(v) for v in t.split(";") if v.strip()),
+        type=lambda t: tuple(int_list(v) for v in t.split(";") if v.strip()),
         help="also score these hidden sizes, ';'-separated (for the card)",
     )
     f.add_argument(

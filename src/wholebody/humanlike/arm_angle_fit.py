@@ -23,7 +23,7 @@ import numpy as np
 
 from wholebody.arm.human_arm_angle import NetworkArmAngle
 from wholebody.errors import DataError
-from wholebody.humanlike.training import _torch, train_epoch
+from wholebody.humanlike.training import import_torch, train_epoch
 
 __all__ = [
     "ArmAngleConfig",
@@ -61,7 +61,7 @@ class ArmAngleTraining:
 
 def _module(hidden: Sequence[int], x_mean, x_scale, a_mean: float, a_scale: float, dtype):
     """The torch network; its input width is that of ``x_mean``."""
-    torch = _torch()
+    torch = import_torch()
     nn = torch.nn
 
     class ArmAngleMLP(nn.Module):
@@ -87,7 +87,7 @@ def _module(hidden: Sequence[int], x_mean, x_scale, a_mean: float, a_scale: floa
 
 def torch_arm_angle_module(net: NetworkArmAngle):
     """A float64 torch module computing exactly ``net``, for checks."""
-    torch = _torch()
+    torch = import_torch()
     m = _module(
         net.hidden_sizes, net.x_mean, net.x_scale, net.alpha_mean, net.alpha_scale, torch.float64
     )
@@ -108,7 +108,7 @@ class TorchPredictor:
     seconds: float
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        torch = _torch()
+        torch = import_torch()
         with torch.no_grad():
             return self.module(torch.as_tensor(np.asarray(X, dtype=float))).numpy()  # type: ignore[operator]
 
@@ -116,7 +116,7 @@ class TorchPredictor:
 def _fit(X: np.ndarray, y: np.ndarray, config: ArmAngleConfig):
     """Train on inputs ``X`` (N, d) and labels ``y`` (N,) (module docstring); returns the
     module, the loss per epoch and the wall time (s)."""
-    torch = _torch()
+    torch = import_torch()
     X = np.asarray(X, dtype=float)
     y = np.asarray(y, dtype=float).reshape(-1)
     if X.ndim != 2 or len(X) != len(y) or len(y) < 2:
@@ -162,7 +162,7 @@ def train_arm_angle(
     comes from the cross-validation (:mod:`wholebody.humanlike.arm_angle_scores`), not from
     this fit's own residuals.
     """
-    torch = _torch()
+    torch = import_torch()
     P = np.asarray(P, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3:
         raise DataError(f"train_arm_angle: need P (N, 3), got {P.shape}")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from shlex import quote
@@ -31,8 +32,8 @@ from wholebody.humanlike.training import DEFAULT_HIDDEN
 __all__ = ["add_stiffness_parser"]
 
 
-def _count(minimum: int):
-    """An argparse type: an integer >= ``minimum``."""
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: an integer >= ``minimum`` (shared with the arm-angle commands)."""
 
     def parse(text: str) -> int:
         try:
@@ -46,7 +47,8 @@ def _count(minimum: int):
     return parse
 
 
-def _ints(text: str) -> tuple[int, ...]:
+def int_list(text: str) -> tuple[int, ...]:
+    """An argparse type: comma-separated positive integers (layer sizes, ``16,16``)."""
     try:
         out = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
@@ -58,7 +60,8 @@ def _ints(text: str) -> tuple[int, ...]:
     return out
 
 
-def _names(text: str) -> tuple[str, ...]:
+def name_list(text: str) -> tuple[str, ...]:
+    """An argparse type: comma-separated names, blanks dropped (participants, tasks)."""
     return tuple(v.strip() for v in text.split(",") if v.strip())
 
 
@@ -145,9 +148,9 @@ def _fit(args: argparse.Namespace) -> int:
     from wholebody.humanlike.dataset import DEFAULT_TEST_PARTICIPANTS, StiffnessDataset
     from wholebody.humanlike.pipeline import PAPER_SCORES, fit_and_evaluate
     from wholebody.humanlike.report import data_card
-    from wholebody.humanlike.training import TrainingConfig, _torch
+    from wholebody.humanlike.training import TrainingConfig, import_torch
 
-    _torch().set_num_threads(args.threads)
+    import_torch().set_num_threads(args.threads)
     path = Path(args.dataset) if args.dataset else _default_dataset()
     ds = StiffnessDataset.load(path)
     config = TrainingConfig(
@@ -372,11 +375,11 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument("--robot", default="mobile_humanoid", help="bundled name, directory or toml")
     d.add_argument("--arm", default="right", help="arm whose lengths and masses label the data")
-    d.add_argument("--records", type=_count(1), default=5000, help="about this many records")
+    d.add_argument("--records", type=int_at_least(1), default=5000, help="about this many records")
     d.add_argument("--seed", type=int, default=0, help="seed of the synthetic data")
     d.add_argument(
         "--synthetic-participants",
-        type=_count(0),
+        type=int_at_least(0),
         default=0,
         metavar="N",
         help="add the SYNTHETIC reaches of virtual participants SYN01..SYN0N "
@@ -384,7 +387,7 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument(
         "--tasks",
-        type=_names,
+        type=name_list,
         default=None,
         metavar="NAMES",
         help="only these tasks of the real recordings (default: all: "
@@ -404,7 +407,7 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     d.add_argument(
         "--held-out",
-        type=_names,
+        type=name_list,
         default=None,
         metavar="IDS",
         help="participants kept out of the calibration, to be held out when the "
@@ -424,21 +427,21 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument("--dataset", default=None, help="dataset file (default: the bundled one)")
     f.add_argument(
         "--test-participants",
-        type=_names,
+        type=name_list,
         default=None,
         metavar="IDS",
         help="comma-separated held-out participants (default: ADL003,ADL008,ADL011)",
     )
     f.add_argument(
         "--hidden",
-        type=_ints,
+        type=int_list,
         default=DEFAULT_HIDDEN,
         metavar="SIZES",
         help="hidden layer sizes (default: %(default)s)",
     )
     f.add_argument(
         "--select-hidden",
-        type=lambda t: tuple(_ints(v) for v in t.split(";") if v.strip()),
+        type=lambda t: tuple(int_list(v) for v in t.split(";") if v.strip()),
         default=None,
         metavar="CANDIDATES",
         help="choose the hidden sizes by grouped 3-fold CV on the training participants among "
@@ -458,11 +461,11 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
         default=0.0,
         help="AdamW weight decay (0: plain Adam, the paper's)",
     )
-    f.add_argument("--epochs", type=_count(1), default=1000)
+    f.add_argument("--epochs", type=int_at_least(1), default=1000)
     f.add_argument("--lr", type=float, default=0.01)
-    f.add_argument("--batch-size", type=_count(1), default=32)
+    f.add_argument("--batch-size", type=int_at_least(1), default=32)
     f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--threads", type=_count(1), default=1, help="torch CPU threads")
+    f.add_argument("--threads", type=int_at_least(1), default=1, help="torch CPU threads")
     f.add_argument("--no-svr", action="store_true", help="skip the SVR baseline")
     f.add_argument(
         "--paper-protocol",
@@ -484,7 +487,7 @@ def add_stiffness_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     f.add_argument(
         "--bootstrap",
-        type=_count(10),
+        type=int_at_least(10),
         default=2000,
         metavar="N",
         help="bootstrap resamples of the per-participant intervals",

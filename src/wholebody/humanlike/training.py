@@ -18,6 +18,7 @@ import itertools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 
@@ -38,7 +39,9 @@ DEFAULT_HIDDEN = (8,)  # fit's default; the shipped network's, chosen by grouped
 FLOOR_FRACTION = 0.01  # 1 / floor_beta as a fraction of k_scale
 
 
-def _torch():
+def import_torch() -> ModuleType:
+    """PyTorch, imported on first use (only training needs it), or a SolverError that says
+    which extra installs it."""
     try:
         import torch
     except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -77,7 +80,7 @@ class TrainingResult:
 
 
 def _module(hidden: Sequence[int], x_mean, x_scale, k_mean, k_scale, beta, dtype):
-    torch = _torch()
+    torch = import_torch()
     nn = torch.nn
 
     class StiffnessMLP(nn.Module):
@@ -104,7 +107,7 @@ def _module(hidden: Sequence[int], x_mean, x_scale, k_mean, k_scale, beta, dtype
 
 def torch_module(net: NetworkStiffness, dtype: object = None):
     """A torch module computing exactly ``net`` (float64 by default), for checks."""
-    torch = _torch()
+    torch = import_torch()
     dtype = dtype or torch.float64
     m = _module(
         net.hidden_sizes, net.x_mean, net.x_scale, net.k_mean, net.k_scale, net.floor_beta, dtype
@@ -120,7 +123,7 @@ def train_epoch(model, opt, X, y, scale: float, batch_size: int, generator) -> f
     """One epoch of mini-batch steps of ``opt`` on ``mean(((model(X) - y) / scale)^2)``, the
     batches in a random order drawn from ``generator``; returns the epoch's mean loss. Why
     shared: the stiffness and arm-angle networks train alike."""
-    torch = _torch()
+    torch = import_torch()
     n = len(y)
     perm = torch.randperm(n, generator=generator)
     total = 0.0
@@ -146,7 +149,7 @@ def train_network(
 ) -> TrainingResult:
     """Fit the network to canonical wrist positions ``X`` (N, 3) (m) and stiffness ``y`` (N,)
     (N m/rad) with mini-batch Adam; returns the exported numpy network and the loss curve."""
-    torch = _torch()
+    torch = import_torch()
     X = np.asarray(X, dtype=float)
     y = np.asarray(y, dtype=float).reshape(-1)
     if X.ndim != 2 or X.shape[1] != 3 or len(X) != len(y) or len(y) < 2:

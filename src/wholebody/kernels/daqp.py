@@ -106,7 +106,7 @@ def _check_version() -> str:
 _LIB = ctypes.CDLL(_check_version())
 
 
-def _external(name: str, restype: types.Type, *args: types.Type):
+def external_function(name: str, restype: types.Type, *args: types.Type):
     """daqp's C function ``name`` as a callable: an external function registered under
     ``wholebody_<name>`` when compiled, its ctypes twin when not (``uintp`` is a pointer)."""
     address = ctypes.cast(getattr(_LIB, name), ctypes.c_void_p).value
@@ -120,9 +120,9 @@ def _external(name: str, restype: types.Type, *args: types.Type):
 
 _P = types.uintp
 # void daqp_quadprog(DAQPResult* res, DAQPProblem* qp, DAQPSettings* settings)
-_quadprog = _external("daqp_quadprog", types.void, _P, _P, _P)
+_quadprog = external_function("daqp_quadprog", types.void, _P, _P, _P)
 # void daqp_default_settings(DAQPSettings* settings)
-_default_settings = _external("daqp_default_settings", types.void, _P)
+_default_settings = external_function("daqp_default_settings", types.void, _P)
 
 # ------------------------------------------------------------------ constants.h, daqp 0.11
 INF = 1e30  # DAQP_INF: a bound at or beyond it is absent
@@ -199,7 +199,7 @@ def settings(**values: float) -> np.ndarray:
 
 
 @kernel
-def _fill_settings(buf: np.ndarray, values: np.ndarray) -> None:
+def fill_settings(buf: np.ndarray, values: np.ndarray) -> None:
     """daqp's default settings into the struct ``buf``, then the non-NaN ``values``."""
     _default_settings(buf.ctypes.data)
     d, i = buf.view(np.float64), buf.view(np.int32)
@@ -218,7 +218,7 @@ def read_settings(values: np.ndarray, out: np.ndarray) -> None:
     defaults (``daqp_default_settings``) with ``values`` applied, read back from the struct
     into ``out`` (N_SETTINGS)."""
     buf = np.zeros(_WORDS_SETTINGS, np.int64)
-    _fill_settings(buf, values)
+    fill_settings(buf, values)
     d, i = buf.view(np.float64), buf.view(np.int32)
     for k in range(N_SETTINGS):
         out[k] = i[_OFFSET[k] // 4] if _IS_INT[k] else d[_OFFSET[k] // 8]
@@ -295,7 +295,7 @@ def solve(
     qp[6] = blower.ctypes.data
     qp[7] = sense.ctypes.data  # (break_points NULL, nh 0, problem_type 0: a QP)
     st = np.zeros(_WORDS_SETTINGS, np.int64)
-    _fill_settings(st, settings)
+    fill_settings(st, settings)
     res = np.zeros(_WORDS_RESULT, np.int64)
     res[0] = x.ctypes.data
     res[1] = lam.ctypes.data

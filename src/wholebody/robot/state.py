@@ -74,6 +74,12 @@ class RobotState:
         stale)."""
         return self._version == self.robot._version
 
+    def require_valid(self) -> None:
+        """Raise a :class:`WholebodyError` if this state is stale (a newer
+        :meth:`Robot.update` was made): what a reader of the robot's shared kinematics checks
+        first."""
+        self._data()
+
     def _data(self) -> pin.Data:
         """The robot's Pinocchio data, or a :class:`WholebodyError` if this state is stale."""
         if self._version != self.robot._version:

@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from wholebody.files import save_figure, write_text
-from wholebody.scenarios.plots import _figure
 from wholebody.sweep.campaign import Campaign
 
 __all__ = ["best_cases", "write_report"]
@@ -101,7 +101,7 @@ def _axes_figure(rows: Sequence[dict], campaign: Campaign):
     """The objective against each axis: numbers on a numeric axis, one column per value on
     another (a backend, a goal); a grid axis' mean per value as a line."""
     axes_ = campaign.axes
-    fig = _figure(figsize=(4.2 * len(axes_), 3.6), layout="constrained")
+    fig = Figure(figsize=(4.2 * len(axes_), 3.6), layout="constrained")
     panels = np.atleast_1d(fig.subplots(1, len(axes_)))
     y = np.array([_value(r, campaign.objective) for r in rows])
     for ax, axis in zip(panels, axes_, strict=True):
@@ -154,7 +154,7 @@ def _heatmap(rows: Sequence[dict], grid: list, objective: str):
                 if _key(r.get(a.key)) == xv and _key(r.get(b.key)) == yv
             ]
             mean[i, j] = _mean(np.array(cell, dtype=float))
-    fig = _figure(figsize=(1.2 * len(xs) + 3, 0.6 * len(ys) + 2.5), layout="constrained")
+    fig = Figure(figsize=(1.2 * len(xs) + 3, 0.6 * len(ys) + 2.5), layout="constrained")
     ax = fig.subplots()
     image = ax.imshow(mean, origin="lower", aspect="auto", cmap="viridis")
     ax.set_xticks(range(len(xs)), [str(v) for v in a.values])

@@ -194,6 +194,16 @@ class Task(Compiled, ABC):
 
     Subclasses call ``super().__init__(name, weight, gain=...)`` (all checked).
 
+    A task has no damping of its own (pink's ``lm_damping``, a Levenberg-Marquardt term
+    ``mu = lm_damping ||e||^2`` added to its QP's Hessian): in a strict hierarchy a
+    regularisation of ``u`` inside a level would take the freedom the levels below it need,
+    so the solvers damp, once for every task of a level:
+    :class:`~wholebody.solvers.ProjectionSolver`'s ``damping`` (``lambda_max``, the largest
+    damping of a level's pseudo-inverse, applied only along its nearly singular directions)
+    and :class:`~wholebody.solvers.HierarchicalQPSolver`'s ``stall_damping`` (``mu``,
+    dimensionless: a level left unmet below the first is solved again as a damped least
+    squares).
+
     Attributes
     ----------
     name

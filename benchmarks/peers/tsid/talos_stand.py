@@ -34,12 +34,22 @@ eliminated (``tau = M dv + h - J_c^T f`` on the actuated rows). Levels:
 The CoM reference is ``com(t) = com0 + [0, A sin(2 pi f t), 0]`` (A = ``com_amplitude`` m,
 f = ``com_frequency`` Hz) with its analytic velocity and acceleration. The loop runs
 ``steps`` steps of ``dt`` s: at time ``t_k = k dt``, ``formulation.computeProblemData`` and
-``solver.solve`` (timed together with ``time.perf_counter``), then a kinematic integration
-(no simulator): ``v += dv dt``, ``q = pinocchio.integrate(q, v dt)``. Measured: the time
-per step (median, p10, p90 in us, without the first ``warmup`` steps), the CoM error
-``|com(q_k) - com_ref(t_k)|`` (m; rms and max over all steps), the feet's final drift from
-their start (m, rad), the smallest distance of each sole's centre of pressure to its
-rectangle's edge (m), the largest ``|tau| / tau_max``, and the QP's size.
+``solver.solve`` (timed with ``time.perf_counter``), then a kinematic integration (no
+simulator): ``v += dv dt``, ``q = pinocchio.integrate(q, v dt)``.
+
+The result (JSON): ``versions``; ``solver``; ``nv``, ``na``; ``qp`` (``n_var``, ``n_eq``,
+``n_in``: TSID's counts, level 0's and 1's rows together); ``solve_us`` (computeProblemData +
+solve), ``compute_us`` and ``qp_us`` (each alone) and ``step_us`` (also the reference update,
+getAccelerations and the integration), each as median, p10, p90 (us) without the first
+``warmup`` steps; ``com_error_m``, the CoM error ``|com(q_k) - com_ref(t_k)|`` (m) as rms and
+max over all steps (with the time of the max), and ``com_error_second_half_m`` over the second
+half only (after the start's transient: the reference starts at full speed, ``A w``, from
+rest); ``feet_drift`` (each sole's final displacement from its start, m and rad);
+``cop_margin_min_m`` and ``cop_margin_second_half_min_m``, the smallest distance of a sole's
+centre of pressure to its rectangle's edge (m; 0: on the edge); ``torque_ratio_max``
+(``max |tau_i| / tau_max_i``); ``solver_failures`` (steps whose solver status is not 0);
+``hand_error_final_m``; ``base_z0_m`` (the base height that puts the soles at z = 0). NaN
+and infinite values (a diverged run) are written as null.
 """
 
 from __future__ import annotations
@@ -273,9 +283,9 @@ def add_posture(robot: Any, formulation: Any, problem: dict[str, Any], q0: np.nd
     task.setKp(kp * np.ones(robot.na))
     task.setKd(2.0 * math.sqrt(kp) * np.ones(robot.na))
     sample = tsid.TrajectorySample(robot.na)
-    sample.pos(q0[7:])
-    sample.vel(np.zeros(robot.na))
-    sample.acc(np.zeros(robot.na))
+    sample.value(q0[7:])
+    sample.derivative(np.zeros(robot.na))
+    sample.second_derivative(np.zeros(robot.na))
     task.setReference(sample)
     formulation.addMotionTask(task, problem["posture_weight"], 1, 0.0)
     return task
@@ -363,6 +373,7 @@ class Record:
     """What the loop measures, per step."""
 
     solve_s: list[float] = field(default_factory=list)
+    compute_s: list[float] = field(default_factory=list)
     step_s: list[float] = field(default_factory=list)
     com_error: list[float] = field(default_factory=list)
     cop_margin: list[float] = field(default_factory=list)
@@ -383,12 +394,13 @@ def run(setup: Setup, q: np.ndarray, problem: dict[str, Any]) -> Record:
         t = k * dt
         start = time.perf_counter()
         p, dp, ddp = com_reference(com0, t, problem)
-        setup.com_sample.pos(p)
-        setup.com_sample.vel(dp)
-        setup.com_sample.acc(ddp)
+        setup.com_sample.value(p)
+        setup.com_sample.derivative(dp)
+        setup.com_sample.second_derivative(ddp)
         setup.com_task.setReference(setup.com_sample)
         solve_start = time.perf_counter()
         hqp = formulation.computeProblemData(t, q, v)
+        compute_end = time.perf_counter()
         sol = solver.solve(hqp)
         solve_end = time.perf_counter()
         dv = formulation.getAccelerations(sol)
@@ -396,6 +408,7 @@ def run(setup: Setup, q: np.ndarray, problem: dict[str, Any]) -> Record:
         q = pin.integrate(model, q, v * dt)
         rec.step_s.append(time.perf_counter() - start)
         rec.solve_s.append(solve_end - solve_start)
+        rec.compute_s.append(compute_end - solve_start)
         rec.failures += sol.status != 0
         rec.com_error.append(float(np.linalg.norm(robot.com(formulation.data()) - p)))
         margins = [
@@ -474,6 +487,7 @@ def summarise(
     assert rec.final_q is not None
     err = np.asarray(rec.com_error)
     dt = problem["dt"]
+    half = len(err) // 2  # the second half: after the start's transient
     f = setup.formulation
     return {
         "peer": "tsid",
@@ -486,6 +500,8 @@ def summarise(
         "steps": problem["steps"],
         "dt": problem["dt"],
         "solve_us": stats_us(rec.solve_s, problem["warmup"]),
+        "compute_us": stats_us(rec.compute_s, problem["warmup"]),
+        "qp_us": stats_us(list(np.subtract(rec.solve_s, rec.compute_s)), problem["warmup"]),
         "step_us": stats_us(rec.step_s, problem["warmup"]),
         "com_error_m": {
             "rms": float(np.sqrt(np.mean(err**2))),
@@ -493,7 +509,12 @@ def summarise(
             "max_at_s": float(np.argmax(err) * dt),
         },
         "feet_drift": feet_drift(model, q0, rec.final_q, problem["feet"]),
+        "com_error_second_half_m": {
+            "rms": float(np.sqrt(np.mean(err[half:] ** 2))),
+            "max": float(err[half:].max()),
+        },
         "cop_margin_min_m": float(min(rec.cop_margin)),
+        "cop_margin_second_half_min_m": float(min(rec.cop_margin[half:])),
         "cop_margin_min_at_s": float(np.argmin(rec.cop_margin) * dt),
         "torque_ratio_max": float(max(rec.torque_ratio)),
         "solver_failures": rec.failures,

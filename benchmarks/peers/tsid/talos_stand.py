@@ -126,9 +126,44 @@ def read_problem(argv: list[str] | None) -> dict[str, Any]:
     unknown = sorted(set(given) - set(DEFAULTS))
     if unknown:
         fail(f"unknown problem keys {unknown}; known: {sorted(DEFAULTS)}")
-    if given.get("solver", DEFAULTS["solver"]) not in SOLVERS:
-        fail(f"solver {given['solver']!r} is not one of {sorted(SOLVERS)} (TSID 1.10's)")
-    return {**DEFAULTS, **given}
+    for key, value in given.items():
+        check_type(key, value)
+    problem = {**DEFAULTS, **given}
+    check_values(problem)
+    return problem
+
+
+def check_type(key: str, value: Any) -> None:
+    """``value`` must have the type of ``DEFAULTS[key]`` (any number for a float, an int for
+    an int; ``q0`` may also be ``"half_sitting"``)."""
+    default = DEFAULTS[key]
+    if key == "q0":
+        ok = value == "half_sitting" or isinstance(value, dict)
+    elif isinstance(default, bool | int):  # bool is an int: no float, no int for a bool
+        ok = type(value) is type(default)
+    elif isinstance(default, float):
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        expected = "a dict or 'half_sitting'" if key == "q0" else f"a {type(default).__name__}"
+        fail(f"{key} = {value!r}: expected {expected} like {default!r}")
+
+
+def check_values(problem: dict[str, Any]) -> None:
+    """The values the loop and TSID need: positive sizes, gains and time step, a known
+    solver, ``fmin <= fmax``, more steps than ``warmup``."""
+    for key in ("lx", "ly", "mu", "fmin", "dt", "contact_kp", "com_kp", "posture_kp"):
+        if not problem[key] > 0:
+            fail(f"{key} = {problem[key]!r} must be positive")
+    if problem["fmax"] < problem["fmin"]:
+        fail(f"fmax = {problem['fmax']} is below fmin = {problem['fmin']}")
+    if not 0 <= problem["warmup"] < problem["steps"]:
+        fail(f"need 0 <= warmup ({problem['warmup']}) < steps ({problem['steps']})")
+    if problem["solver"] not in SOLVERS:
+        fail(f"solver {problem['solver']!r} is not one of {sorted(SOLVERS)} (TSID 1.10's)")
+    if len(problem["feet"]) != 2 or len(problem["hand_frames"]) != 2:
+        fail("feet and hand_frames must name two frames each")
 
 
 def robot_data_share() -> Path:

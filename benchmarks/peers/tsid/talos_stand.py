@@ -14,7 +14,8 @@ others at 0; or ``"half_sitting"``, the SRDF's reference) with both soles flat a
 base height is shifted so that the soles' mean height is 0). TSID's
 ``InverseDynamicsFormulationAccForce`` over the variables ``x = (dv, f)``: ``dv`` the
 generalised accelerations (nv; base twist in the base frame, 1/s^2 and m/s^2), ``f`` the
-forces at the four corners of each sole (3 per corner, world axes, N); torques are
+forces at the four corners of each sole (3 per corner, N, in the sole frame's axes: TSID's
+local frame; the soles stand level, so up to their yaw these are world axes); torques are
 eliminated (``tau = M dv + h - J_c^T f`` on the actuated rows). Levels:
 
 * level 0 (hard): the base rows of ``M dv + h = J_c^T f`` (6), each sole's 6-D contact
@@ -23,7 +24,8 @@ eliminated (``tau = M dv + h - J_c^T f`` on the actuated rows). Levels:
   centre of pressure stays inside the rectangle ``|x| <= lx``, ``|y| <= ly`` of the sole
   frame), ``fmin <= sum f_z <= fmax`` per sole, the URDF's torque limits (optional) and the
   joint position/velocity bounds as acceleration bounds (``TaskJointPosVelAccBounds``,
-  optional);
+  optional; it looks 2 dt ahead, and with no acceleration limit set its viability bound
+  takes 1e10 rad/s^2, i.e. none);
 * level 1 (weighted sum of squares): the CoM task (``J_com dv + Jdot_com v = a_ref +
   Kd (v_ref - v_com) + Kp (p_ref - p_com)``, weight ``com_weight``, Kp ``com_kp`` 1/s^2,
   Kd = 2 sqrt(Kp)), the posture task on the actuated joints towards ``q0`` (``posture_weight``,
@@ -38,16 +40,17 @@ f = ``com_frequency`` Hz) with its analytic velocity and acceleration. The loop 
 simulator): ``v += dv dt``, ``q = pinocchio.integrate(q, v dt)``.
 
 The result (JSON): ``versions``; ``solver``; ``nv``, ``na``; ``qp`` (``n_var``, ``n_eq``,
-``n_in``: TSID's counts, level 0's and 1's rows together); ``solve_us`` (computeProblemData +
-solve), ``compute_us`` and ``qp_us`` (each alone) and ``step_us`` (also the reference update,
-getAccelerations and the integration), each as median, p10, p90 (us) without the first
-``warmup`` steps; ``com_error_m``, the CoM error ``|com(q_k) - com_ref(t_k)|`` (m) as rms and
-max over all steps (with the time of the max), and ``com_error_second_half_m`` over the second
-half only (after the start's transient: the reference starts at full speed, ``A w``, from
-rest); ``feet_drift`` (each sole's final displacement from its start, m and rad);
-``cop_margin_min_m`` and ``cop_margin_second_half_min_m``, the smallest distance of a sole's
-centre of pressure to its rectangle's edge (m; 0: on the edge); ``torque_ratio_max``
-(``max |tau_i| / tau_max_i``); ``solver_failures`` (steps whose solver status is not 0);
+``n_in``: TSID's counts; the equalities and inequalities are level 0's rows, level 1 is only
+the cost); ``solve_us`` (computeProblemData + solve), ``compute_us`` and ``qp_us`` (each
+alone) and ``step_us`` (also the reference update, getAccelerations and the integration),
+each as median, p10, p90 (us) without the first ``warmup`` steps; ``com_error_m``, the CoM
+error ``|com(q_k) - com_ref(t_k)|`` (m) as rms and max over all steps (with the time of the
+max), and ``com_error_second_half_m`` over the second half only (after the start's
+transient: the reference starts at full speed, ``A w``, from rest); ``feet_drift`` (each
+sole's final displacement from its start, m and rad); ``cop_margin_min_m`` and
+``cop_margin_second_half_min_m``, the smallest distance of a sole's centre of pressure to
+its rectangle's edge (m; 0: on the edge); ``torque_ratio_max`` (``max |tau_i| /
+tau_max_i``); ``solver_failures`` (steps whose solver status is not 0);
 ``hand_error_final_m``; ``base_z0_m`` (the base height that puts the soles at z = 0). NaN
 and infinite values (a diverged run) are written as null.
 """

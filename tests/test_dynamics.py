@@ -11,7 +11,7 @@ import pytest
 
 import wholebody as wb
 from wholebody.dynamics import DynamicsSolver, PatchContact, PointContact
-from wholebody.errors import ConfigError, DimensionError
+from wholebody.errors import ConfigError, DimensionError, SolverError
 from wholebody.solvers.result import SolverStatus
 
 DT = 1e-3
@@ -161,7 +161,9 @@ def test_the_rows_drift_is_pinocchios_frame_acceleration(panda):
     q = panda.home()
     hand.set_target(panda.frame_pose(q, "panda_hand_tcp"))
     u = np.random.default_rng(2).normal(scale=1.0, size=panda.nu)
-    (drift, _), _ = solver._task_drifts(stack, q, u, DT)
+    ahead = solver._task_drifts(stack, q, u, DT)
+    problem = stack.evaluate(panda.update(q), DT)
+    (drift, _), _ = solver._drift_rows(problem, u, ahead)
     model, data = panda.model, panda.model.createData()
     fid = model.getFrameId("panda_hand_tcp")
     pin.forwardKinematics(model, data, q, panda.actuation @ u, np.zeros(model.nv))
@@ -176,17 +178,20 @@ def test_priorities_are_strict(talos):
     com, stack, solver, q = standing(talos)
     com.set_target(talos.com_position(q) + np.array([0.02, 0.0, 0.0]))
     u = np.zeros(talos.nu)
-    base = solver.solve(stack, q, u, DT)
+    base_result = solver.solve(stack, q, u, DT)
+    r0 = base_result.solution.task_residuals["com"]
     hand = wb.FrameTask(talos, "gripper_right_base_link", kp=10.0)
     far = talos.frame_pose(q, "gripper_right_base_link")
     far[:3, 3] += (1.0, -1.0, 0.5)  # out of reach: it must give way
     hand.set_target(far)
     with_hand = wb.Stack(talos, [[com], [hand], [wb.PostureTask(talos)]], stack.constraints)
     res = solver.solve(with_hand, q, u, DT)
+    with pytest.raises(SolverError, match="solved again"):
+        _ = base_result.solution  # a result's details are the last solve's only
     for name in ("contact left_sole_link", "contact right_sole_link"):
         assert res.solution.task_residuals[name] < 1e-8
     # the CoM asks more than friction allows (it is unmet), by exactly as much either way
-    r, r0 = res.solution.task_residuals["com"], base.solution.task_residuals["com"]
+    r = res.solution.task_residuals["com"]
     assert r0 > 0.1 and abs(r - r0) < 1e-8 * (1 + r0)
     assert res.solution.task_residuals[hand.name] > 1.0  # unmet, as it had to be
 
@@ -227,7 +232,7 @@ def test_a_slow_reach_agrees_with_the_velocity_hqp(panda):
         kin.append(panda.frame_pose(q, "panda_hand_tcp")[:3, 3])
     hand2, stack2 = hand_stack(panda, kp=2.0)
     hand2.set_target(goal)
-    solver = DynamicsSolver(panda, velocity_gain=200.0)
+    solver = DynamicsSolver(panda, velocity_gain=200.0, acceleration_limits=False)
     q, u = q0.copy(), np.zeros(panda.nu)
     gap = 0.0
     for k in range(2500):

@@ -59,6 +59,13 @@ class ContactRows:
     upper: np.ndarray
 
 
+def _frozen(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """``arrays`` made read-only (a contact's constant rows, shared by every step)."""
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
+
+
 def _positive(name: str, value: float, what: str, strict: bool = True) -> float:
     value = float(value)
     if not math.isfinite(value) or value < 0.0 or (strict and value == 0.0):
@@ -157,6 +164,7 @@ class PatchContact(Contact):
         super().__post_init__()
         self.half_length = _positive(self.frame, self.half_length, "half_length")
         self.half_width = _positive(self.frame, self.half_width, "half_width")
+        self._wrench = _frozen(self.wrench_rows())
 
     def make(self, model: pin.Model, data: pin.Data) -> None:
         self.reference = data.oMf[self._id].homogeneous.copy()
@@ -170,10 +178,11 @@ class PatchContact(Contact):
         here = data.oMf[self._id]
         error = pin.log6(pin.SE3(self.reference).actInv(here)).vector
         desired = -self.kp * error - self.kd * velocity
-        return ContactRows(J, drift, desired, *self.wrench_rows())
+        return ContactRows(J, drift, desired, *self._wrench)
 
     def wrench_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``C``, ``lower``, ``upper`` of the module docstring's rows on the wrench."""
+        """``C``, ``lower``, ``upper`` of the module docstring's rows on the wrench (made
+        anew: the contact's own copy is read-only)."""
         C, lower, upper = self._pyramid(6)
         extra = np.zeros((6, 6))
         yaw = self.mu * min(self.half_length, self.half_width)
@@ -220,6 +229,8 @@ class PointContact(Contact):
         t1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         t1 /= np.linalg.norm(t1)
         self._basis = np.array([t1, np.cross(n, t1), n])
+        C, lower, upper = self._pyramid(3)
+        self._wrench = _frozen((C @ self._basis, lower, upper))
 
     def make(self, model: pin.Model, data: pin.Data) -> None:
         self.reference = data.oMf[self._id].translation.copy()
@@ -232,8 +243,7 @@ class PointContact(Contact):
             raise ConfigError(f"contact {self.frame!r} was never made (call make())")
         error = data.oMf[self._id].translation - self.reference
         desired = -self.kp * error - self.kd * velocity
-        C, lower, upper = self._pyramid(3)
-        return ContactRows(J, drift, desired, C @ self._basis, lower, upper)
+        return ContactRows(J, drift, desired, *self._wrench)
 
     def quiet(self) -> np.ndarray:
         return self._basis[:2].copy()

@@ -111,7 +111,7 @@ class TorqueController:
             twist = sample.twist if self.t < ref.duration else np.zeros(6)
             task.set_target(sample.pose, twist)
         result = self.solver.solve(self.stack, q, u, self.dt)
-        self.stack.advance(self.robot.update(q), self.dt, u=u + result.a * self.dt)
+        self.stack.advance(self.solver.state, self.dt, u=u + result.a * self.dt)
         self.t += self.dt
         self.result = result
         return result

@@ -30,14 +30,15 @@ the torque level the same rows ask for the acceleration that brings ``J u`` to `
 
 with ``K_d`` the ``velocity_gain`` (1/s). For a task ``e' = -k e`` this is the PD law
 ``e'' + K_d e' + K_d k e = 0`` (critically damped at ``K_d = 4 k``). ``Jdot u`` is the
-derivative of the rows along the motion, by central differences of the stack's own rows at
-``q (+/-) eps u`` for every task, built-in or a user's (``eps`` such that no coordinate moves
-more than ``1e-5``; its error is below 1e-9 relative, checked against Pinocchio's frame
-accelerations in the tests). An inequality row ``l <= C u' <= h`` on the next velocity
-``u' = u + a dt`` becomes ``(l - C u)/dt <= C a <= (h - C u)/dt``; so does the stack's box
-(velocity limits, position limits for one step), intersected with the braking bounds of the
-joint position limits (:mod:`wholebody.dynamics.braking`) and the robot's acceleration
-limits; a floating base's six are left free (the contacts and the joints move them).
+derivative of the rows along the motion, by a forward difference of the stack's own rows at
+``q`` and ``q (+) eps u`` for every task, built-in or a user's (``eps`` such that no
+coordinate moves more than :data:`DRIFT_STEP`; its error is about 1e-8 relative, checked
+against Pinocchio's frame accelerations in the tests). An inequality row ``l <= C u' <= h``
+on the next velocity ``u' = u + a dt`` becomes ``(l - C u)/dt <= C a <= (h - C u)/dt``; so
+does the stack's box (velocity limits, position limits for one step), intersected with the
+braking bounds of the joint position limits (:mod:`wholebody.dynamics.braking`) and the
+robot's acceleration limits; a floating base's six are left free (the contacts and the
+joints move them).
 
 Priorities
 ----------
@@ -73,10 +74,13 @@ import pinocchio as pin
 
 from wholebody.dynamics.braking import braking_bounds
 from wholebody.dynamics.contacts import Contact, ContactRows
-from wholebody.errors import ConfigError, DimensionError
-from wholebody.robot import Robot
+from wholebody.errors import ConfigError, DimensionError, SolverError
+from wholebody.kernels import layout as lay
+from wholebody.robot import Robot, RobotState
 from wholebody.robot.sim import effort_limits
+from wholebody.solvers import compiled_hqp
 from wholebody.solvers.hqp import HierarchicalQPSolver
+from wholebody.solvers.plan import ProblemArena
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import OBJECTIVES, LevelProblem, Stack, StackProblem
 from wholebody.tasks.limits import AccelerationLimits
@@ -85,6 +89,8 @@ __all__ = ["DynamicsResult", "DynamicsSolver"]
 
 GRAVITY = 9.81
 """m/s^2, the scale of the wrenches inside the QP (the robot's weight)."""
+DRIFT_STEP = 1e-8
+"""rad or m: the largest coordinate change of the forward difference that gives ``Jdot u``."""
 
 
 @dataclass
@@ -110,8 +116,6 @@ class DynamicsResult:
         Kind of bound -> the largest excess over it (0 where every bound holds).
     status
         The cascade's status, INFEASIBLE where a violation exceeds the tolerance.
-    solution
-        The cascade's result (its ``u`` is ``[a, f]``).
     """
 
     a: np.ndarray
@@ -121,8 +125,18 @@ class DynamicsResult:
     wrenches: dict[str, np.ndarray]
     violations: dict[str, float]
     status: SolverStatus
-    solution: SolverResult = field(repr=False)
+    solver: DynamicsSolver = field(repr=False)
+    solve: int = 0
+    """Which solve of ``solver`` this is (:attr:`solution` needs it to be the last)."""
     solve_time: float = 0.0
+
+    @property
+    def solution(self) -> SolverResult:
+        """The cascade's full outcome (levels, each task's residual in m/s^2 or rad/s^2,
+        unmet tasks): readable until the solver solves again."""
+        if self.solve != self.solver._solves:
+            raise SolverError("DynamicsResult.solution: the solver has solved again since")
+        return self.solver.solution()
 
     def report(self) -> str:
         """Per task its acceleration residual ``||J a + Jdot u - a*||`` (m/s^2, rad/s^2) and
@@ -142,6 +156,50 @@ class DynamicsResult:
 
     def __str__(self) -> str:
         return self.report()
+
+
+@dataclass(slots=True)
+class Rows:
+    """One level's rows, in the order of :class:`~wholebody.solvers.stack.LevelProblem`'s
+    fields, without its reporting machinery: built every step, turned into a
+    ``LevelProblem`` only when the cascade's arena is laid out (:meth:`level`)."""
+
+    name: str
+    A: np.ndarray
+    b: np.ndarray
+    C: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    task_rows: dict[str, slice]
+    inequality_rows: dict[str, slice]
+    identity_scale: float = 0.0
+    unweight: np.ndarray | None = None
+    reference_scale: float = 1.0
+
+    def level(self) -> LevelProblem:
+        return LevelProblem(
+            self.name,
+            self.A,
+            self.b,
+            self.C,
+            self.lower,
+            self.upper,
+            self.task_rows,
+            self.inequality_rows,
+            self.identity_scale,
+            self.unweight,
+            self.reference_scale,
+        )
+
+    def key(self) -> tuple:
+        """What the arena's layout depends on."""
+        return (
+            self.name,
+            self.A.shape,
+            self.C.shape,
+            tuple((k, s.start, s.stop) for k, s in self.task_rows.items()),
+            tuple((k, s.start, s.stop) for k, s in self.inequality_rows.items()),
+        )
 
 
 @dataclass
@@ -229,6 +287,12 @@ class DynamicsSolver:
         self._limited = np.flatnonzero(np.isfinite(lower) | np.isfinite(upper))
         self.force_scale = float(sum(i.mass for i in model.inertias)) * GRAVITY
         self.qp = HierarchicalQPSolver(engine, bound_relaxation=1e-12)
+        self._arena: ProblemArena | None = None
+        self._layout: tuple | None = None
+        self._solves, self._eps = 0, 0.0
+        self.state: RobotState | None = None
+        """The kinematics at the last solve's ``q`` (valid until the robot's next update):
+        what the stack's :meth:`~wholebody.solvers.Stack.advance` takes after the step."""
         self.contacts: list[Contact] = []
         for contact in contacts:
             self.add_contact(contact)
@@ -266,16 +330,38 @@ class DynamicsSolver:
         t0 = time.perf_counter()
         q, u = self._checked(stack, q, u, dt)
         drifts = self._task_drifts(stack, q, u, dt)
-        state = self.robot.update(q)
+        self.state = state = self.robot.update(q)
         problem = stack.evaluate(state, dt)
+        drifts = self._drift_rows(problem, u, drifts)
         physics = self._physics(q, self._A @ u)
         levels = self._task_levels(problem, u, drifts, dt)
         box = self._box(problem, q, u, dt)
-        cascade = self._cascade(physics, levels, box)
-        solution = self.qp.solve_problem(cascade)
-        result = self._result(physics, solution)
+        x, status = self._run(self._cascade(physics, levels, box))
+        result = self._result(physics, x, status)
         result.solve_time = time.perf_counter() - t0
         return result
+
+    def _run(self, problem: StackProblem) -> tuple[np.ndarray, SolverStatus]:
+        """The cascade's kernel on ``problem`` (of :class:`Rows`), in an arena laid out at
+        the first step and whenever the problem's shape changes, filled in place
+        otherwise; the answer ``[a, f]`` and the status."""
+        key = tuple(r.key() for r in problem.levels)
+        if key != self._layout:
+            levels = [r.level() for r in problem.levels]  # type: ignore[attr-defined]
+            laid = StackProblem(levels, problem.lower, problem.upper, problem.scale, {})
+            self._arena, self._layout = ProblemArena(laid), key
+        else:
+            self._arena.fill(problem)
+        compiled_hqp.run(self.qp, self._arena, self.qp.workspace(self._arena))
+        self._solves += 1
+        out = self._arena.view(lay.I_OUT)
+        return self._arena.view(lay.F_U)[1].copy(), SolverStatus(int(out[lay.OUT_STATUS]))
+
+    def solution(self) -> SolverResult:
+        """The last cascade's full outcome (levels, each task's residual, unmet tasks)."""
+        if self._arena is None:
+            raise SolverError("DynamicsSolver: nothing solved yet")
+        return self.qp.result(self._arena, 0.0)
 
     def _checked(
         self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float
@@ -300,22 +386,28 @@ class DynamicsSolver:
             raise DimensionError(f"DynamicsSolver: dt must be positive, got {dt}")
         return q, u
 
-    def _task_drifts(self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float) -> list:
-        """Per level of the stack, ``Jdot u`` of its equality rows and of its inequality rows
-        (central differences of the rows along ``u``, module docstring)."""
+    def _task_drifts(self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float) -> list | None:
+        """Per level of the stack, its equality and inequality rows times ``u`` at
+        ``q (+) eps u`` (``eps`` such that no coordinate moves more than ``DRIFT_STEP``), the
+        first half of :meth:`_drift_rows`'s forward difference; None at rest."""
         speed = float(np.abs(u).max(initial=0.0))
         if speed == 0.0:
-            return [None] * len(stack.levels)
-        eps = 1e-5 / speed
-        rows = []
-        for sign in (1.0, -1.0):
-            state = self.robot.update(self.robot.integrate(q, u, sign * eps))
-            problem = stack.evaluate(state, dt)
-            u_s = u / problem.scale
-            rows.append([(lp.A @ u_s, lp.C @ u_s) for lp in problem.levels])
+            return None
+        self._eps = DRIFT_STEP / speed
+        state = self.robot.update(self.robot.integrate(q, u, self._eps))
+        problem = stack.evaluate(state, dt)
+        u_s = u / problem.scale
+        return [(lp.A @ u_s, lp.C @ u_s) for lp in problem.levels]
+
+    def _drift_rows(self, problem: StackProblem, u: np.ndarray, ahead: list | None) -> list:
+        """Per level, ``Jdot u`` of its equality and inequality rows: the forward difference
+        ``(J(q (+) eps u) u - J(q) u) / eps`` (None per level at rest)."""
+        if ahead is None:
+            return [None] * len(problem.levels)
+        u_s = u / problem.scale
         return [
-            ((p[0] - m[0]) / (2 * eps), (p[1] - m[1]) / (2 * eps))
-            for p, m in zip(rows[0], rows[1], strict=True)
+            ((Au - lp.A @ u_s) / self._eps, (Cu - lp.C @ u_s) / self._eps)
+            for (Au, Cu), lp in zip(ahead, problem.levels, strict=True)
         ]
 
     def _physics(self, q: np.ndarray, v: np.ndarray) -> _Physics:
@@ -331,7 +423,7 @@ class DynamicsSolver:
 
     def _task_levels(
         self, problem: StackProblem, u: np.ndarray, drifts: list, dt: float
-    ) -> list[LevelProblem]:
+    ) -> list[Rows]:
         """The stack's levels in acceleration form, over ``a`` (their columns unscaled)."""
         D, kd = problem.scale, self.velocity_gain
         u_s = u / D
@@ -345,7 +437,7 @@ class DynamicsSolver:
                 b -= drift[0]
                 lower, upper = lower - drift[1], upper - drift[1]
             out.append(
-                LevelProblem(
+                Rows(
                     lp.name,
                     A,
                     b,
@@ -361,7 +453,7 @@ class DynamicsSolver:
             )
         return out if self.mode == "strict" else [self._weighted(out)]
 
-    def _weighted(self, levels: list[LevelProblem]) -> LevelProblem:
+    def _weighted(self, levels: list[Rows]) -> Rows:
         """The stack's levels as one: level ``k``'s rows times ``level_weights[k]``."""
         weights = self.level_weights or [1.0] * len(levels)
         if len(weights) != len(levels):
@@ -382,7 +474,7 @@ class DynamicsSolver:
         unweight = np.concatenate(
             [np.ones(lp.A.shape[0]) if lp.unweight is None else lp.unweight for lp in levels]
         )
-        return LevelProblem(
+        return Rows(
             "tasks",
             np.vstack([lp.A for lp in levels]) * w[:, None],
             np.concatenate([lp.b for lp in levels]) * w,
@@ -417,7 +509,7 @@ class DynamicsSolver:
         return lo, hi
 
     def _cascade(
-        self, physics: _Physics, levels: list[LevelProblem], box: tuple[np.ndarray, np.ndarray]
+        self, physics: _Physics, levels: list[Rows], box: tuple[np.ndarray, np.ndarray]
     ) -> StackProblem:
         """The whole problem over ``x~ = [a, f / (m g)]``."""
         nu, fs = self.robot.nu, self.force_scale
@@ -425,7 +517,7 @@ class DynamicsSolver:
         n = nu + nf
         MA = physics.M @ self._A
         Jc = np.vstack([c.jacobian for c in physics.contacts]) if nf else np.zeros((0, MA.shape[0]))
-        top: list[LevelProblem] = []
+        top: list[Rows] = []
         if self._unactuated.size:
             S = self._A[:, self._unactuated].T
             A0 = np.hstack([S @ MA, -S @ Jc.T * fs]) / fs
@@ -440,9 +532,7 @@ class DynamicsSolver:
         scale = np.r_[np.ones(nu), np.full(nf, fs)]
         return StackProblem(top + padded, lower, upper, scale, {})
 
-    def _contact_level(
-        self, physics: _Physics, MA: np.ndarray, Jc: np.ndarray, n: int
-    ) -> LevelProblem:
+    def _contact_level(self, physics: _Physics, MA: np.ndarray, Jc: np.ndarray, n: int) -> Rows:
         """Contacts' acceleration rows; their wrench rows and the torque limits as
         inequalities."""
         nu, fs = self.robot.nu, self.force_scale
@@ -473,7 +563,7 @@ class DynamicsSolver:
         C = np.vstack(C_rows)
         norm = np.linalg.norm(C, axis=1)
         norm[norm == 0.0] = 1.0
-        return LevelProblem(
+        return Rows(
             "contacts and actuators",
             np.vstack(A_rows) if A_rows else np.zeros((0, n)),
             np.concatenate(b_rows) if b_rows else np.zeros(0),
@@ -484,7 +574,7 @@ class DynamicsSolver:
             inames,
         )
 
-    def _quiet_level(self, n: int) -> LevelProblem:
+    def _quiet_level(self, n: int) -> Rows:
         """The last level: the contacts' tangential forces and torques small (in units of the
         robot's weight), where the levels above leave the wrenches free."""
         blocks, col = [], self.robot.nu
@@ -497,9 +587,8 @@ class DynamicsSolver:
         A = np.vstack(blocks)
         return _level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
-    def _result(self, physics: _Physics, solution: SolverResult) -> DynamicsResult:
+    def _result(self, physics: _Physics, x: np.ndarray, status: SolverStatus) -> DynamicsResult:
         nu = self.robot.nu
-        x = solution.u
         a, f = x[:nu].copy(), x[nu:].copy()
         dv = self._A @ a
         Q = physics.M @ dv + physics.h
@@ -520,27 +609,28 @@ class DynamicsSolver:
         violations["equations of motion"] = float(
             np.abs(Q[self._A[:, self._unactuated].any(axis=1)]).max(initial=0.0)
         )
-        status = solution.status
         if max(violations.values(), default=0.0) > self.tolerance:
             status = SolverStatus.INFEASIBLE
-        return DynamicsResult(a, dv, Q, self._A.T @ Q, wrenches, violations, status, solution)
+        return DynamicsResult(
+            a, dv, Q, self._A.T @ Q, wrenches, violations, status, self, self._solves
+        )
 
 
-def _level(name: str, A: np.ndarray, b: np.ndarray, n: int) -> LevelProblem:
+def _level(name: str, A: np.ndarray, b: np.ndarray, n: int) -> Rows:
     """An equality level of one task of the same name."""
     empty = np.zeros(0)
     rows = {name: slice(0, A.shape[0])}
-    return LevelProblem(name, A, b, np.zeros((0, n)), empty, empty.copy(), rows, {})
+    return Rows(name, A, b, np.zeros((0, n)), empty, empty.copy(), rows, {})
 
 
-def _padded(lp: LevelProblem, n: int) -> LevelProblem:
+def _padded(lp: Rows, n: int) -> Rows:
     """``lp`` with zero columns for the wrenches (``n`` columns in all), its equality rows
     divided by ``max(1, ||b||)``: the same optimum, and a residual of order 1 at most, so
     that the cascade's tolerances (relative to the residual) stay tight on the constraints
     the level inherits."""
     pad = n - lp.A.shape[1]
     s = 1.0 / max(1.0, float(np.linalg.norm(lp.b)))
-    return LevelProblem(
+    return Rows(
         lp.name,
         np.hstack([lp.A * s, np.zeros((lp.A.shape[0], pad))]),
         lp.b * s,

@@ -178,7 +178,8 @@ class Arena:
 class ProblemArena(Arena):
     """An evaluated :class:`~wholebody.solvers.stack.StackProblem` (rows in scaled
     coordinates) laid out for the solver kernels alone: how the compiled solvers take a
-    problem that no stack made (tests, fuzzing)."""
+    problem that no stack made (tests, fuzzing, the torque level's problem). :meth:`fill`
+    writes the numbers of another problem of the same layout into it."""
 
     def __init__(self, problem: StackProblem) -> None:
         from wholebody.solvers.stack import OBJECTIVES
@@ -224,26 +225,13 @@ class ProblemArena(Arena):
             }
         )
         v = self.view
-        metric = v(lay.F_METRIC)
-        metric[0] = problem.scale
-        metric[1] = problem.scale**2
-        box = v(lay.F_BOX)
-        box[0], box[1] = problem.lower, problem.upper
-        box[2], box[3] = problem.lower, problem.upper  # (no separate velocity box known)
-        if problem.anchor is not None:
-            v(lay.F_ANCHOR)[:] = problem.anchor
-        A, b, C, CB = v(lay.F_A), v(lay.F_B), v(lay.F_C), v(lay.F_CB)
-        rw, lf, li_ = v(lay.F_ROW), v(lay.F_LEVEL), v(lay.I_LEVEL)
+        li_ = v(lay.I_LEVEL)
         k = p = 0
         for j, lp in enumerate(levels):
             m, c = lp.A.shape[0], lp.C.shape[0]
-            A[k : k + m], b[k : k + m] = lp.A, lp.b
-            rw[1, k : k + m] = 1.0 if lp.unweight is None else lp.unweight
-            C[p : p + c], CB[0, p : p + c], CB[1, p : p + c] = lp.C, lp.lower, lp.upper
-            lf[j, lay.LEVEL_IDENTITY] = lp.identity_scale
-            lf[j, lay.LEVEL_REFERENCE] = lp.reference_scale
             li_[j] = (k, k + m, k + m, p, p + c, 1)
             k, p = k + m, p + c
+        self.fill(problem)
         if tasks:
             v(lay.I_TASK)[:] = [t[:3] for t in tasks]
         self.reported = [(t, name, levels[li].name) for t, (li, _, _, name) in enumerate(tasks)]
@@ -256,6 +244,31 @@ class ProblemArena(Arena):
             k += lp.C.shape[0]
         if self.inequality_rows:
             v(lay.I_INEQ)[:] = [row[:3] for row in self.inequality_rows]
+
+    def fill(self, problem: StackProblem) -> None:
+        """The numbers of ``problem`` (the same levels, rows and variables as the problem
+        the arena was laid out for; its levels need only the attributes ``A``, ``b``, ``C``,
+        ``lower``, ``upper``, ``unweight``, ``identity_scale`` and ``reference_scale``)."""
+        v = self.view
+        metric = v(lay.F_METRIC)
+        metric[0] = problem.scale
+        metric[1] = problem.scale**2
+        box = v(lay.F_BOX)
+        box[0], box[1] = problem.lower, problem.upper
+        box[2], box[3] = problem.lower, problem.upper  # (no separate velocity box known)
+        if problem.anchor is not None:
+            v(lay.F_ANCHOR)[:] = problem.anchor
+        A, b, C, CB = v(lay.F_A), v(lay.F_B), v(lay.F_C), v(lay.F_CB)
+        rw, lf = v(lay.F_ROW), v(lay.F_LEVEL)
+        k = p = 0
+        for j, lp in enumerate(problem.levels):
+            m, c = lp.A.shape[0], lp.C.shape[0]
+            A[k : k + m], b[k : k + m] = lp.A, lp.b
+            rw[1, k : k + m] = 1.0 if lp.unweight is None else lp.unweight
+            C[p : p + c], CB[0, p : p + c], CB[1, p : p + c] = lp.C, lp.lower, lp.upper
+            lf[j, lay.LEVEL_IDENTITY] = lp.identity_scale
+            lf[j, lay.LEVEL_REFERENCE] = lp.reference_scale
+            k, p = k + m, p + c
 
 
 class _Record:

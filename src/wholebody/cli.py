@@ -349,7 +349,7 @@ def _report_run(run, files: dict[str, Path]) -> None:
             print(f"  {entry['pair']} held {entry['task']} back for {entry['steps']} steps")
     if m.get("sim") == "mujoco":
         _report_physics(m)
-    if "fell" in m:
+    if "violation_max" in m:
         _report_torque(m)
     for name, f in files.items():
         print(f"  {name:17s} {f}")
@@ -358,13 +358,15 @@ def _report_run(run, files: dict[str, Path]) -> None:
 def _report_torque(m: dict) -> None:
     """A torque-level run's line: the bounds, and whether the robot stood."""
     cop = m.get("cop_margin_min_m")
-    parts = [
-        f"bounds exceeded by at most {m['violation_max']:.2g} N m or N",
-        *([f"CoP at least {cop * 1e3:.1f} mm inside the soles"] if cop is not None else []),
-        f"contacts slid {m['foot_slip_max_m_all'] * 1e3:.2f} mm",
-        f"CoM moved {m['com_excursion_max_m'] * 1e3:.1f} mm",
-        "FELL" if m["fell"] else "stood",
-    ]
+    parts = [f"bounds exceeded by at most {m['violation_max']:.2g} N m or N"]
+    if cop is not None:
+        parts.append(f"CoP at least {cop * 1e3:.1f} mm inside the soles")
+    if "fell" in m:
+        parts += [
+            f"contacts slid {m['foot_slip_max_m_all'] * 1e3:.2f} mm",
+            f"CoM moved {m['com_excursion_max_m'] * 1e3:.1f} mm",
+            "FELL" if m["fell"] else "stood",
+        ]
     print("  torque level     " + "; ".join(parts))
 
 

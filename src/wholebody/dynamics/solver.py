@@ -16,7 +16,10 @@ follows from them through the equations of motion,
 ``Q`` being what the motors apply to the model's velocities (zero on a floating base's six:
 those rows are equalities) and ``tau`` its work-conjugate on ``u`` (a wheel's torque for a
 wheel speed). The torques are thus not free variables: eliminating them keeps the problem
-small and makes ``M dv + h = S^T tau + sum J_c^T f`` hold exactly.
+small and makes ``M dv + h = S^T tau + sum J_c^T f`` hold exactly. ``M`` and ``h`` are the
+rigid bodies' (Pinocchio's) plus each drive's rotor inertia on the diagonal and viscous
+friction ``d v`` (robot.toml ``[sim] armature`` and ``damping``: what the MuJoCo model
+simulates and a real drive has; 0 in ``[sim]`` for the rigid bodies alone).
 
 Tasks in acceleration form
 --------------------------
@@ -44,7 +47,7 @@ Priorities
 ----------
 Level 0 holds the equations of motion of the unactuated velocities (a floating base's six),
 level 1 the contacts (their acceleration rows, and as inequality rows their wrench cones and
-centres of pressure, and the torque limits ``|Q_i| <= effort_i``), then the stack's levels
+centres of pressure, and the torque limits ``|tau_j| <= effort_j``), then the stack's levels
 in order, and last the contacts' tangential forces and torques kept small where nothing above
 decides them (the load shared between contacts with the centres of pressure central).
 ``mode="strict"`` solves them as a strict hierarchy with the hierarchical QP (the cascade,
@@ -280,12 +283,22 @@ class DynamicsSolver:
         # a floating base's six velocities have no motor: the entries of u that move them
         root = self._A[:6] if robot.base.floating else self._A[:0]
         self._unactuated = np.flatnonzero(np.abs(root).sum(axis=0) > 0)
-        self.effort = effort_limits(robot, robot.sim_settings)
-        """The torque limit of each model velocity (N m, N; inf on a floating base's six)."""
-        self._driven = np.flatnonzero(np.isfinite(self.effort))
+        self.effort = _actuator_limits(self._A, effort_limits(robot, robot.sim_settings))
+        """The torque limit of each entry of ``u`` (N m, N: a joint's, a wheel's; inf for a
+        floating base's six, which have no motor)."""
+        self._driven = np.setdiff1d(np.flatnonzero(np.isfinite(self.effort)), self._unactuated)
         lower, upper = robot.position_limits
         self._limited = np.flatnonzero(np.isfinite(lower) | np.isfinite(upper))
         self.force_scale = float(sum(i.mass for i in model.inertias)) * GRAVITY
+        sim = robot.sim_settings
+        driven = np.ones(model.nv)
+        driven[: 6 if robot.base.floating else 0] = 0.0
+        self.rotor_inertia = sim.armature * driven
+        """Per model velocity, the drive's rotor inertia added to ``M``'s diagonal (kg m^2,
+        kg: robot.toml ``[sim] armature``, as MuJoCo simulates it)."""
+        self.friction = sim.damping * driven
+        """Per model velocity, the drive's viscous friction added to ``h`` (N m s/rad, N s/m:
+        ``[sim] damping``)."""
         self.qp = HierarchicalQPSolver(engine, bound_relaxation=1e-12)
         self._arena: ProblemArena | None = None
         self._layout: tuple | None = None
@@ -418,7 +431,8 @@ class DynamicsSolver:
         contacts = [c.rows(model, data) for c in self.contacts]
         M = pin.crba(model, data, q)
         M = np.triu(M) + np.triu(M, 1).T
-        h = pin.nonLinearEffects(model, data, q, v).copy()
+        M[np.diag_indices_from(M)] += self.rotor_inertia
+        h = pin.nonLinearEffects(model, data, q, v) + self.friction * v
         return _Physics(M, h, contacts)
 
     def _task_levels(
@@ -553,11 +567,12 @@ class DynamicsSolver:
             hi_rows.append(rows.upper)
             inames[f"wrench {contact.frame}"] = slice(irow, irow + C.shape[0])
             col, row, irow = col + k, row + k, irow + C.shape[0]
-        d = self._driven
-        T = np.hstack([MA[d], -Jc.T[d] * fs])
+        d, At = self._driven, self._A.T
+        T = np.hstack([At[d] @ MA, -(At[d] @ Jc.T) * fs])  # tau = A^T (M A a + h - Jc^T f)
         C_rows.append(T)
-        lo_rows.append(-self.effort[d] - physics.h[d])
-        hi_rows.append(self.effort[d] - physics.h[d])
+        h = At[d] @ physics.h
+        lo_rows.append(-self.effort[d] - h)
+        hi_rows.append(self.effort[d] - h)
         inames["torque limits"] = slice(irow, irow + d.size)
         # rows of unit norm: the cascade's tolerances are then the same for every row
         C = np.vstack(C_rows)
@@ -602,18 +617,24 @@ class DynamicsSolver:
             excess = np.maximum(rows.lower - Cw, Cw - rows.upper)
             violations[f"wrench {contact.frame}"] = max(float(excess.max(initial=0.0)), 0.0)
             col += contact.size
-        d = self._driven
+        d, tau = self._driven, self._A.T @ Q
         violations["torque limits"] = max(
-            float((np.abs(Q[d]) - self.effort[d]).max(initial=0.0)), 0.0
+            float((np.abs(tau[d]) - self.effort[d]).max(initial=0.0)), 0.0
         )
         violations["equations of motion"] = float(
             np.abs(Q[self._A[:, self._unactuated].any(axis=1)]).max(initial=0.0)
         )
         if max(violations.values(), default=0.0) > self.tolerance:
             status = SolverStatus.INFEASIBLE
-        return DynamicsResult(
-            a, dv, Q, self._A.T @ Q, wrenches, violations, status, self, self._solves
-        )
+        return DynamicsResult(a, dv, Q, tau, wrenches, violations, status, self, self._solves)
+
+
+def _actuator_limits(A: np.ndarray, effort: np.ndarray) -> np.ndarray:
+    """The torque limit of each entry of ``u`` from those of the model's velocities: the
+    limit of the velocity an entry drives itself (the last nonzero row of its column of
+    ``A``: a joint's own, a wheel's own joint; a planar base's own root velocity)."""
+    own = A.shape[0] - 1 - np.argmax(A[::-1] != 0.0, axis=0)
+    return effort[own]
 
 
 def _level(name: str, A: np.ndarray, b: np.ndarray, n: int) -> Rows:

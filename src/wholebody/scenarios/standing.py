@@ -1,6 +1,7 @@
 """What a torque-level run adds to a scenario's metrics: the bounds held, and for a robot on
 its contacts whether it stood.
 
+The standing metrics need contacts (a robot without contacts gets ``violation_max`` only).
 Read from the controller's records (:class:`~wholebody.dynamics.controller.TorqueLog`: the
 torques and the wrenches it commanded) and from the true configurations (a physics run's
 simulated ones, else the integrated ones):
@@ -72,6 +73,8 @@ def torque_metrics(
         m["cop_margin_min_m"] = float(
             min(min(c.cop_margin(w) for w in arrays[f"wrench/{c.frame}"]) for c in patches)
         )
+    if not solver.contacts:  # nothing to stand on: only the bounds
+        return m
     slip = {c.frame: _slip(robot, q, c.frame) for c in solver.contacts}
     com = np.array([robot.com_position(qk)[:2] for qk in q])
     m["foot_slip_max_m"] = slip

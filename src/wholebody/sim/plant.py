@@ -46,7 +46,7 @@ import numpy as np
 from wholebody.control.sensor import JointSensor
 from wholebody.errors import DimensionError, ModelError
 from wholebody.robot import Robot
-from wholebody.robot.sim import SimSettings
+from wholebody.robot.sim import SimSettings, wheel_dofs
 from wholebody.sim.world import World, build_world
 
 if TYPE_CHECKING:
@@ -170,6 +170,7 @@ class MujocoPlant:
         self._A = np.asarray(self.robot.actuation)
         base = self.robot.base
         self._wheels = base.matrix if (planar and base.wheel_joints) else np.zeros((3, 0))
+        self._wheel_v = np.array(wheel_dofs(self.robot), dtype=int)
 
     def qpos(self, q: np.ndarray) -> np.ndarray:
         """MuJoCo's robot positions of a Pinocchio configuration (objects untouched)."""
@@ -316,12 +317,15 @@ class MujocoPlant:
     def velocity(self) -> np.ndarray:
         """The simulated robot's Pinocchio velocity ``v`` (nv): a planar root's in the base
         frame, a free flyer's linear and angular velocity in its own frame (MuJoCo keeps the
-        linear one in the world's)."""
+        linear one in the world's); a wheeled base's wheels at the speeds that roll it as
+        its root moves (in the simulation they only spin, nothing ties them to the floor)."""
         v = self.data.qvel[self._dofs].copy()
         if self._planar is not None:
             yaw = self.data.qpos[self._planar[3]]
             c, s = np.cos(yaw), np.sin(yaw)
             v[0], v[1] = c * v[0] + s * v[1], -s * v[0] + c * v[1]
+        if self._wheels.size:  # the wheels' speeds that roll the base as it moves
+            v[self._wheel_v] = np.linalg.lstsq(self._wheels, v[:3], rcond=None)[0]
         if self._free is not None:
             R = np.empty(9)
             a = self._free[1]
@@ -355,7 +359,9 @@ class MujocoPlant:
             yaw = self.data.qpos[self._planar[3]]
             c, s = np.cos(yaw), np.sin(yaw)
             tau[0], tau[1] = c * force[0] - s * force[1], s * force[0] + c * force[1]
-        limit = self.world.effort
+        limit = self.world.effort.copy()
+        if self._wheels.size:  # a wheeled base's force is bounded by its wheels' torques
+            limit[:3] = np.inf
         at_limit = np.abs(tau) > limit * (1.0 + 1e-9)
         demand = np.abs(tau)
         np.clip(tau, -limit, limit, out=tau)

@@ -12,9 +12,11 @@ frame's ``LOCAL`` Jacobian (6 x nv). Every step it must satisfy (linear rows on 
 * unilateral: ``f_min <= f_z <= f_max``;
 * friction pyramid, inscribed in the cone of coefficient ``mu``:
   ``|f_x| <= mu f_z / sqrt(2)``, ``|f_y| <= mu f_z / sqrt(2)``;
-* centre of pressure inside the patch: ``|tau_y| <= half_length f_z``,
-  ``|tau_x| <= half_width f_z`` (``CoP = (-tau_y, tau_x) / f_z`` in the patch);
-* yaw friction: ``|tau_z| <= mu min(half_length, half_width) f_z`` (a conservative bound).
+* centre of pressure inside the patch, ``margin`` from its edges:
+  ``|tau_y| <= (half_length - margin) f_z``, ``|tau_x| <= (half_width - margin) f_z``
+  (``CoP = (-tau_y, tau_x) / f_z`` in the patch);
+* yaw friction: ``|tau_z| <= mu min(half_length, half_width) f_z`` (a conservative bound,
+  on the patch less its margin).
 
 A **point contact** (:class:`PointContact`: a fingertip, a foot's corner) holds a point of
 the robot. Its force ``f = (f_x, f_y, f_z)`` (N) is in the world's axes at the frame's origin
@@ -49,7 +51,9 @@ class ContactRows:
 
     ``jacobian`` (k x nv) and ``drift`` (``Jdot v``, k) give the frame's acceleration
     ``jacobian dv + drift``; ``desired`` (k) is the acceleration the contact asks for
-    (``-kp e - kd V``); ``C lower <= C f <= C upper`` bounds its wrench ``f`` (k)."""
+    (``-kp e - kd V``); ``C lower <= C f <= C upper`` bounds its wrench ``f`` (k);
+    ``to_world`` (6 x k) maps ``f`` to the wrench it exerts about the world's origin (world
+    axes, force then torque)."""
 
     jacobian: np.ndarray
     drift: np.ndarray
@@ -57,6 +61,7 @@ class ContactRows:
     C: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    to_world: np.ndarray
 
 
 def _frozen(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
@@ -153,10 +158,13 @@ class PatchContact(Contact):
     """A 6-D contact on a rectangular patch centred at the frame's origin, normal along the
     frame's z (a sole, a flat grasp); the wrench in the frame (``LOCAL``), module docstring.
 
-    ``half_length`` (m, along the frame's x) and ``half_width`` (m, along y): the patch."""
+    ``half_length`` (m, along the frame's x) and ``half_width`` (m, along y): the patch;
+    ``margin`` (m): the centre of pressure is kept that far inside its edges (a sole rolls
+    onto its edge before the CoP reaches it: its contact is soft, its edge rounded)."""
 
     half_length: float = 0.1
     half_width: float = 0.05
+    margin: float = 0.0
 
     size = 6
 
@@ -164,6 +172,12 @@ class PatchContact(Contact):
         super().__post_init__()
         self.half_length = _positive(self.frame, self.half_length, "half_length")
         self.half_width = _positive(self.frame, self.half_width, "half_width")
+        self.margin = _positive(self.frame, self.margin, "margin", strict=False)
+        if self.margin >= min(self.half_length, self.half_width):
+            raise ConfigError(
+                f"contact {self.frame!r}: margin {self.margin} m leaves no patch of "
+                f"{self.half_length} m x {self.half_width} m"
+            )
         self._wrench = _frozen(self.wrench_rows())
 
     def make(self, model: pin.Model, data: pin.Data) -> None:
@@ -178,15 +192,16 @@ class PatchContact(Contact):
         here = data.oMf[self._id]
         error = pin.log6(pin.SE3(self.reference).actInv(here)).vector
         desired = -self.kp * error - self.kd * velocity
-        return ContactRows(J, drift, desired, *self._wrench)
+        return ContactRows(J, drift, desired, *self._wrench, here.toDualActionMatrix())
 
     def wrench_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``C``, ``lower``, ``upper`` of the module docstring's rows on the wrench (made
         anew: the contact's own copy is read-only)."""
         C, lower, upper = self._pyramid(6)
         extra = np.zeros((6, 6))
-        yaw = self.mu * min(self.half_length, self.half_width)
-        for i, (axis, arm) in enumerate(((4, self.half_length), (3, self.half_width), (5, yaw))):
+        hl, hw = self.half_length - self.margin, self.half_width - self.margin
+        yaw = self.mu * min(hl, hw)
+        for i, (axis, arm) in enumerate(((4, hl), (3, hw), (5, yaw))):
             extra[2 * i, axis], extra[2 * i, 2] = 1.0, -arm  # tau <= arm f_z
             extra[2 * i + 1, axis], extra[2 * i + 1, 2] = -1.0, -arm  # -tau <= arm f_z
         return (
@@ -204,7 +219,7 @@ class PatchContact(Contact):
 
     def cop_margin(self, wrench: np.ndarray) -> float:
         """The distance (m) from the centre of pressure to the patch's nearest edge (negative
-        outside)."""
+        outside; at least ``margin`` while the wrench is in its bounds)."""
         x, y = self.cop(wrench)
         return float(min(self.half_length - abs(x), self.half_width - abs(y)))
 
@@ -241,9 +256,9 @@ class PointContact(Contact):
         velocity = pin.getFrameVelocity(model, data, self._id, LWA).linear
         if self.reference is None:
             raise ConfigError(f"contact {self.frame!r} was never made (call make())")
-        error = data.oMf[self._id].translation - self.reference
-        desired = -self.kp * error - self.kd * velocity
-        return ContactRows(J, drift, desired, *self._wrench)
+        p = data.oMf[self._id].translation
+        desired = -self.kp * (p - self.reference) - self.kd * velocity
+        return ContactRows(J, drift, desired, *self._wrench, np.vstack([np.eye(3), pin.skew(p)]))
 
     def quiet(self) -> np.ndarray:
         return self._basis[:2].copy()

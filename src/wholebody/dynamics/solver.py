@@ -118,7 +118,8 @@ class DynamicsResult:
     violations
         Kind of bound -> the largest excess over it (0 where every bound holds).
     status
-        The cascade's status, INFEASIBLE where a violation exceeds the tolerance.
+        INFEASIBLE where a bound is exceeded by more than the solver's tolerance, FAILED
+        where the cascade failed, BOUNDS_ACTIVE where a task gave way to a bound, else OK.
     """
 
     a: np.ndarray
@@ -248,6 +249,13 @@ class DynamicsSolver:
     level_weights
         ``mode="weighted"``: the weight of each stack level's rows (default 1 for every
         level: the tasks' own weights decide).
+    wrench_regularization
+        Weight, inside every level of the stack, of the contacts' internal tangential forces
+        and torques (in units of the robot's weight: the part of the wrenches whose sum is
+        zero, which pushes the contacts against each other and which no task needs) against
+        the level's own rows: a level whose optimum leaves them free then takes the quietest,
+        not a vertex of their cones, which the levels below would inherit (0: only the last
+        level chooses them).
     tolerance
         Excess over a bound (N m, N) that makes the step INFEASIBLE.
     engine
@@ -266,7 +274,8 @@ class DynamicsSolver:
         braking: float = 10.0,
         acceleration_limits: bool = True,
         level_weights: Sequence[float] | None = None,
-        tolerance: float = 1e-4,
+        wrench_regularization: float = 1e-3,
+        tolerance: float = 1e-3,
         engine: str = "daqp",
     ) -> None:
         if mode not in ("strict", "weighted"):
@@ -276,6 +285,11 @@ class DynamicsSolver:
         self.braking = _checked_gain("braking", braking)
         self.acceleration_limits = bool(acceleration_limits)
         self.level_weights = None if level_weights is None else [float(w) for w in level_weights]
+        self.wrench_regularization = float(wrench_regularization)
+        if not (math.isfinite(self.wrench_regularization) and self.wrench_regularization >= 0):
+            raise ConfigError(
+                f"DynamicsSolver: wrench_regularization must be >= 0, got {wrench_regularization}"
+            )
         self.tolerance = _checked_gain("tolerance", tolerance)
         model = robot.model
         self._data = model.createData()
@@ -299,7 +313,7 @@ class DynamicsSolver:
         self.friction = sim.damping * driven
         """Per model velocity, the drive's viscous friction added to ``h`` (N m s/rad, N s/m:
         ``[sim] damping``)."""
-        self.qp = HierarchicalQPSolver(engine, bound_relaxation=1e-12)
+        self.qp = HierarchicalQPSolver(engine, bound_relaxation=1e-12, stall_damping=0.0)
         self._arena: ProblemArena | None = None
         self._layout: tuple | None = None
         self._solves, self._eps = 0, 0.0
@@ -540,7 +554,10 @@ class DynamicsSolver:
         top.append(self._contact_level(physics, MA, Jc, n))
         padded = [_padded(lp, n) for lp in levels]
         if nf:
-            padded.append(self._quiet_level(n))
+            quiet = self._quiet_level(n)
+            internal = self._internal(quiet, physics)
+            padded = [_with_rows(lp, internal, self.wrench_regularization) for lp in padded]
+            padded.append(quiet)
         lower = np.r_[box[0], np.full(nf, -np.inf)]
         upper = np.r_[box[1], np.full(nf, np.inf)]
         scale = np.r_[np.ones(nu), np.full(nf, fs)]
@@ -602,6 +619,26 @@ class DynamicsSolver:
         A = np.vstack(blocks)
         return _level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
+    def _internal(self, quiet: Rows, physics: _Physics) -> Rows:
+        """``quiet``'s rows on the internal part of the wrenches alone: ``R P f`` with ``P``
+        the projector onto the wrenches whose sum about the world's origin is zero (those
+        that push the contacts against each other; the motion never needs them)."""
+        G = np.hstack([c.to_world for c in physics.contacts])
+        P = np.eye(G.shape[1]) - np.linalg.pinv(G) @ G
+        A = quiet.A.copy()
+        nu = self.robot.nu
+        A[:, nu:] = A[:, nu:] @ P
+        return Rows(
+            "internal wrenches",
+            A,
+            quiet.b,
+            quiet.C,
+            quiet.lower,
+            quiet.upper,
+            {"internal wrenches": slice(0, A.shape[0])},
+            {},
+        )
+
     def _result(self, physics: _Physics, x: np.ndarray, status: SolverStatus) -> DynamicsResult:
         nu = self.robot.nu
         a, f = x[:nu].copy(), x[nu:].copy()
@@ -624,9 +661,20 @@ class DynamicsSolver:
         violations["equations of motion"] = float(
             np.abs(Q[self._A[:, self._unactuated].any(axis=1)]).max(initial=0.0)
         )
-        if max(violations.values(), default=0.0) > self.tolerance:
-            status = SolverStatus.INFEASIBLE
+        status = _status(status, max(violations.values(), default=0.0) > self.tolerance)
         return DynamicsResult(a, dv, Q, tau, wrenches, violations, status, self, self._solves)
+
+
+def _status(cascade: SolverStatus, exceeded: bool) -> SolverStatus:
+    """A torque-level step's status: INFEASIBLE when a bound is exceeded (the physics cannot
+    do what the contacts, torques and equations of motion ask), FAILED when the cascade
+    failed, BOUNDS_ACTIVE when a task gave way to a bound (the unmet tasks are in
+    :attr:`DynamicsResult.solution`), else the cascade's."""
+    if exceeded:
+        return SolverStatus.INFEASIBLE
+    if cascade == SolverStatus.INFEASIBLE:
+        return SolverStatus.BOUNDS_ACTIVE
+    return cascade
 
 
 def _actuator_limits(A: np.ndarray, effort: np.ndarray) -> np.ndarray:
@@ -642,6 +690,30 @@ def _level(name: str, A: np.ndarray, b: np.ndarray, n: int) -> Rows:
     empty = np.zeros(0)
     rows = {name: slice(0, A.shape[0])}
     return Rows(name, A, b, np.zeros((0, n)), empty, empty.copy(), rows, {})
+
+
+def _with_rows(lp: Rows, extra: Rows, weight: float) -> Rows:
+    """``lp`` with ``extra``'s equality rows times ``weight`` below its own, named as
+    ``extra``'s with `` (regularisation)``."""
+    if weight == 0.0 or not lp.A.shape[0] or OBJECTIVES in lp.task_rows:
+        return lp  # (an objectives' level's rows come last: the last level does it)
+    k, m = lp.A.shape[0], extra.A.shape[0]
+    rows = dict(lp.task_rows)
+    rows[f"{extra.name} (regularisation)"] = slice(k, k + m)
+    unweight = np.ones(k) if lp.unweight is None else lp.unweight
+    return Rows(
+        lp.name,
+        np.vstack([lp.A, weight * extra.A]),
+        np.concatenate([lp.b, weight * extra.b]),
+        lp.C,
+        lp.lower,
+        lp.upper,
+        rows,
+        lp.inequality_rows,
+        lp.identity_scale,
+        np.concatenate([unweight, np.full(m, 1.0 / weight)]),
+        lp.reference_scale,
+    )
 
 
 def _padded(lp: Rows, n: int) -> Rows:

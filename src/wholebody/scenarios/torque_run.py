@@ -4,8 +4,9 @@ contacts and pushes, logged as a :class:`~wholebody.control.RunLog` like every o
 backend's run (so metrics, plots and Table 2 read it the same), plus the torques and
 contact wrenches in ``meta["torque"]``.
 
-A floating base stands on its contacts: the centre of mass (x, y) is held above every
-other task, where it was when the phase began (``[torque] com_kp``, 1/s).
+A floating base stands on its contacts: the centre of mass (x, y, z) and the base's
+orientation are held above every other task, where they were when the phase began
+(``[torque] com_kp``, 1/s).
 """
 
 from __future__ import annotations
@@ -38,16 +39,22 @@ def torque_solver(spec: ScenarioSpec, robot: Robot) -> DynamicsSolver:
             f"its contacts ([torque.contacts.FRAME], e.g. the soles)"
         )
     contacts = [c.make() for c in t.contacts]
-    return DynamicsSolver(robot, contacts, mode=t.mode, velocity_gain=t.velocity_gain)
+    return DynamicsSolver(
+        robot,
+        contacts,
+        mode=t.mode,
+        velocity_gain=t.velocity_gain,
+        acceleration_limits=t.acceleration_limits,
+    )
 
 
 def _balanced(robot: Robot, stack: Stack, q: np.ndarray, com_kp: float) -> Stack:
-    """``stack`` with, above all, the centre of mass (x, y) held where it is at ``q`` and
+    """``stack`` with, above all, the centre of mass (x, y, z) held where it is at ``q`` and
     the base's orientation held as it is, for a floating base (else ``stack`` itself): what
     keeps a standing robot over its feet while the tasks below move it."""
     if not robot.base.floating or com_kp == 0.0:
         return stack
-    com = ComTask(robot, "xy", kp=com_kp, target=robot.com_position(q))
+    com = ComTask(robot, "xyz", kp=com_kp, target=robot.com_position(q))
     base = FrameTask(robot, robot.base_frame, name="base orientation", position=False, kp=com_kp)
     base.set_target(robot.frame_pose(q, robot.base_frame))
     levels = [Level((com, base), name="balance"), *stack.levels]

@@ -8,11 +8,13 @@
     velocity_gain = 20.0    # K_d (1/s) of the tasks' acceleration form
     com_kp = 5.0            # a floating base: the centre of mass held (x, y) above all (1/s)
     mode = "strict"         # or "weighted"
+    acceleration_limits = true  # bound the accelerations by robot.toml [acceleration]
 
     [torque.contacts.left_sole_link]   # a robot frame held in contact
     kind = "patch"          # or "point"
     half_length = 0.1       # m, along the frame's x (patch)
     half_width = 0.05       # m, along its y (patch)
+    margin = 0.02           # m, the centre of pressure kept that far inside (patch)
     mu = 0.8                # friction coefficient
     f_min = 5.0             # N, the least normal force
     f_max = 2000.0          # N
@@ -33,6 +35,9 @@ from wholebody.tomlreader import TomlReader
 
 __all__ = ["ContactSpec", "PushSpec", "TorqueSpec", "parse_torque"]
 
+NON_NEGATIVE = ("f_min", "margin")
+"""The contact keys that may be 0 (the others must be positive)."""
+
 
 @dataclass(frozen=True)
 class ContactSpec:
@@ -45,6 +50,7 @@ class ContactSpec:
     f_max: float = 2000.0
     half_length: float = 0.1
     half_width: float = 0.05
+    margin: float = 0.0
 
     def make(self) -> Contact:
         """The contact (:mod:`wholebody.dynamics.contacts`)."""
@@ -57,6 +63,7 @@ class ContactSpec:
             self.f_max,
             half_length=self.half_length,
             half_width=self.half_width,
+            margin=self.margin,
         )
 
 
@@ -79,6 +86,7 @@ class TorqueSpec:
     velocity_gain: float = 20.0
     com_kp: float = 5.0
     mode: str = "strict"
+    acceleration_limits: bool = True
     contacts: tuple[ContactSpec, ...] = ()
     pushes: tuple[PushSpec, ...] = ()
 
@@ -89,7 +97,19 @@ class TorqueSpec:
 
 def parse_torque(r: TomlReader, table: dict) -> TorqueSpec:
     """``[torque]`` checked (an empty table: the defaults)."""
-    r.only(table, "torque", ("rate_hz", "velocity_gain", "com_kp", "mode", "contacts", "pushes"))
+    r.only(
+        table,
+        "torque",
+        (
+            "rate_hz",
+            "velocity_gain",
+            "com_kp",
+            "mode",
+            "acceleration_limits",
+            "contacts",
+            "pushes",
+        ),
+    )
     contacts = tuple(
         _contact(r, frame, c) for frame, c in r.table(table, "contacts", "torque", False).items()
     )
@@ -104,6 +124,7 @@ def parse_torque(r: TomlReader, table: dict) -> TorqueSpec:
         velocity_gain=r.number(table, "velocity_gain", "torque", default=20.0, positive=True),
         com_kp=com_kp,
         mode=r.string(table, "mode", "torque", default="strict", choices=("strict", "weighted")),
+        acceleration_limits=r.boolean(table, "acceleration_limits", "torque", default=True),
         contacts=contacts,
         pushes=tuple(_push(r, p, f"torque.pushes[{i}]") for i, p in enumerate(raw)),
     )
@@ -113,13 +134,15 @@ def _contact(r: TomlReader, frame: str, table: object) -> ContactSpec:
     where = f"torque.contacts.{frame}"
     if not isinstance(table, dict):
         raise r.fail(where, "expected a table")
-    r.only(table, where, ("kind", "mu", "f_min", "f_max", "half_length", "half_width"))
+    r.only(table, where, ("kind", "mu", "f_min", "f_max", "half_length", "half_width", "margin"))
     spec = ContactSpec(
         frame,
         r.string(table, "kind", where, default="patch", choices=("patch", "point")),
         *(
-            r.number(table, k, where, default=getattr(ContactSpec, k), positive=k != "f_min")
-            for k in ("mu", "f_min", "f_max", "half_length", "half_width")
+            r.number(
+                table, k, where, default=getattr(ContactSpec, k), positive=k not in NON_NEGATIVE
+            )
+            for k in ("mu", "f_min", "f_max", "half_length", "half_width", "margin")
         ),
     )
     if not 0.0 <= spec.f_min <= spec.f_max:

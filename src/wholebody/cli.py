@@ -361,6 +361,8 @@ def _report_torque(m: dict) -> None:
     parts = [f"bounds exceeded by at most {m['violation_max']:.2g} N m or N"]
     if cop is not None:
         parts.append(f"CoP at least {cop * 1e3:.1f} mm inside the soles")
+    for obj, err in m.get("squeeze_error_max_n", {}).items():
+        parts.append(f"{obj}'s squeeze within {err:.2f} N of its setpoint")
     if "fell" in m:
         parts += [
             f"contacts slid {m['foot_slip_max_m_all'] * 1e3:.2f} mm",

@@ -63,6 +63,8 @@ class TorqueLog:
     status: np.ndarray
     violation: np.ndarray
     """(N,) the largest excess over a bound (N m, N): 0 while every bound holds."""
+    squeeze: dict[str, np.ndarray]
+    """Carried object -> (N,) the squeeze its hands' wrenches make (N; NaN while not held)."""
     step_time: np.ndarray
     """(N,) wall time of the solve (s)."""
     meta: dict = field(default_factory=dict)
@@ -162,6 +164,7 @@ class _Rows:
         self.tau = np.zeros((n, robot.nu))
         self.violation, self.step_time = np.zeros(n), np.zeros(n)
         self.wrenches = {c.frame: np.zeros((n, c.size)) for c in solver.contacts}
+        self.squeeze = {o.name: np.full(n, np.nan) for o in solver.objects}
 
     def record(
         self, k: int, t: float, q: np.ndarray, u: np.ndarray, r: DynamicsResult, wall: float
@@ -170,7 +173,10 @@ class _Rows:
         self.status[k], self.step_time[k] = int(r.status), wall
         self.violation[k] = max(r.violations.values(), default=0.0)
         for frame, w in r.wrenches.items():
-            self.wrenches[frame][k] = w
+            if frame in self.wrenches:
+                self.wrenches[frame][k] = w
+        for name, value in r.squeeze.items():
+            self.squeeze[name][k] = value
 
     def finish(self, n: int, meta: dict) -> TorqueLog:
         return TorqueLog(
@@ -181,6 +187,7 @@ class _Rows:
             {f: w[:n] for f, w in self.wrenches.items()},
             self.status[:n],
             self.violation[:n],
+            {o: v[:n] for o, v in self.squeeze.items()},
             self.step_time[:n],
             meta,
         )

@@ -74,8 +74,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from wholebody.dynamics.braking import braking_bounds
+from wholebody.dynamics.carry import CarriedObject, GraspRows
 from wholebody.dynamics.contacts import Contact, ContactRows
 from wholebody.errors import ConfigError, DimensionError, SolverError
 from wholebody.kernels import layout as lay
@@ -114,7 +116,8 @@ class DynamicsResult:
         ``A^T Q`` per entry of ``u``: the torque of each actuated joint, a wheel's torque.
     wrenches
         Contact frame -> its wrench (6: force then torque, in the contact frame; 3: a point
-        contact's force, world axes).
+        contact's force, world axes); ``"object/hand"`` -> the carried object's wrench on
+        that hand (hand frame).
     violations
         Kind of bound -> the largest excess over it (0 where every bound holds).
     status
@@ -132,6 +135,8 @@ class DynamicsResult:
     solver: DynamicsSolver = field(repr=False)
     solve: int = 0
     """Which solve of ``solver`` this is (:attr:`solution` needs it to be the last)."""
+    squeeze: dict[str, float] = field(default_factory=dict)
+    """Carried object -> the squeeze between its two hands (N, :mod:`~wholebody.dynamics.carry`)."""
     solve_time: float = 0.0
 
     @property
@@ -214,6 +219,12 @@ class _Physics:
     M: np.ndarray
     h: np.ndarray
     contacts: list[ContactRows]
+    grasps: list[GraspRows]
+
+    def jacobians(self) -> list[np.ndarray]:
+        """Each wrench's Jacobian (k x nv), in the order of the unknowns: the contacts', then
+        each carried object's hands'."""
+        return [c.jacobian for c in self.contacts] + [J for g in self.grasps for J in g.jacobians]
 
 
 def _checked_gain(name: str, value: float) -> float:
@@ -321,6 +332,8 @@ class DynamicsSolver:
         """The kinematics at the last solve's ``q`` (valid until the robot's next update):
         what the stack's :meth:`~wholebody.solvers.Stack.advance` takes after the step."""
         self.contacts: list[Contact] = []
+        self.objects: list[CarriedObject] = []
+        """The carried objects (:meth:`carry`, :mod:`wholebody.dynamics.carry`)."""
         for contact in contacts:
             self.add_contact(contact)
 
@@ -337,6 +350,50 @@ class DynamicsSolver:
             if c.frame == frame:
                 return self.contacts.pop(i)
         raise ConfigError(f"DynamicsSolver: no active contact on {frame!r}")
+
+    def carry(self, obj: CarriedObject, q: np.ndarray, pose: np.ndarray) -> None:
+        """Hold ``obj`` at ``pose`` (4x4, world, at its centre of mass) with its hands where
+        they are at ``q``; it replaces an object of the same name."""
+        obj.bind(self.robot.model)
+        self.release(obj.name, missing_ok=True)
+        pin.framesForwardKinematics(self.robot.model, self._data, np.asarray(q, dtype=float))
+        obj.hold(self._data, pose)
+        self.objects.append(obj)
+
+    def release(self, name: str, missing_ok: bool = False) -> CarriedObject | None:
+        """Let go of the carried object ``name``; returns it."""
+        for i, o in enumerate(self.objects):
+            if o.name == name:
+                return self.objects.pop(i)
+        if not missing_ok:
+            raise ConfigError(f"DynamicsSolver: no carried object {name!r}")
+        return None
+
+    def _wrench_count(self) -> int:
+        return sum(c.size for c in self.contacts) + sum(o.size for o in self.objects)
+
+    def _grasp_rows(
+        self, obj: CarriedObject, g: GraspRows, col: int, n: int
+    ) -> tuple[dict[str, np.ndarray], list[np.ndarray], np.ndarray]:
+        """A carried object's rows over ``x~`` (its wrenches at columns ``col``...): the
+        equalities by name (its equations of motion and closure in N and m/s^2, the squeeze
+        task), their right-hand sides, and the friction rows (``<= 0``)."""
+        nu, fs, k = self.robot.nu, self.force_scale, obj.size
+        E = np.zeros((6, n))
+        E[:, :nu] = g.E_dv @ self._A / fs
+        E[:, col : col + k] = g.E_f
+        eq, b = {f"carry {obj.name}": E}, [g.e / fs]
+        if g.K.shape[0]:
+            K = np.zeros((g.K.shape[0], n))
+            K[:, :nu] = g.K @ self._A
+            eq[f"closure {obj.name}"], b = K, [*b, g.k]
+        if obj.squeeze is not None:
+            S = np.zeros((1, n))
+            S[0, col : col + k] = g.squeeze
+            eq[f"squeeze {obj.name}"], b = S, [*b, np.array([obj.squeeze / fs])]
+        C = np.zeros((g.C.shape[0], n))
+        C[:, col : col + k] = g.C
+        return eq, b, C
 
     @property
     def contacts_made(self) -> bool:
@@ -443,11 +500,12 @@ class DynamicsSolver:
         pin.updateFramePlacements(model, data)
         pin.computeJointJacobians(model, data, q)
         contacts = [c.rows(model, data) for c in self.contacts]
+        grasps = [o.rows(model, data) for o in self.objects]
         M = pin.crba(model, data, q)
         M = np.triu(M) + np.triu(M, 1).T
         M[np.diag_indices_from(M)] += self.rotor_inertia
         h = pin.nonLinearEffects(model, data, q, v) + self.friction * v
-        return _Physics(M, h, contacts)
+        return _Physics(M, h, contacts, grasps)
 
     def _task_levels(
         self, problem: StackProblem, u: np.ndarray, drifts: list, dt: float
@@ -541,10 +599,10 @@ class DynamicsSolver:
     ) -> StackProblem:
         """The whole problem over ``x~ = [a, f / (m g)]``."""
         nu, fs = self.robot.nu, self.force_scale
-        nf = sum(c.size for c in self.contacts)
+        nf = self._wrench_count()
         n = nu + nf
         MA = physics.M @ self._A
-        Jc = np.vstack([c.jacobian for c in physics.contacts]) if nf else np.zeros((0, MA.shape[0]))
+        Jc = np.vstack(physics.jacobians()) if nf else np.zeros((0, MA.shape[0]))
         top: list[Rows] = []
         if self._unactuated.size:
             S = self._A[:, self._unactuated].T
@@ -584,6 +642,20 @@ class DynamicsSolver:
             hi_rows.append(rows.upper)
             inames[f"wrench {contact.frame}"] = slice(irow, irow + C.shape[0])
             col, row, irow = col + k, row + k, irow + C.shape[0]
+        for obj, g in zip(self.objects, physics.grasps, strict=True):
+            eq, b, ineq = self._grasp_rows(obj, g, col, n)
+            for name, rows_ in eq.items():
+                names[name] = slice(row, row + rows_.shape[0])
+                A_rows.append(rows_)
+                row += rows_.shape[0]
+            b_rows += b
+            if ineq.shape[0]:
+                C_rows.append(ineq)
+                lo_rows.append(np.full(ineq.shape[0], -np.inf))
+                hi_rows.append(np.zeros(ineq.shape[0]))
+                inames[f"grasp {obj.name}"] = slice(irow, irow + ineq.shape[0])
+                irow += ineq.shape[0]
+            col += obj.size
         d, At = self._driven, self._A.T
         T = np.hstack([At[d] @ MA, -(At[d] @ Jc.T) * fs])  # tau = A^T (M A a + h - Jc^T f)
         C_rows.append(T)
@@ -610,21 +682,26 @@ class DynamicsSolver:
         """The last level: the contacts' tangential forces and torques small (in units of the
         robot's weight), where the levels above leave the wrenches free."""
         blocks, col = [], self.robot.nu
-        for c in self.contacts:
-            R = c.quiet()
+        quiet = [c.quiet() for c in self.contacts] + [np.eye(o.size) for o in self.objects]
+        for R in quiet:  # (a carried object's hands: their whole wrenches small)
             block = np.zeros((R.shape[0], n))
-            block[:, col : col + c.size] = R
+            block[:, col : col + R.shape[1]] = R
             blocks.append(block)
-            col += c.size
+            col += R.shape[1]
         A = np.vstack(blocks)
         return _level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
     def _internal(self, quiet: Rows, physics: _Physics) -> Rows:
         """``quiet``'s rows on the internal part of the wrenches alone: ``R P f`` with ``P``
         the projector onto the wrenches whose sum about the world's origin is zero (those
-        that push the contacts against each other; the motion never needs them)."""
-        G = np.hstack([c.to_world for c in physics.contacts])
-        P = np.eye(G.shape[1]) - np.linalg.pinv(G) @ G
+        that push the contacts against each other; the motion never needs them), and for a
+        carried object the hands' wrenches that do not move it."""
+        blocks = []
+        if physics.contacts:
+            G = np.hstack([c.to_world for c in physics.contacts])
+            blocks.append(G)
+        blocks += [g.E_f for g in physics.grasps]  # an object's hands: their sum moves it
+        P = scipy.linalg.block_diag(*(np.eye(B.shape[1]) - np.linalg.pinv(B) @ B for B in blocks))
         A = quiet.A.copy()
         nu = self.robot.nu
         A[:, nu:] = A[:, nu:] @ P
@@ -654,6 +731,16 @@ class DynamicsSolver:
             excess = np.maximum(rows.lower - Cw, Cw - rows.upper)
             violations[f"wrench {contact.frame}"] = max(float(excess.max(initial=0.0)), 0.0)
             col += contact.size
+        squeeze = {}
+        for obj, g in zip(self.objects, physics.grasps, strict=True):
+            w = f[col : col + obj.size]
+            Q -= np.vstack(g.jacobians).T @ w
+            for i, hand in enumerate(obj.hands):
+                wrenches[f"{obj.name}/{hand}"] = w[6 * i : 6 * i + 6]
+            squeeze[obj.name] = float(g.squeeze @ w)
+            excess = g.C @ w
+            violations[f"grasp {obj.name}"] = max(float(excess.max(initial=0.0)), 0.0)
+            col += obj.size
         d, tau = self._driven, self._A.T @ Q
         violations["torque limits"] = max(
             float((np.abs(tau[d]) - self.effort[d]).max(initial=0.0)), 0.0
@@ -662,7 +749,9 @@ class DynamicsSolver:
             np.abs(Q[self._A[:, self._unactuated].any(axis=1)]).max(initial=0.0)
         )
         status = _status(status, max(violations.values(), default=0.0) > self.tolerance)
-        return DynamicsResult(a, dv, Q, tau, wrenches, violations, status, self, self._solves)
+        return DynamicsResult(
+            a, dv, Q, tau, wrenches, violations, status, self, self._solves, squeeze
+        )
 
 
 def _status(cascade: SolverStatus, exceeded: bool) -> SolverStatus:

@@ -41,6 +41,7 @@ BACKEND_LABELS = {
     "pinv": "pseudo-inverse (paper's baseline)",
     "projection": "projection + energy (paper's method)",
     "hqp": "hierarchical QP",
+    "dynamics": "torque level (hierarchical QP)",
 }
 
 

@@ -63,8 +63,8 @@ from wholebody.scenarios.physics import (
     true_tracking,
 )
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
-from wholebody.scenarios.standing import torque_arrays, torque_metrics
-from wholebody.scenarios.torque_run import torque_phase, torque_solver
+from wholebody.scenarios.standing import squeeze_errors, torque_arrays, torque_metrics
+from wholebody.scenarios.torque_run import Grasp, torque_phase, torque_solver
 from wholebody.solvers import ProjectionSolver, Solver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, CollisionAvoidance, FrameTask, RelativeFrameTask
@@ -339,6 +339,7 @@ def run_scenario(
             {"phase": phase.name},
             _final_u(logs[-1]) if logs else None,
             t0,
+            _grasp(phase, tasks, shared),
         )
         logs.append(log)
         q = np.asarray(log.meta["final_q"])
@@ -407,6 +408,8 @@ class _Phase:
     monitors: list
     torque: list[TorqueLog] = field(default_factory=list)
     """The torque-level phases' torques and wrenches, in order."""
+    offsets: dict[str, np.ndarray] = field(default_factory=dict)
+    """Carried object -> its pose in its first hand's frame as last held (torque level)."""
 
 
 def _run_phase(
@@ -419,8 +422,10 @@ def _run_phase(
     meta: dict,
     u0: np.ndarray | None,
     t0: float,
+    grasp: Grasp,
 ) -> RunLog:
-    """One phase's run: the velocity controller, or the torque-level one (``dynamics``)."""
+    """One phase's run: the velocity controller, or the torque-level one (``dynamics``,
+    carrying what ``grasp`` holds)."""
     if isinstance(p.solver, DynamicsSolver):
         log, torques = torque_phase(
             p.spec,
@@ -436,6 +441,7 @@ def _run_phase(
             monitors=p.monitors,
             callback=callback,
             meta=meta,
+            grasp=grasp,
         )
         p.torque.append(torques)
         return log
@@ -471,7 +477,30 @@ def _torque_outcome(
             bool(metrics.get("stopped")),
         )
     )
+    setpoints = [
+        (log.phase_mask(p.name), p.squeeze_n)
+        for p in shared.spec.phases
+        if p.squeeze_n is not None and p.name in log.meta["phases"]
+    ]
+    if setpoints:
+        squeeze = {k.split("/", 1)[1]: v for k, v in torque.items() if k.startswith("squeeze/")}
+        if physics is not None:  # what the welds measured, where the controller held it
+            squeeze = {
+                o: np.where(np.isfinite(s), physics["squeeze"][o], np.nan)
+                for o, s in squeeze.items()
+                if o in physics["squeeze"]
+            }
+        metrics["squeeze_error_max_n"] = squeeze_errors(setpoints, squeeze)
     return torque
+
+
+def _grasp(phase: PhaseSpec, tasks: dict[str, FrameTask], shared: _Phase) -> Grasp:
+    """What ``phase`` carries for the torque level: each object with its hands' frames, the
+    chain's primary first."""
+    carried: dict[str, list[str]] = {}
+    for hand, obj in sorted(_carried(phase).items(), key=lambda ho: ho[0] != phase.primary):
+        carried.setdefault(obj, []).append(tasks[hand].frame.name)
+    return Grasp({o: tuple(h) for o, h in carried.items()}, phase.squeeze_n, shared.offsets)
 
 
 def _final_u(log: RunLog) -> np.ndarray:

@@ -76,6 +76,8 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     duration = 5.0                     # s
     closed_chain = false               # hold the hands' relative pose (dual-arm carry)
     primary = "right"                  # closed chain: the task is b = secondary in a = primary
+    squeeze_n = 10.0                   # closed chain carrying: the squeeze (N) on the object
+                                       # (--backend dynamics)
     [phases.hands.right]
     planner = "dmp"                    # dmp | min_jerk | hold | follow | free
     goal = [1.701, -0.45675, 0.46133]  # m, world (dmp, min_jerk)
@@ -192,6 +194,9 @@ class PhaseSpec:
     hands: dict[str, HandPhase]
     closed_chain: bool = False
     primary: str | None = None
+    squeeze_n: float | None = None
+    """The squeeze (N) the torque level holds on the carried object (``--backend dynamics``;
+    the velocity backends cannot set a force)."""
 
 
 START_POSTURES = ("home", "neutral")
@@ -518,7 +523,7 @@ def _phase(
 ) -> PhaseSpec:
     if not isinstance(table, dict):
         raise r.fail(where, "expected a table")
-    r.only(table, where, ("name", "duration", "closed_chain", "primary", "hands"))
+    r.only(table, where, ("name", "duration", "closed_chain", "primary", "hands", "squeeze_n"))
     name = r.string(table, "name", where)
     if name in seen:
         raise r.fail(f"{where}.name", f"phase {name!r} is defined twice")
@@ -532,7 +537,12 @@ def _phase(
         for hname, spec in hp.items()
     }
     _check_phase_hands(r, where, out, hands, closed, primary)
-    return PhaseSpec(name, duration, out, closed, primary)
+    squeeze = None
+    if "squeeze_n" in table:
+        squeeze = r.number(table, "squeeze_n", where)
+        if not (closed and any(h.carry for h in out.values())):
+            raise r.fail(f"{where}.squeeze_n", "a squeeze needs a closed chain carrying an object")
+    return PhaseSpec(name, duration, out, closed, primary, squeeze)
 
 
 def _hand_phase(

@@ -23,6 +23,10 @@ simulated ones, else the integrated ones):
 ``com_after_push_m``
     With pushes: the centre of mass's horizontal distance at the run's end from where it was
     when the first push began (m): it recovered when that is small.
+``squeeze_error_max_n``
+    Per carried object with a squeeze setpoint (``[[phases]] squeeze_n``), the largest
+    distance (N) of its squeeze from the setpoint over the phases that set one: the
+    simulation's (measured at the welds) in a physics run, else the commanded wrenches'.
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from wholebody.dynamics.controller import TorqueLog
 from wholebody.robot import Robot
 from wholebody.scenarios.torque_spec import PushSpec
 
-__all__ = ["torque_arrays", "torque_metrics"]
+__all__ = ["squeeze_errors", "torque_arrays", "torque_metrics"]
 
 FALL_DROP = 0.2
 """m: a base lower than this below its start has fallen."""
@@ -46,13 +50,32 @@ FALL_SLIP = 0.05
 
 def torque_arrays(logs: Sequence[TorqueLog]) -> dict[str, np.ndarray]:
     """The torque-level records of consecutive phases (``torque.npz``): ``tau`` (N, nu; N m,
-    N, in ``u``'s order), ``wrench/FRAME`` (N, 6 or 3), ``violation`` (N; N m or N)."""
+    N, in ``u``'s order), ``wrench/FRAME`` (N, 6 or 3), ``violation`` (N; N m or N),
+    ``squeeze/OBJECT`` (N; N, NaN while not held by the controller)."""
     out = {
         "tau": np.concatenate([g.tau for g in logs]),
         "violation": np.concatenate([g.violation for g in logs]),
     }
     for frame in logs[0].wrenches:
         out[f"wrench/{frame}"] = np.concatenate([g.wrenches[frame] for g in logs])
+    for obj in sorted({o for g in logs for o in g.squeeze}):
+        out[f"squeeze/{obj}"] = np.concatenate(
+            [g.squeeze.get(obj, np.full(len(g.t), np.nan)) for g in logs]
+        )
+    return out
+
+
+def squeeze_errors(
+    setpoints: Sequence[tuple[np.ndarray, float]], squeeze: dict[str, np.ndarray]
+) -> dict[str, float]:
+    """Per object, the largest ``|s - setpoint|`` (N) over the steps of ``setpoints`` (pairs
+    of a step mask and the setpoint there) where the object is held (``s`` finite)."""
+    out = {}
+    for obj, s in squeeze.items():
+        errors = [np.abs(s[mask] - value) for mask, value in setpoints]
+        errors = [e[np.isfinite(e)] for e in errors]
+        if any(e.size for e in errors):
+            out[obj] = float(max(e.max(initial=0.0) for e in errors))
     return out
 
 

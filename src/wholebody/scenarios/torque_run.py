@@ -12,21 +12,23 @@ orientation are held above every other task, where they were when the phase bega
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from wholebody.control.log import ArmTrace, RunLog
 from wholebody.dynamics import DynamicsSolver
+from wholebody.dynamics.carry import CarriedObject, box_inertia
 from wholebody.dynamics.controller import TorqueController, TorqueLog
 from wholebody.errors import ConfigError
 from wholebody.planning.trajectory import Trajectory
 from wholebody.robot import Robot
-from wholebody.scenarios.spec import ScenarioSpec
+from wholebody.scenarios.spec import ObjectSpec, ScenarioSpec
 from wholebody.solvers.result import SolverStatus
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import ComTask, FrameTask
 
-__all__ = ["torque_phase", "torque_solver"]
+__all__ = ["Grasp", "object_inertia", "torque_phase", "torque_solver"]
 
 
 def torque_solver(spec: ScenarioSpec, robot: Robot) -> DynamicsSolver:
@@ -76,12 +78,15 @@ def torque_phase(
     monitors: Sequence = (),
     callback: Callable[[int, float, np.ndarray], None] | None = None,
     meta: Mapping[str, object] | None = None,
+    grasp: Grasp | None = None,
 ) -> tuple[RunLog, TorqueLog]:
     """Run one phase from ``(q, u0)`` for ``duration`` s (``t0``: the phase's start in the
-    run, which the pushes' times count from); the phase's :class:`RunLog` and its torques
-    and wrenches (:class:`~wholebody.dynamics.controller.TorqueLog`)."""
+    run, which the pushes' times count from; ``grasp``: what the phase carries); the phase's
+    :class:`RunLog` and its torques and wrenches
+    (:class:`~wholebody.dynamics.controller.TorqueLog`)."""
     dt = spec.torque.dt
     stack = _balanced(robot, stack, q, spec.torque.com_kp)
+    _hold(spec, robot, solver, grasp, plant, q)
     if not solver.contacts_made:
         solver.make_contacts(q)
     controller = TorqueController(robot, stack, solver, dt=dt, references=refs, plant=plant)
@@ -113,6 +118,68 @@ def torque_phase(
         **(meta or {}),
     }
     return _run_log(robot, stack, refs, monitors, tlog, info), tlog
+
+
+@dataclass
+class Grasp:
+    """What a phase carries: object -> its hands' frames (the primary first), the squeeze
+    (N) to hold, and each object's pose in its first hand's frame as last held (kept from
+    phase to phase: a kinematic run has no object to read it from)."""
+
+    carried: dict[str, tuple[str, ...]]
+    squeeze: float | None = None
+    offsets: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _hold(
+    spec: ScenarioSpec, robot: Robot, solver: DynamicsSolver, grasp: Grasp | None, plant, q
+) -> None:
+    """The solver's carried objects those of ``grasp`` (released otherwise), each held where
+    it is: the simulation's pose, else where the hand took it (its scenario pose at the
+    first grasp)."""
+    carried = grasp.carried if grasp is not None else {}
+    for obj in list(solver.objects):
+        if obj.name not in carried:
+            solver.release(obj.name)
+    if grasp is None:
+        return
+    for name, hands in carried.items():
+        obj = spec.objects[name]
+        if obj.mass is None:
+            raise ConfigError(
+                f"{spec.path}: object {name!r} has no mass: a torque-level run carrying it "
+                f"needs one (objects.mass, kg)"
+            )
+        hand = robot.frame_pose(q, hands[0])
+        if plant is not None:
+            pose = plant.object_poses()[name]
+        else:
+            pose = hand @ grasp.offsets[name] if name in grasp.offsets else obj.pose
+        grasp.offsets[name] = np.linalg.solve(hand, pose)
+        carried_object = CarriedObject(
+            name,
+            obj.mass,
+            object_inertia(obj),
+            hands,
+            squeeze=grasp.squeeze,
+            mu=spec.torque.grasp_mu,
+        )
+        solver.carry(carried_object, q, pose)
+
+
+def object_inertia(obj: ObjectSpec) -> np.ndarray:
+    """A scenario object's rotational inertia (kg m^2, about its centre, its axes) as a
+    uniform solid of its mass."""
+    m = float(obj.mass or 0.0)
+    if obj.kind == "box":
+        return box_inertia(m, obj.size)
+    if obj.kind == "cylinder":  # axis z
+        r, h = obj.radius, obj.height
+        side = m * (3 * r * r + h * h) / 12.0
+        return np.diag([side, side, 0.5 * m * r * r])
+    if obj.kind == "sphere":
+        return np.eye(3) * 0.4 * m * obj.radius**2
+    raise ConfigError(f"object {obj.name!r}: no inertia for a {obj.kind!r}")
 
 
 def _pusher(spec: ScenarioSpec, robot: Robot, plant, t0: float) -> Callable[[float], None] | None:

@@ -9,6 +9,7 @@
     com_kp = 5.0            # a floating base: the centre of mass held (x, y) above all (1/s)
     mode = "strict"         # or "weighted"
     acceleration_limits = true  # bound the accelerations by robot.toml [acceleration]
+    grasp_mu = 2.0          # friction of a carried object's grasps (none: welded)
 
     [torque.contacts.left_sole_link]   # a robot frame held in contact
     kind = "patch"          # or "point"
@@ -87,6 +88,7 @@ class TorqueSpec:
     com_kp: float = 5.0
     mode: str = "strict"
     acceleration_limits: bool = True
+    grasp_mu: float | None = None
     contacts: tuple[ContactSpec, ...] = ()
     pushes: tuple[PushSpec, ...] = ()
 
@@ -106,6 +108,7 @@ def parse_torque(r: TomlReader, table: dict) -> TorqueSpec:
             "com_kp",
             "mode",
             "acceleration_limits",
+            "grasp_mu",
             "contacts",
             "pushes",
         ),
@@ -125,6 +128,9 @@ def parse_torque(r: TomlReader, table: dict) -> TorqueSpec:
         com_kp=com_kp,
         mode=r.string(table, "mode", "torque", default="strict", choices=("strict", "weighted")),
         acceleration_limits=r.boolean(table, "acceleration_limits", "torque", default=True),
+        grasp_mu=(
+            r.number(table, "grasp_mu", "torque", positive=True) if "grasp_mu" in table else None
+        ),
         contacts=contacts,
         pushes=tuple(_push(r, p, f"torque.pushes[{i}]") for i, p in enumerate(raw)),
     )

@@ -29,10 +29,12 @@ the torque level the same rows ask for the acceleration that brings ``J u`` to `
 
 .. math::
 
-    J a = K_d\,(b - J u) - \dot J u
+    J a = K_d\,(b - J u) + \dot b - \dot J u
 
-with ``K_d`` the ``velocity_gain`` (1/s). For a task ``e' = -k e`` this is the PD law
-``e'' + K_d e' + K_d k e = 0`` (critically damped at ``K_d = 4 k``). ``Jdot u`` is the
+with ``K_d`` the ``velocity_gain`` (1/s) and ``b'`` the rate of ``b`` (its change since the
+last step over ``dt``; ``feedforward``): ``J u`` then follows ``b`` with the time constant
+``1 / K_d`` and no lag, and a task ``e' = v_ref - k e`` keeps its velocity-level behaviour
+(without ``b'`` it is the PD law ``e'' + K_d e' + K_d k e = 0``). ``Jdot u`` is the
 derivative of the rows along the motion, by a forward difference of the stack's own rows at
 ``q`` and ``q (+) eps u`` for every task, built-in or a user's (``eps`` such that no
 coordinate moves more than :data:`DRIFT_STEP`; its error is about 1e-8 relative, checked
@@ -251,6 +253,10 @@ class DynamicsSolver:
         ``K_d`` (1/s) of the tasks' acceleration form.
     braking
         Deceleration (rad/s^2, m/s^2) the joint position limits keep in reserve.
+    feedforward
+        Add the rate of each row's wanted velocity ``b`` (its change since the last step over
+        ``dt``) to the row's acceleration: a moving reference's acceleration, which the
+        velocity rows do not hold, so that ``J u`` follows ``b`` without lag.
     acceleration_limits
         Bound each actuated acceleration by the robot's acceleration limits
         (:attr:`~wholebody.robot.Robot.acceleration_limits`, robot.toml ``[acceleration]``).
@@ -284,6 +290,7 @@ class DynamicsSolver:
         velocity_gain: float = 20.0,
         braking: float = 10.0,
         acceleration_limits: bool = True,
+        feedforward: bool = True,
         level_weights: Sequence[float] | None = None,
         wrench_regularization: float = 1e-3,
         tolerance: float = 1e-3,
@@ -295,6 +302,9 @@ class DynamicsSolver:
         self.velocity_gain = _checked_gain("velocity_gain", velocity_gain)
         self.braking = _checked_gain("braking", braking)
         self.acceleration_limits = bool(acceleration_limits)
+        self.feedforward = bool(feedforward)
+        self._last_b: list[np.ndarray] | None = None
+        self._stack: Stack | None = None
         self.level_weights = None if level_weights is None else [float(w) for w in level_weights]
         self.wrench_regularization = float(wrench_regularization)
         if not (math.isfinite(self.wrench_regularization) and self.wrench_regularization >= 0):
@@ -413,6 +423,8 @@ class DynamicsSolver:
         the configuration ``q`` and actuated velocity ``u`` (rad/s, m/s)."""
         t0 = time.perf_counter()
         q, u = self._checked(stack, q, u, dt)
+        if stack is not self._stack:  # another stack: its rows' rates start anew
+            self._stack, self._last_b = stack, None
         drifts = self._task_drifts(stack, q, u, dt)
         self.state = state = self.robot.update(q)
         problem = stack.evaluate(state, dt)
@@ -514,9 +526,14 @@ class DynamicsSolver:
         D, kd = problem.scale, self.velocity_gain
         u_s = u / D
         out = []
-        for lp, drift in zip(problem.levels, drifts, strict=True):
+        last, self._last_b = self._last_b, [lp.b.copy() for lp in problem.levels]
+        if last is not None and [b.shape for b in last] != [b.shape for b in self._last_b]:
+            last = None  # (the stack's shape changed: no rate this step)
+        for k, (lp, drift) in enumerate(zip(problem.levels, drifts, strict=True)):
             A = lp.A / D
             b = kd * (lp.b - lp.A @ u_s)
+            if self.feedforward and last is not None:
+                b += (lp.b - last[k]) / dt
             Cu = lp.C @ u_s
             lower, upper = (lp.lower - Cu) / dt, (lp.upper - Cu) / dt
             if drift is not None:

@@ -288,3 +288,24 @@ def test_bad_input_is_refused_clearly(panda, talos):
         solver.solve(hand_stack(panda)[1], panda.home(), np.zeros(3), DT)
     with pytest.raises(ConfigError, match="another robot"):
         solver.solve(standing(talos)[1], panda.home(), np.zeros(panda.nu), DT)
+
+
+def test_a_force_task_sets_a_contacts_wrench_above_the_tasks(panda):
+    """The Panda's hand pressing down on a table with 20 N (a wrench target on its point
+    contact, the tangential force left free): met exactly every step, while the posture
+    below moves the arm; without it the contact takes the least force it can."""
+    q = panda.home()
+    hand = PointContact("panda_hand_tcp", mu=0.5, f_min=1.0)
+    solver = DynamicsSolver(panda, [hand])
+    solver.make_contacts(q)
+    stack = wb.Stack(panda, [[wb.PostureTask(panda, kp=1.0)]], [wb.VelocityLimits(panda)])
+    assert solver.solve(stack, q, np.zeros(panda.nu), DT).wrenches["panda_hand_tcp"][2] < 20.0
+    hand.set_wrench_target([np.nan, np.nan, 20.0])
+
+    def pressing(q, u, res):
+        assert abs(res.wrenches["panda_hand_tcp"][2] - 20.0) < 1e-6
+        assert max(res.violations.values()) < 1e-6
+
+    run(panda, stack, solver, q, np.zeros(panda.nu), 50, pressing)
+    with pytest.raises(ConfigError, match="wrench target"):
+        hand.set_wrench_target([0.0, 20.0])

@@ -103,6 +103,8 @@ class Contact:
     kd: float = 0.0
     reference: np.ndarray | None = field(default=None, repr=False)
     """Where the contact was made (set by :meth:`make`): a 4x4 pose (patch) or a point."""
+    wrench_target: np.ndarray | None = field(default=None, repr=False)
+    """A force task on the contact's wrench (:meth:`set_wrench_target`), or None."""
 
     size = 0
     """The wrench's dimension."""
@@ -118,6 +120,21 @@ class Contact:
         self.kp = _positive(self.frame, self.kp, "kp", strict=False)
         self.kd = _positive(self.frame, self.kd, "kd", strict=False)
         self._id = -1
+
+    def set_wrench_target(self, wrench: np.ndarray | None) -> None:
+        """Ask for this wrench (the contact's frame and units: N, N m; ``size`` entries; NaN
+        leaves an entry free) in a level of its own right below the contacts', above every
+        task: a hand pressing on a table with a given force. None removes the task."""
+        if wrench is None:
+            self.wrench_target = None
+            return
+        w = np.asarray(wrench, dtype=float)
+        if w.shape != (self.size,) or np.isinf(w).any():
+            raise ConfigError(
+                f"contact {self.frame!r}: a wrench target is {self.size} finite numbers or "
+                f"NaN, got {wrench!r}"
+            )
+        self.wrench_target = w
 
     def bind(self, model: pin.Model) -> None:
         """Find the frame in ``model`` (a clear error if it has none by that name)."""

@@ -49,7 +49,9 @@ Priorities
 ----------
 Level 0 holds the equations of motion of the unactuated velocities (a floating base's six),
 level 1 the contacts (their acceleration rows, and as inequality rows their wrench cones and
-centres of pressure, and the torque limits ``|tau_j| <= effort_j``), then the stack's levels
+centres of pressure, and the torque limits ``|tau_j| <= effort_j``), then the contacts'
+wrench targets if any (force tasks, :meth:`Contact.set_wrench_target
+<wholebody.dynamics.contacts.Contact.set_wrench_target>`), then the stack's levels
 in order, and last the contacts' tangential forces and torques kept small where nothing above
 decides them (the load shared between contacts with the centres of pressure central).
 ``mode="strict"`` solves them as a strict hierarchy with the hierarchical QP (the cascade,
@@ -627,6 +629,9 @@ class DynamicsSolver:
             b0 = -(S @ physics.h) / fs
             top.append(_level("equations of motion", A0, b0, n))
         top.append(self._contact_level(physics, MA, Jc, n))
+        targets = self._wrench_targets(n)
+        if targets is not None:
+            top.append(targets)
         padded = [_padded(lp, n) for lp in levels]
         if nf:
             quiet = self._quiet_level(n)
@@ -694,6 +699,24 @@ class DynamicsSolver:
             names,
             inames,
         )
+
+    def _wrench_targets(self, n: int) -> Rows | None:
+        """The contacts' wrench targets (force tasks) as one level, or None without any:
+        ``f_i = target_i`` (N, N m, scaled by the robot's weight) for each entry set."""
+        rows, b, names, col = [], [], {}, self.robot.nu
+        for c in self.contacts:
+            if c.wrench_target is not None:
+                held = np.flatnonzero(np.isfinite(c.wrench_target))
+                block = np.zeros((held.size, n))
+                block[np.arange(held.size), col + held] = 1.0
+                names[f"wrench target {c.frame}"] = slice(len(b), len(b) + held.size)
+                rows.append(block)
+                b += list(c.wrench_target[held] / self.force_scale)
+            col += c.size
+        if not rows:
+            return None
+        A, empty = np.vstack(rows), np.zeros(0)
+        return Rows("wrench targets", A, np.array(b), np.zeros((0, n)), empty, empty, names, {})
 
     def _quiet_level(self, n: int) -> Rows:
         """The last level: the contacts' tangential forces and torques small (in units of the

@@ -110,7 +110,9 @@ def torque_phase(
         "groups": {g: grp.indices.tolist() for g, grp in robot.groups.items()},
         "position_limits": [lim.tolist() for lim in robot.position_limits],
         "orientation_rows": {
-            t.name: np.flatnonzero(t.rows >= 3).tolist() for t in stack.tasks if t in refs
+            t.name: np.flatnonzero(t.rows >= 3).tolist()
+            for t in stack.tasks
+            if isinstance(t, FrameTask)
         },
         "final_q": np.asarray(tlog.meta["final_q"]).tolist(),
         "final_u": np.asarray(tlog.meta.get("final_u", tlog.u[-1])).tolist(),

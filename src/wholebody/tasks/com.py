@@ -63,7 +63,7 @@ class ComTask(Task):
         self.rows = np.array([_AXES[a] for a in axes], dtype=int)
         self.rows.setflags(write=False)
         self.kp = float(kp)
-        self._target = np.zeros(3)
+        self._target, self._velocity = np.zeros(3), np.zeros(3)
         self.set_target(robot.update(robot.home()).com_position() if target is None else target)
 
     @property
@@ -75,21 +75,28 @@ class ComTask(Task):
         """The point held (m, world; a copy)."""
         return self._target.copy()
 
-    def set_target(self, target: Sequence[float] | np.ndarray) -> None:
-        """The point to hold (m, world, three coordinates)."""
+    def set_target(
+        self,
+        target: Sequence[float] | np.ndarray,
+        velocity: Sequence[float] | np.ndarray | None = None,
+    ) -> None:
+        """The point to hold (m, world, three coordinates) and, for a moving one, its
+        velocity (m/s, world; default at rest) as feed-forward: the rows ask
+        ``J u = velocity + kp (target - com)``."""
         t = np.asarray(target, dtype=float)
-        if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise DimensionError(
-                f"{self.name}: target must be 3 finite numbers (m), got {target!r}"
-            )
+        v = np.zeros(3) if velocity is None else np.asarray(velocity, dtype=float)
+        for name, x in (("target", t), ("velocity", v)):
+            if x.shape != (3,) or not np.all(np.isfinite(x)):
+                raise DimensionError(f"{self.name}: {name} must be 3 finite numbers, got {x!r}")
         self._target[:] = t
+        self._velocity[:] = v
 
     def error(self, state: RobotState) -> np.ndarray:
         return (self._target - state.com_position())[self.rows]
 
     def compute(self, state: RobotState) -> TaskRows:
         J = state.com_jacobian()[self.rows]
-        return TaskRows(J, self.kp * self.error(state), self.weights)
+        return TaskRows(J, self._velocity[self.rows] + self.kp * self.error(state), self.weights)
 
     def __repr__(self) -> str:
         return f"ComTask({self.name!r}, rows={self.dim})"

@@ -64,7 +64,7 @@ from wholebody.scenarios.physics import (
 )
 from wholebody.scenarios.spec import ObjectSpec, PhaseSpec, ScenarioSpec
 from wholebody.scenarios.standing import squeeze_errors, torque_arrays, torque_metrics
-from wholebody.scenarios.torque_run import Grasp, torque_phase, torque_solver
+from wholebody.scenarios.torque_run import Grasp, balanced, torque_phase, torque_solver
 from wholebody.solvers import ProjectionSolver, Solver, Stack
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.tasks import ArmPotentialEnergy, CollisionAvoidance, FrameTask, RelativeFrameTask
@@ -323,6 +323,7 @@ def run_scenario(
             acceleration=weights.acceleration and backend != "dynamics",
             collision=phase_collision,
         )
+        stack = balanced(robot, stack, q, spec.torque.com_kp)  # (a floating base's balance)
         if plant is not None:
             plant.hold(_grips(phase, tasks))
         if bar is not None:

@@ -4,9 +4,10 @@ contacts and pushes, logged as a :class:`~wholebody.control.RunLog` like every o
 backend's run (so metrics, plots and Table 2 read it the same), plus the torques and
 contact wrenches in ``meta["torque"]``.
 
-A floating base stands on its contacts: the centre of mass (x, y, z) and the base's
-orientation are held above every other task, where they were when the phase began
-(``[torque] com_kp``, 1/s).
+A floating base stands on its contacts: :func:`balanced` holds the centre of mass (x, y, z)
+and the base's orientation above every other task, where they were when the phase began
+(``[torque] com_kp``, 1/s), at every level of control (the runner applies it to a floating
+base's stack whatever the backend).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from wholebody.solvers.result import SolverStatus
 from wholebody.solvers.stack import Level, Stack
 from wholebody.tasks import ComTask, FrameTask
 
-__all__ = ["Grasp", "object_inertia", "torque_phase", "torque_solver"]
+__all__ = ["Grasp", "balanced", "object_inertia", "torque_phase", "torque_solver"]
 
 
 def torque_solver(spec: ScenarioSpec, robot: Robot) -> DynamicsSolver:
@@ -50,7 +51,7 @@ def torque_solver(spec: ScenarioSpec, robot: Robot) -> DynamicsSolver:
     )
 
 
-def _balanced(robot: Robot, stack: Stack, q: np.ndarray, com_kp: float) -> Stack:
+def balanced(robot: Robot, stack: Stack, q: np.ndarray, com_kp: float) -> Stack:
     """``stack`` with, above all, the centre of mass (x, y, z) held where it is at ``q`` and
     the base's orientation held as it is, for a floating base (else ``stack`` itself): what
     keeps a standing robot over its feet while the tasks below move it."""
@@ -85,7 +86,6 @@ def torque_phase(
     :class:`RunLog` and its torques and wrenches
     (:class:`~wholebody.dynamics.controller.TorqueLog`)."""
     dt = spec.torque.dt
-    stack = _balanced(robot, stack, q, spec.torque.com_kp)
     _hold(spec, robot, solver, grasp, plant, q)
     if not solver.contacts_made:
         solver.make_contacts(q)

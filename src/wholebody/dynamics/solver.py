@@ -74,7 +74,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -83,6 +83,8 @@ import scipy.linalg
 from wholebody.dynamics.braking import braking_bounds
 from wholebody.dynamics.carry import CarriedObject, GraspRows
 from wholebody.dynamics.contacts import Contact, ContactRows
+from wholebody.dynamics.result import DynamicsResult
+from wholebody.dynamics.rows import Rows, equality_level, padded, with_rows
 from wholebody.errors import ConfigError, DimensionError, SolverError
 from wholebody.kernels import layout as lay
 from wholebody.robot import Robot, RobotState
@@ -91,7 +93,7 @@ from wholebody.solvers import compiled_hqp
 from wholebody.solvers.hqp import HierarchicalQPSolver
 from wholebody.solvers.plan import ProblemArena
 from wholebody.solvers.result import SolverResult, SolverStatus
-from wholebody.solvers.stack import OBJECTIVES, LevelProblem, Stack, StackProblem
+from wholebody.solvers.stack import OBJECTIVES, Stack, StackProblem
 from wholebody.tasks.limits import AccelerationLimits
 
 __all__ = ["DynamicsResult", "DynamicsSolver"]
@@ -100,119 +102,6 @@ GRAVITY = 9.81
 """m/s^2, the scale of the wrenches inside the QP (the robot's weight)."""
 DRIFT_STEP = 1e-8
 """rad or m: the largest coordinate change of the forward difference that gives ``Jdot u``."""
-
-
-@dataclass
-class DynamicsResult:
-    """One torque-level step. Units: rad/s^2 and m/s^2 (accelerations), N m and N (torques,
-    generalised forces), wrenches as their contact states (:mod:`~wholebody.dynamics.contacts`).
-
-    Attributes
-    ----------
-    a
-        Actuated acceleration (nu).
-    dv
-        Model acceleration ``A a`` (nv).
-    force
-        ``Q``, the actuators' generalised force on the model's velocities (nv; zero on a
-        floating base's six, up to the solver's tolerance).
-    tau
-        ``A^T Q`` per entry of ``u``: the torque of each actuated joint, a wheel's torque.
-    wrenches
-        Contact frame -> its wrench (6: force then torque, in the contact frame; 3: a point
-        contact's force, world axes); ``"object/hand"`` -> the carried object's wrench on
-        that hand (hand frame).
-    violations
-        Kind of bound -> the largest excess over it (0 where every bound holds).
-    status
-        INFEASIBLE where a bound is exceeded by more than the solver's tolerance, FAILED
-        where the cascade failed, BOUNDS_ACTIVE where a task gave way to a bound, else OK.
-    """
-
-    a: np.ndarray
-    dv: np.ndarray
-    force: np.ndarray
-    tau: np.ndarray
-    wrenches: dict[str, np.ndarray]
-    violations: dict[str, float]
-    status: SolverStatus
-    solver: DynamicsSolver = field(repr=False)
-    solve: int = 0
-    """Which solve of ``solver`` this is (:attr:`solution` needs it to be the last)."""
-    squeeze: dict[str, float] = field(default_factory=dict)
-    """Carried object -> the squeeze between its two hands (N, :mod:`~wholebody.dynamics.carry`)."""
-    solve_time: float = 0.0
-
-    @property
-    def solution(self) -> SolverResult:
-        """The cascade's full outcome (levels, each task's residual in m/s^2 or rad/s^2,
-        unmet tasks): readable until the solver solves again."""
-        if self.solve != self.solver._solves:
-            raise SolverError("DynamicsResult.solution: the solver has solved again since")
-        return self.solver.solution()
-
-    def report(self) -> str:
-        """Per task its acceleration residual ``||J a + Jdot u - a*||`` (m/s^2, rad/s^2) and
-        whether it was met, the contacts' wrenches, and the bounds' excesses."""
-        unmet = {name for _, name in self.solution.infeasible}
-        lines = [f"{self.status.name}: solved in {self.solve_time * 1e6:.0f} us"]
-        lines += [
-            f"  {name}: residual {r:.3g}, {'UNMET' if name in unmet else 'met'}"
-            for name, r in self.solution.task_residuals.items()
-        ]
-        for frame, w in self.wrenches.items():
-            lines.append(f"  contact {frame}: wrench " + " ".join(f"{x:+.2f}" for x in w))
-        bad = {k: v for k, v in self.violations.items() if v > 0.0}
-        excess = ", ".join(f"{k} by {v:.3g}" for k, v in bad.items())
-        lines.append("  exceeded: " + (excess or "none"))
-        return "\n".join(lines)
-
-    def __str__(self) -> str:
-        return self.report()
-
-
-@dataclass(slots=True)
-class Rows:
-    """One level's rows, in the order of :class:`~wholebody.solvers.stack.LevelProblem`'s
-    fields, without its reporting machinery: built every step, turned into a
-    ``LevelProblem`` only when the cascade's arena is laid out (:meth:`level`)."""
-
-    name: str
-    A: np.ndarray
-    b: np.ndarray
-    C: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    task_rows: dict[str, slice]
-    inequality_rows: dict[str, slice]
-    identity_scale: float = 0.0
-    unweight: np.ndarray | None = None
-    reference_scale: float = 1.0
-
-    def level(self) -> LevelProblem:
-        return LevelProblem(
-            self.name,
-            self.A,
-            self.b,
-            self.C,
-            self.lower,
-            self.upper,
-            self.task_rows,
-            self.inequality_rows,
-            self.identity_scale,
-            self.unweight,
-            self.reference_scale,
-        )
-
-    def key(self) -> tuple:
-        """What the arena's layout depends on."""
-        return (
-            self.name,
-            self.A.shape,
-            self.C.shape,
-            tuple((k, s.start, s.stop) for k, s in self.task_rows.items()),
-            tuple((k, s.start, s.stop) for k, s in self.inequality_rows.items()),
-        )
 
 
 @dataclass
@@ -627,21 +516,21 @@ class DynamicsSolver:
             S = self._A[:, self._unactuated].T
             A0 = np.hstack([S @ MA, -S @ Jc.T * fs]) / fs
             b0 = -(S @ physics.h) / fs
-            top.append(_level("equations of motion", A0, b0, n))
+            top.append(equality_level("equations of motion", A0, b0, n))
         top.append(self._contact_level(physics, MA, Jc, n))
         targets = self._wrench_targets(n)
         if targets is not None:
             top.append(targets)
-        padded = [_padded(lp, n) for lp in levels]
+        below = [padded(lp, n) for lp in levels]
         if nf:
             quiet = self._quiet_level(n)
             internal = self._internal(quiet, physics)
-            padded = [_with_rows(lp, internal, self.wrench_regularization) for lp in padded]
-            padded.append(quiet)
+            below = [with_rows(lp, internal, self.wrench_regularization) for lp in below]
+            below.append(quiet)
         lower = np.r_[box[0], np.full(nf, -np.inf)]
         upper = np.r_[box[1], np.full(nf, np.inf)]
         scale = np.r_[np.ones(nu), np.full(nf, fs)]
-        return StackProblem(top + padded, lower, upper, scale, {})
+        return StackProblem(top + below, lower, upper, scale, {})
 
     def _contact_level(self, physics: _Physics, MA: np.ndarray, Jc: np.ndarray, n: int) -> Rows:
         """Contacts' acceleration rows; their wrench rows and the torque limits as
@@ -729,7 +618,7 @@ class DynamicsSolver:
             blocks.append(block)
             col += R.shape[1]
         A = np.vstack(blocks)
-        return _level("contact wrenches", A, np.zeros(A.shape[0]), n)
+        return equality_level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
     def _internal(self, quiet: Rows, physics: _Physics) -> Rows:
         """``quiet``'s rows on the internal part of the wrenches alone: ``R P f`` with ``P``
@@ -812,56 +701,3 @@ def _actuator_limits(A: np.ndarray, effort: np.ndarray) -> np.ndarray:
     ``A``: a joint's own, a wheel's own joint; a planar base's own root velocity)."""
     own = A.shape[0] - 1 - np.argmax(A[::-1] != 0.0, axis=0)
     return effort[own]
-
-
-def _level(name: str, A: np.ndarray, b: np.ndarray, n: int) -> Rows:
-    """An equality level of one task of the same name."""
-    empty = np.zeros(0)
-    rows = {name: slice(0, A.shape[0])}
-    return Rows(name, A, b, np.zeros((0, n)), empty, empty.copy(), rows, {})
-
-
-def _with_rows(lp: Rows, extra: Rows, weight: float) -> Rows:
-    """``lp`` with ``extra``'s equality rows times ``weight`` below its own, named as
-    ``extra``'s with `` (regularisation)``."""
-    if weight == 0.0 or not lp.A.shape[0] or OBJECTIVES in lp.task_rows:
-        return lp  # (an objectives' level's rows come last: the last level does it)
-    k, m = lp.A.shape[0], extra.A.shape[0]
-    rows = dict(lp.task_rows)
-    rows[f"{extra.name} (regularisation)"] = slice(k, k + m)
-    unweight = np.ones(k) if lp.unweight is None else lp.unweight
-    return Rows(
-        lp.name,
-        np.vstack([lp.A, weight * extra.A]),
-        np.concatenate([lp.b, weight * extra.b]),
-        lp.C,
-        lp.lower,
-        lp.upper,
-        rows,
-        lp.inequality_rows,
-        lp.identity_scale,
-        np.concatenate([unweight, np.full(m, 1.0 / weight)]),
-        lp.reference_scale,
-    )
-
-
-def _padded(lp: Rows, n: int) -> Rows:
-    """``lp`` with zero columns for the wrenches (``n`` columns in all), its equality rows
-    divided by ``max(1, ||b||)``: the same optimum, and a residual of order 1 at most, so
-    that the cascade's tolerances (relative to the residual) stay tight on the constraints
-    the level inherits."""
-    pad = n - lp.A.shape[1]
-    s = 1.0 / max(1.0, float(np.linalg.norm(lp.b)))
-    return Rows(
-        lp.name,
-        np.hstack([lp.A * s, np.zeros((lp.A.shape[0], pad))]),
-        lp.b * s,
-        np.hstack([lp.C, np.zeros((lp.C.shape[0], pad))]),
-        lp.lower,
-        lp.upper,
-        lp.task_rows,
-        lp.inequality_rows,
-        0.0,
-        np.full(lp.A.shape[0], 1.0 / s) if lp.unweight is None else lp.unweight / s,
-        lp.reference_scale * s,
-    )

@@ -40,6 +40,7 @@ CASES = {
     "panda_box": [ROBOTS, SLOW],
     "ur5_joint_limit": [ROBOTS, SLOW],
     "mujoco_physics": [SIM, SLOW],
+    "torque_standing": [ROBOTS, SIM, SLOW],
 }
 
 

@@ -153,8 +153,9 @@ class Contact:
 
     def quiet(self) -> np.ndarray:
         """The rows ``R`` (r x size) of the wrench that the last level keeps small when
-        nothing above decides them (``R f -> 0``): the tangential forces, and for a patch the
-        torques, so that the centre of pressure stays central."""
+        nothing above decides them (``R f -> 0``, N): the tangential forces, and for a patch
+        the torques over its smaller half-size, so that the centre of pressure stays central
+        and the load moves between contacts rather than to their edges."""
         raise NotImplementedError
 
     def _pyramid(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -228,7 +229,11 @@ class PatchContact(Contact):
         )
 
     def quiet(self) -> np.ndarray:
-        return np.eye(6)[[0, 1, 3, 4, 5]]
+        # the torques over the patch's smaller half-size: a centre of pressure at its edge
+        # weighs as much as the whole normal force moved sideways
+        R = np.eye(6)[[0, 1, 3, 4, 5]]
+        R[2:] /= min(self.half_length, self.half_width)
+        return R
 
     def cop(self, wrench: np.ndarray) -> np.ndarray:
         """The centre of pressure (m, in the patch's x-y) of a wrench of this contact."""

@@ -621,28 +621,31 @@ class DynamicsSolver:
         return equality_level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
     def _internal(self, quiet: Rows, physics: _Physics) -> Rows:
-        """``quiet``'s rows on the internal part of the wrenches alone: ``R P f`` with ``P``
-        the projector onto the wrenches whose sum about the world's origin is zero (those
-        that push the contacts against each other; the motion never needs them), and for a
-        carried object the hands' wrenches that do not move it."""
+        """Rows that keep the wrenches' internal part small: the part whose sum about the
+        world's origin is zero (it pushes the contacts against each other; the motion never
+        needs it), measured in the metric ``W = R^T R + eps I`` of ``quiet``'s rows ``R``:
+        ``f`` then tends to the quietest wrenches that make its sum (the load shared between
+        the contacts, their centres of pressure central). A carried object's hands: the part
+        of their wrenches that does not move it, in the plain metric."""
+        nu, n = self.robot.nu, quiet.A.shape[1]
         blocks = []
         if physics.contacts:
+            k = sum(c.size for c in self.contacts)
+            R = quiet.A[: quiet.A.shape[0] - sum(o.size for o in self.objects), nu : nu + k]
             G = np.hstack([c.to_world for c in physics.contacts])
-            blocks.append(G)
-        blocks += [g.E_f for g in physics.grasps]  # an object's hands: their sum moves it
-        P = scipy.linalg.block_diag(*(np.eye(B.shape[1]) - np.linalg.pinv(B) @ B for B in blocks))
-        A = quiet.A.copy()
-        nu = self.robot.nu
-        A[:, nu:] = A[:, nu:] @ P
+            W = R.T @ R + 1e-6 * np.eye(k)
+            WG = np.linalg.solve(W, G.T)
+            P = np.eye(k) - WG @ np.linalg.pinv(G @ WG) @ G  # (G may lack rank: one point)
+            blocks.append(np.linalg.cholesky(W).T @ P)
+        for g in physics.grasps:  # an object's hands: their sum moves it
+            blocks.append(np.eye(g.E_f.shape[1]) - np.linalg.pinv(g.E_f) @ g.E_f)
+        B = scipy.linalg.block_diag(*blocks)
+        A = np.zeros((B.shape[0], n))
+        A[:, nu:] = B
+        empty = np.zeros(0)
+        rows = {"internal wrenches": slice(0, A.shape[0])}
         return Rows(
-            "internal wrenches",
-            A,
-            quiet.b,
-            quiet.C,
-            quiet.lower,
-            quiet.upper,
-            {"internal wrenches": slice(0, A.shape[0])},
-            {},
+            "internal wrenches", A, np.zeros(A.shape[0]), np.zeros((0, n)), empty, empty, rows, {}
         )
 
     def _result(self, physics: _Physics, x: np.ndarray, status: SolverStatus) -> DynamicsResult:

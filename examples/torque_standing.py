@@ -45,7 +45,7 @@ c0 = robot.com_position(q0)
 q, u, errors, margins = q0, np.zeros(robot.nu), [], []
 for k in range(2000):  # 2 s at 1 kHz: 3 cm to the left and back, from rest to rest
     t = k * 0.001
-    target = c0 + [0.0, 0.015 * (1.0 - np.cos(np.pi * t)), 0.0]
+    target = c0 + np.array([0.0, 0.015 * (1.0 - np.cos(np.pi * t)), 0.0])
     com.set_target(target, [0.0, 0.015 * np.pi * np.sin(np.pi * t), 0.0])  # m, m/s
     result = controller.step(q, u)  # torques (N m) in result.tau, wrenches in result.wrenches
     q, u = controller.advance(q, u, result)  # MuJoCo's state after the step

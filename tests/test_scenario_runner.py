@@ -337,18 +337,18 @@ def test_progress_is_a_bar_on_a_terminal_and_periodic_lines_elsewhere():
 
     from tqdm import tqdm
 
-    from wholebody.control.controller import _progress
+    from wholebody.control.controller import progress_report
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
             return True
 
-    bar = _progress(10, True, "x", stream=Terminal())
+    bar = progress_report(10, True, "x", stream=Terminal())
     assert isinstance(bar, tqdm)
     bar.close()
-    assert _progress(10, False) is None
+    assert progress_report(10, False) is None
     log = io.StringIO()
-    lines = _progress(4, True, "run", every=0.0, stream=log)  # a line at every update
+    lines = progress_report(4, True, "run", every=0.0, stream=log)  # a line at every update
     lines.set_postfix_str("reach")
     for _ in range(4):
         lines.update(1)

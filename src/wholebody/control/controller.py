@@ -42,7 +42,7 @@ import numbers
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Protocol, runtime_checkable
+from typing import IO, Any, Protocol, runtime_checkable
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -536,7 +536,7 @@ class Controller:
             float(getattr(self.solver, "tolerance", 1e-6)),
         )
         self.reset(u0)
-        bar = _progress(n, progress)
+        bar = progress_report(n, progress)
         with _threads(self.threads), _gc_paused():  # no collection mid-step
             q, done = self._loop(q, n, log, callback, bar)
         if bar is not None:
@@ -757,15 +757,15 @@ class _Recorder:
         )
 
 
-def _progress(
+def progress_report(
     n: int,
     enabled: bool,
     desc: str = "control",
     *,
     leave: bool = False,
     every: float = 10.0,
-    stream=None,
-):
+    stream: IO[str] | None = None,
+) -> Any:
     """A progress report over ``n`` steps, or None when not ``enabled``.
 
     On a terminal (``stream``, default stderr, is a TTY): a tqdm bar. Elsewhere (a log file,

@@ -36,7 +36,7 @@ import pinocchio as pin
 from wholebody.arm.stiffness import StiffnessModel
 from wholebody.collision import CollisionModel, Obstacle, PairDistance
 from wholebody.control import Controller, JointSensor, RunLog, summary
-from wholebody.control.controller import _progress
+from wholebody.control.controller import progress_report
 from wholebody.control.log import concatenate
 from wholebody.control.metrics import closed_chain_error, tracking
 from wholebody.dynamics import DynamicsSolver
@@ -740,7 +740,7 @@ def _unmet(log: RunLog, k: int, tol: float = 1e-3) -> list[str]:
 
 def _progress_bar(total: int, name: str):
     """The run's progress: a bar on a terminal, plain lines in a log (never a bar there)."""
-    return _progress(total, True, name, leave=True)
+    return progress_report(total, True, name, leave=True)
 
 
 def _scaled(phase: PhaseSpec, duration: float) -> PhaseSpec:

@@ -98,23 +98,39 @@ def torque_metrics(
         )
     if not solver.contacts:  # nothing to stand on: only the bounds
         return m
-    slip = {c.frame: _slip(robot, q, c.frame) for c in solver.contacts}
-    com = np.array([robot.com_position(qk)[:2] for qk in q])
+    base = robot.base_frame.name
+    positions, com = _trajectories(robot, q, [*(c.frame for c in solver.contacts), base])
+    slip = {c.frame: _largest_shift(positions[c.frame]) for c in solver.contacts}
     m["foot_slip_max_m"] = slip
     m["foot_slip_max_m_all"] = max(slip.values(), default=0.0)
-    m["com_excursion_max_m"] = float(np.linalg.norm(com - com[0], axis=1).max())
+    m["com_excursion_max_m"] = _largest_shift(com)
     drop = 0.0
     if robot.base.floating:
-        height = np.array([robot.frame_pose(qk, robot.base_frame)[2, 3] for qk in q])
+        height = positions[base][:, 2]
         drop = float(height[0] - height.min())
     m["fell"] = bool(stopped or drop > FALL_DROP or m["foot_slip_max_m_all"] > FALL_SLIP)
     if pushes:
         k = min(int(np.searchsorted(t, min(p.start for p in pushes))), len(t) - 1)
-        m["com_after_push_m"] = float(np.linalg.norm(com[-1] - com[k]))
+        m["com_after_push_m"] = float(np.linalg.norm(com[-1, :2] - com[k, :2]))
     return m
 
 
-def _slip(robot: Robot, q: np.ndarray, frame: str) -> float:
-    """The largest horizontal displacement (m) of ``frame`` from its first position."""
-    p = np.array([robot.frame_pose(qk, frame)[:2, 3] for qk in q])
-    return float(np.linalg.norm(p - p[0], axis=1).max())
+def _trajectories(
+    robot: Robot, q: np.ndarray, frames: Sequence[str]
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Per configuration of ``q`` (N, nq), each frame's position and the centre of mass
+    (N x 3 each, m, world), from one kinematics update a configuration."""
+    parts = {f: robot.frame(f) for f in frames}
+    positions = {f: np.empty((len(q), 3)) for f in parts}
+    com = np.empty((len(q), 3))
+    for k, qk in enumerate(q):
+        state = robot.update(qk)
+        for f, part in parts.items():
+            positions[f][k] = state.position(part)
+        com[k] = state.com_position()
+    return positions, com
+
+
+def _largest_shift(p: np.ndarray) -> float:
+    """The largest horizontal distance (m) of the points ``p`` (N x 3) from the first."""
+    return float(np.linalg.norm(p[:, :2] - p[0, :2], axis=1).max())

@@ -229,6 +229,8 @@ class DynamicsSolver:
         self._arena: ProblemArena | None = None
         self._layout: tuple | None = None
         self._solves, self._eps = 0, 0.0
+        self._quiet_key: tuple | None = None
+        self._quiet_cache: tuple[np.ndarray, np.ndarray, np.ndarray]
         self.state: RobotState | None = None
         """The kinematics at the last solve's ``q`` (valid until the robot's next update):
         what the stack's :meth:`~wholebody.solvers.Stack.advance` takes after the step."""
@@ -524,7 +526,7 @@ class DynamicsSolver:
         below = [padded(lp, n) for lp in levels]
         if nf:
             quiet = self._quiet_level(n)
-            internal = self._internal(quiet, physics)
+            internal = self._internal(physics, n)
             below = [with_rows(lp, internal, self.wrench_regularization) for lp in below]
             below.append(quiet)
         lower = np.r_[box[0], np.full(nf, -np.inf)]
@@ -607,41 +609,50 @@ class DynamicsSolver:
         A, empty = np.vstack(rows), np.zeros(0)
         return Rows("wrench targets", A, np.array(b), np.zeros((0, n)), empty, empty, names, {})
 
+    def _quiet(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows the last level keeps small, over every wrench's columns (block diagonal:
+        each contact's :meth:`~wholebody.dynamics.contacts.Contact.quiet` rows ``R``, a
+        carried object's hands' whole wrenches), and for the contacts the metric
+        ``W = R^T R + eps I``'s inverse and Cholesky factor (transposed): constant for a set
+        of contacts and objects, made once per set."""
+        key = tuple(map(id, self.contacts)) + tuple(map(id, self.objects))
+        if key != self._quiet_key:
+            R = [c.quiet() for c in self.contacts]
+            k = sum(r.shape[1] for r in R)
+            Rc = scipy.linalg.block_diag(*R) if R else np.zeros((0, 0))
+            W = Rc.T @ Rc + 1e-6 * np.eye(k)
+            rows = scipy.linalg.block_diag(Rc, *(np.eye(o.size) for o in self.objects))
+            self._quiet_cache = (rows, np.linalg.inv(W), np.linalg.cholesky(W).T)
+            self._quiet_key = key
+        return self._quiet_cache
+
     def _quiet_level(self, n: int) -> Rows:
         """The last level: the contacts' tangential forces and torques small (in units of the
         robot's weight), where the levels above leave the wrenches free."""
-        blocks, col = [], self.robot.nu
-        quiet = [c.quiet() for c in self.contacts] + [np.eye(o.size) for o in self.objects]
-        for R in quiet:  # (a carried object's hands: their whole wrenches small)
-            block = np.zeros((R.shape[0], n))
-            block[:, col : col + R.shape[1]] = R
-            blocks.append(block)
-            col += R.shape[1]
-        A = np.vstack(blocks)
+        rows = self._quiet()[0]
+        A = np.zeros((rows.shape[0], n))
+        A[:, self.robot.nu :] = rows
         return equality_level("contact wrenches", A, np.zeros(A.shape[0]), n)
 
-    def _internal(self, quiet: Rows, physics: _Physics) -> Rows:
+    def _internal(self, physics: _Physics, n: int) -> Rows:
         """Rows that keep the wrenches' internal part small: the part whose sum about the
         world's origin is zero (it pushes the contacts against each other; the motion never
-        needs it), measured in the metric ``W = R^T R + eps I`` of ``quiet``'s rows ``R``:
-        ``f`` then tends to the quietest wrenches that make its sum (the load shared between
-        the contacts, their centres of pressure central). A carried object's hands: the part
-        of their wrenches that does not move it, in the plain metric."""
-        nu, n = self.robot.nu, quiet.A.shape[1]
+        needs it), measured in the metric ``W`` of :meth:`_quiet`'s rows: ``f`` then tends
+        to the quietest wrenches that make its sum (the load shared between the contacts,
+        their centres of pressure central). A carried object's hands: the part of their
+        wrenches that does not move it, in the plain metric."""
+        _, W_inv, L_t = self._quiet()
         blocks = []
         if physics.contacts:
-            k = sum(c.size for c in self.contacts)
-            R = quiet.A[: quiet.A.shape[0] - sum(o.size for o in self.objects), nu : nu + k]
             G = np.hstack([c.to_world for c in physics.contacts])
-            W = R.T @ R + 1e-6 * np.eye(k)
-            WG = np.linalg.solve(W, G.T)
-            P = np.eye(k) - WG @ np.linalg.pinv(G @ WG) @ G  # (G may lack rank: one point)
-            blocks.append(np.linalg.cholesky(W).T @ P)
+            WG = W_inv @ G.T
+            P = np.eye(G.shape[1]) - WG @ np.linalg.pinv(G @ WG) @ G  # (G may lack rank)
+            blocks.append(L_t @ P)
         for g in physics.grasps:  # an object's hands: their sum moves it
             blocks.append(np.eye(g.E_f.shape[1]) - np.linalg.pinv(g.E_f) @ g.E_f)
         B = scipy.linalg.block_diag(*blocks)
         A = np.zeros((B.shape[0], n))
-        A[:, nu:] = B
+        A[:, self.robot.nu :] = B
         empty = np.zeros(0)
         rows = {"internal wrenches": slice(0, A.shape[0])}
         return Rows(

@@ -332,13 +332,30 @@ class WholebodyCase(Case):
         return np.concatenate([self.setup.base_twist(self.u), self.u[base:]])
 
 
+def _pink_tasks(setup: Setup | RobotSetup) -> tuple[list, object]:
+    """pink's hand tasks (one per hand frame, position and orientation rows weighted
+    ``sqrt(W_HAND)``) and its posture task (``sqrt(W_POSTURE)``), gains 1, no damping: the
+    same rows as the stacks of every library here."""
+    from pink.tasks import FrameTask, PostureTask
+
+    hands = [
+        FrameTask(
+            f,
+            position_cost=math.sqrt(W_HAND),
+            orientation_cost=math.sqrt(W_HAND),
+            lm_damping=0.0,
+            gain=1.0,
+        )
+        for f in setup.hands
+    ]
+    return hands, PostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)
+
+
 class PinkCase(Case):
     library = "pink"
 
     def __init__(self, setup: Setup, backend: str, problem: str) -> None:
         import pink
-        from pink.tasks import FrameTask as PinkFrameTask
-        from pink.tasks import PostureTask as PinkPostureTask
         from pink.tasks import Task as PinkTask
 
         class BaseDamping(PinkTask):
@@ -364,17 +381,7 @@ class PinkCase(Case):
         self.q0 = pin.neutral(m)
         self.q0[:4] = setup.q0[:4]  # x, y, cos yaw, sin yaw: the same planar root
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
-        self.hands = [
-            PinkFrameTask(
-                f,
-                position_cost=math.sqrt(W_HAND),
-                orientation_cost=math.sqrt(W_HAND),
-                lm_damping=0.0,
-                gain=1.0,
-            )
-            for f in setup.hands
-        ]
-        self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)
+        self.hands, self.posture = _pink_tasks(setup)
         self.posture.set_target(self.q0)
         base = BaseDamping(cost=np.sqrt(setup.base_cost), gain=0.0)
         if problem == HIERARCHY:
@@ -813,8 +820,6 @@ class RobotPinkCase(PinkCase):
 
     def __init__(self, setup: RobotSetup, backend: str, problem: str) -> None:
         import pink
-        from pink.tasks import FrameTask as PinkFrameTask
-        from pink.tasks import PostureTask as PinkPostureTask
 
         self.setup, self.backend, self.problem = setup, backend, problem
         self._pink = pink
@@ -826,17 +831,7 @@ class RobotPinkCase(PinkCase):
         if setup.mobile:
             self.q0[:4] = setup.q0[:4]  # x, y, cos yaw, sin yaw: the same planar root
         self.q0[self.iq] = [setup.home[j] for j in setup.joints]
-        self.hands = [
-            PinkFrameTask(
-                f,
-                position_cost=math.sqrt(W_HAND),
-                orientation_cost=math.sqrt(W_HAND),
-                lm_damping=0.0,
-                gain=1.0,
-            )
-            for f in setup.hands
-        ]
-        self.posture = PinkPostureTask(cost=math.sqrt(W_POSTURE), gain=1.0)  # skips the root
+        self.hands, self.posture = _pink_tasks(setup)  # (the posture skips the root)
         self.posture.set_target(self.q0)
         self.limits = [
             pink.limits.ConfigurationLimit(m, config_limit_gain=LIMIT_GAIN),

@@ -239,20 +239,7 @@ class NetworkArmAngle(mlp.TanhNetwork, HumanArmAngleModel):
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it)."""
         numbers = ("alpha_mean", "alpha_scale", "spread", "spread_between", "spread_within")
-        own = {
-            "x_mean": self.x_mean,
-            "x_scale": self.x_scale,
-            **{k: np.array(getattr(self, k)) for k in numbers},
-        }
-        return mlp.write_network(
-            path,
-            FORMAT,
-            self.weights,
-            self.biases,
-            own,
-            (self.input_low, self.input_high),
-            self.meta,
-        )
+        return self.write(path, FORMAT, numbers)
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkArmAngle:

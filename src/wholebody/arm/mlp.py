@@ -65,8 +65,12 @@ class TanhNetwork:
     training inputs (``input_low``/``input_high``, or None)."""
 
     weights: list[np.ndarray]
+    biases: list[np.ndarray]
+    x_mean: np.ndarray
+    x_scale: np.ndarray
     input_low: np.ndarray | None
     input_high: np.ndarray | None
+    meta: dict
 
     def in_range(self, P: np.ndarray) -> np.ndarray:
         """Whether points (..., 3) lie in the bounding box of the training inputs. Why: outside
@@ -79,6 +83,18 @@ class TanhNetwork:
     @property
     def hidden_sizes(self) -> tuple[int, ...]:
         return tuple(w.shape[0] for w in self.weights[:-1])
+
+    def write(self, path: str | Path, fmt: str, numbers: Sequence[str]) -> Path:
+        """:func:`write_network` of this network: its layers, its input standardisation
+        (``x_mean``, ``x_scale``), the scalar attributes ``numbers``, its training box and
+        ``meta``; the file written (``.npz`` appended to a name without it)."""
+        own = {
+            "x_mean": self.x_mean,
+            "x_scale": self.x_scale,
+            **{k: np.array(getattr(self, k)) for k in numbers},
+        }
+        box = (self.input_low, self.input_high)
+        return write_network(path, fmt, self.weights, self.biases, own, box, self.meta)
 
 
 def vector3(value: object, name: str, who: str) -> np.ndarray:

@@ -175,20 +175,7 @@ class NetworkStiffness(mlp.TanhNetwork, StiffnessModel):
         """Write the network (module docstring layout); returns the file written (``.npz``
         appended to a name without it, as numpy does)."""
         numbers = ("k_mean", "k_scale", "floor_beta")
-        own = {
-            "x_mean": self.x_mean,
-            "x_scale": self.x_scale,
-            **{k: np.array(getattr(self, k)) for k in numbers},
-        }
-        return mlp.write_network(
-            path,
-            FORMAT,
-            self.weights,
-            self.biases,
-            own,
-            (self.input_low, self.input_high),
-            self.meta,
-        )
+        return self.write(path, FORMAT, numbers)
 
     @classmethod
     def load(cls, path: str | Path) -> NetworkStiffness:

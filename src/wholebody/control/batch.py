@@ -81,8 +81,8 @@ def solve_many(
     if plan.python or not buffers.movable:
         raise WholebodyError(
             "solve_many needs a stack whose entries are all compiled (no "
-            "entry written in Python) and a robot whose joints the kernels "
-            "move"
+            "entry written in Python, no damped task) and a robot whose joints "
+            "the kernels move"
         )
     tasks = list(targets or {})
     refs = _references(plan, tasks, targets or {}, n)

@@ -33,7 +33,15 @@ from wholebody.kernels.objectives import AE_WIDTH, ARM_PARTS
 from wholebody.robot import Frame, RobotState
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
-from wholebody.tasks.base import InequalityTask, Limit, Objective, ObjectiveValue, Task
+from wholebody.tasks.base import (
+    InequalityTask,
+    Limit,
+    Objective,
+    ObjectiveValue,
+    Packed,
+    Packer,
+    Task,
+)
 
 if TYPE_CHECKING:
     from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
@@ -358,7 +366,7 @@ class Plan(Arena):
             self._add(c, lay.CAT_LIMIT, -1, 0, 0, j)
         self.K, self.P = k, p
         for rec in self.records:
-            rec.packed = rec.entry.pack(self)
+            rec.packed = _pack(rec.entry, self)
         self.compiled = [r for r in self.records if r.packed is not None]
         self.python = [r for r in self.records if r.packed is None]
 
@@ -523,6 +531,8 @@ class Plan(Arena):
         for rec in self.tasks:
             if rec.packed is not None and rec.entry.weight is not rec.key:
                 self._weigh(rec, rec.entry.weight)
+            if rec.packed is not None and rec.entry.lm_damping:  # damped from now on: in Python
+                self.stale = True
         obj = self._obj
         for rec in self.objectives:
             obj[rec.slot, 0] = rec.entry.weight
@@ -587,7 +597,10 @@ class Plan(Arena):
                 continue
             entry, r0, r1 = rec.entry, rec.row, rec.row + rec.rows
             if rec.cat == lay.CAT_TASK:
-                self._weigh(rec, entry.write_rows(state, A[r0:r1], b[r0:r1]))
+                w = entry.write_rows(state, A[r0:r1], b[r0:r1])
+                if entry.lm_damping:
+                    entry.damp(state, A[r0:r1], b[r0:r1], w)
+                self._weigh(rec, w)
             elif rec.cat == lay.CAT_INEQUALITY:
                 rows = entry.compute(state, dt)
                 C[r0:r1], CB[0, r0:r1], CB[1, r0:r1] = rows.C, rows.lower, rows.upper
@@ -782,4 +795,12 @@ def is_compiled(entry: Entry) -> bool:
         def frame(self, frame: Frame) -> int:
             return frames.setdefault(frame.index, len(frames))
 
-    return entry.pack(_Any()) is not None
+    return _pack(entry, _Any()) is not None
+
+
+def _pack(entry: Entry, packer: Packer) -> Packed | None:
+    """How the kernels compute ``entry``: its :meth:`~wholebody.tasks.Task.pack`, or None
+    for a damped task (:meth:`~wholebody.tasks.Task.damp` runs in Python)."""
+    if getattr(entry, "lm_damping", 0.0):
+        return None
+    return entry.pack(packer)

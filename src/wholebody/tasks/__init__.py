@@ -13,6 +13,7 @@ from wholebody.tasks.base import (
     ObjectiveValue,
     Task,
     TaskRows,
+    damp_rows,
 )
 from wholebody.tasks.collision import CollisionAvoidance
 from wholebody.tasks.com import ComTask
@@ -49,4 +50,5 @@ __all__ = [
     "Task",
     "TaskRows",
     "VelocityLimits",
+    "damp_rows",
 ]

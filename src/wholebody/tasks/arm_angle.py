@@ -225,9 +225,12 @@ class HumanArmAngleTask(Task):
         weight: float = 1.0,
         fade: float = 0.03,
         name: str | None = None,
+        lm_damping: float = 0.0,
     ) -> None:
         self.pull = HumanArmAngle(robot, arm, model, fade=fade)
-        super().__init__(name or f"{self.pull.arm.name}_human_arm_angle", weight)
+        super().__init__(
+            name or f"{self.pull.arm.name}_human_arm_angle", weight, lm_damping=lm_damping
+        )
         group = self.pull.arm.group
         if arm_only and group is None:
             raise DimensionError(

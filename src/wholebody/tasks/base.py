@@ -51,6 +51,7 @@ __all__ = [
     "Packer",
     "Task",
     "TaskRows",
+    "damp_rows",
 ]
 
 
@@ -194,15 +195,16 @@ class Task(Compiled, ABC):
 
     Subclasses call ``super().__init__(name, weight, gain=...)`` (all checked).
 
-    A task has no damping of its own (pink's ``lm_damping``, a Levenberg-Marquardt term
-    ``mu = lm_damping ||e||^2`` added to its QP's Hessian): in a strict hierarchy a
-    regularisation of ``u`` inside a level would take the freedom the levels below it need,
-    so the solvers damp, once for every task of a level:
-    :class:`~wholebody.solvers.ProjectionSolver`'s ``damping`` (``lambda_max``, the largest
-    damping of a level's pseudo-inverse, applied only along its nearly singular directions)
-    and :class:`~wholebody.solvers.HierarchicalQPSolver`'s ``stall_damping`` (``mu``,
-    dimensionless: a level left unmet below the first is solved again as a damped least
-    squares).
+    A task may be damped (``lm_damping``, pink's): a Levenberg-Marquardt term ``mu =
+    lm_damping * sum_i w_i e_i^2`` (``w`` its weights, ``e`` its :meth:`error`) that makes
+    the task ask for less where its Jacobian is ill-conditioned and its error large. The stack
+    applies it to the task's own rows when it assembles the level
+    (:func:`~wholebody.tasks.damp_rows`): their right-hand side becomes ``v_mu = S^-1 G (G +
+    mu I)^-1 S v`` (``S = diag(sqrt w)``, ``G = S J J^T S``), so that a task alone in its
+    level, no bound active, moves exactly as pink's damped QP, ``u = (J^T W J + mu I)^-1 J^T
+    W v``, on every backend; and the directions the task does not use stay free for the levels
+    below it (a damping term on ``u`` inside the level would take them). A built-in task with
+    damping is evaluated in Python.
 
     Attributes
     ----------
@@ -215,7 +217,12 @@ class Task(Compiled, ABC):
         The decay rate of the error with the short way (1/s): ``de/dt = -gain e``, the error
         shrinking by a factor e every ``1 / gain`` s while the task is met. Not used by a
         task that overrides :meth:`compute`.
+    lm_damping
+        The Levenberg-Marquardt damping above (in units of ``1 / e^2`` times those of ``J^T W
+        J``; 0, the default: none): finite, >= 0.
     """
+
+    _lm_damping = 0.0  # (a subclass that does not call __init__ is undamped)
 
     def __init__(
         self,
@@ -223,9 +230,11 @@ class Task(Compiled, ABC):
         weight: float | Sequence[float] | np.ndarray = 1.0,
         *,
         gain: float = 10.0,
+        lm_damping: float = 0.0,
     ) -> None:
         self.name = check_name(name, type(self).__name__)
         self.weight = weight
+        self.lm_damping = lm_damping
         if not (isinstance(gain, (int, float)) and math.isfinite(gain) and gain >= 0):
             raise DimensionError(
                 f"{self.name}: gain must be a finite number >= 0 (1/s), got {gain!r}"
@@ -241,6 +250,31 @@ class Task(Compiled, ABC):
     @weight.setter
     def weight(self, value: float | Sequence[float] | np.ndarray) -> None:
         self._weight = check_weight(value, getattr(self, "name", type(self).__name__))
+
+    @property
+    def lm_damping(self) -> float:
+        """The Levenberg-Marquardt damping (finite, >= 0; class docstring)."""
+        return self._lm_damping
+
+    @lm_damping.setter
+    def lm_damping(self, value: float) -> None:
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            name = getattr(self, "name", type(self).__name__)
+            raise DimensionError(f"{name}: lm_damping must be a finite number >= 0, got {value!r}")
+        self._lm_damping = float(value)
+
+    def damp(self, state: RobotState, J: np.ndarray, v: np.ndarray, weights: object) -> None:
+        """Damp the rows ``J u = v`` at ``state`` (weights as :meth:`write_rows` returns them)
+        in place: ``v`` becomes :func:`~wholebody.tasks.damp_rows`'s with ``mu =
+        lm_damping * sum w e^2``."""
+        e = np.asarray(self.error(state), dtype=float)
+        w = np.broadcast_to(np.asarray(weights, dtype=float), v.shape)
+        if e.shape != v.shape or not np.isfinite(e).all():
+            raise DimensionError(
+                f"{self.name}: lm_damping needs the task's error, (dim,) and finite (define "
+                f"compute_error or error); got shape {e.shape}"
+            )
+        v[:] = damp_rows(J, v, w, self.lm_damping * float(w @ (e * e)))
 
     @property
     def weights(self) -> np.ndarray:
@@ -329,6 +363,23 @@ class Task(Compiled, ABC):
 
     def reset(self) -> None:
         """Forget internal state (integrators)."""
+
+
+def damp_rows(J: np.ndarray, v: np.ndarray, w: np.ndarray, mu: float) -> np.ndarray:
+    """The right-hand side ``v_mu = S^-1 G (G + mu I)^-1 S v`` of the rows ``J u = v`` (m x
+    n, m) of weights ``w`` (m, >= 0; ``S = diag(sqrt w)``, ``G = S J J^T S``) damped by ``mu
+    >= 0``: the minimum-norm solution of ``S J u = S v_mu`` is the Levenberg-Marquardt step
+    ``J^T S (G + mu I)^-1 S v = (J^T W J + mu I)^-1 J^T W v``. Rows of weight 0 keep ``v``."""
+    if mu <= 0.0:
+        return v.copy()
+    s = np.sqrt(w)
+    Js, vs = J * s[:, None], v * s
+    G = Js @ Js.T
+    G[np.diag_indices_from(G)] += mu
+    out = v.copy()
+    kept = s > 0.0
+    out[kept] = (vs - mu * np.linalg.solve(G, vs))[kept] / s[kept]
+    return out
 
 
 class InequalityTask(Compiled, ABC):

@@ -42,6 +42,8 @@ class ComTask(Task):
         Gain (1/s).
     weight
         Weight in its level, scalar or per row.
+    lm_damping
+        Levenberg-Marquardt damping (:class:`~wholebody.tasks.Task`; 0: none).
     """
 
     def __init__(
@@ -53,12 +55,13 @@ class ComTask(Task):
         target: Sequence[float] | np.ndarray | None = None,
         kp: float = 5.0,
         weight: float | Sequence[float] = 1.0,
+        lm_damping: float = 0.0,
     ) -> None:
         if not axes or len(set(axes)) != len(axes) or not set(axes) <= set(_AXES):
             raise DimensionError(f"{name}: axes must be distinct letters of 'xyz', got {axes!r}")
         if not (np.isfinite(kp) and kp >= 0):
             raise DimensionError(f"{name}: kp must be a finite number >= 0, got {kp!r}")
-        super().__init__(name, weight)
+        super().__init__(name, weight, lm_damping=lm_damping)
         self.robot = robot
         self.rows = np.array([_AXES[a] for a in axes], dtype=int)
         self.rows.setflags(write=False)

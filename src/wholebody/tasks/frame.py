@@ -137,6 +137,7 @@ class PoseTask(Task):
         ki: float | Sequence[float],
         integral_limit: float,
         weight: float | Sequence[float],
+        lm_damping: float = 0.0,
     ) -> None:
         if not (position or orientation):
             raise DimensionError(
@@ -145,7 +146,7 @@ class PoseTask(Task):
         self.robot = robot
         self.rows = np.flatnonzero([position] * 3 + [orientation] * 3)
         self.rows.setflags(write=False)
-        super().__init__(name, weight)
+        super().__init__(name, weight, lm_damping=lm_damping)
         self._params = np.zeros(POSE_WIDTH)
         self._params[POSE_STAMP] = -1.0
         self.kp = kp
@@ -319,6 +320,8 @@ class FrameTask(PoseTask):
         Anti-windup clamp of each integral component (m s, rad s).
     weight
         Weight in its level, scalar or per row.
+    lm_damping
+        Levenberg-Marquardt damping (:class:`~wholebody.tasks.Task`; 0: none).
 
     The target pose and twist are in the world (world axes, linear velocity of the target
     frame's origin).
@@ -336,6 +339,7 @@ class FrameTask(PoseTask):
         ki: float | Sequence[float] = 0.0,
         integral_limit: float = 0.05,
         weight: float | Sequence[float] = 1.0,
+        lm_damping: float = 0.0,
     ) -> None:
         self.frame = robot.frame(frame)
         super().__init__(
@@ -347,6 +351,7 @@ class FrameTask(PoseTask):
             ki=ki,
             integral_limit=integral_limit,
             weight=weight,
+            lm_damping=lm_damping,
         )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

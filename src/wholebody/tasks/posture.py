@@ -38,6 +38,8 @@ class PostureTask(Task):
         Gain (1/s), scalar or per joint.
     weight
         Weight in its level, scalar or per joint.
+    lm_damping
+        Levenberg-Marquardt damping (:class:`~wholebody.tasks.Task`; 0: none).
 
     The target and the gains are read-only arrays: change them with :meth:`set_target` and
     by assigning ``kp``.
@@ -52,6 +54,7 @@ class PostureTask(Task):
         target: np.ndarray | Sequence[float] | None = None,
         kp: float | Sequence[float] = 1.0,
         weight: float | Sequence[float] = 1.0,
+        lm_damping: float = 0.0,
     ) -> None:
         self.robot = robot
         if joints is None:
@@ -65,7 +68,7 @@ class PostureTask(Task):
             label = "posture"
         self.indices = np.array(idx, dtype=np.int64)
         self.indices.setflags(write=False)
-        super().__init__(name or label, weight)
+        super().__init__(name or label, weight, lm_damping=lm_damping)
         base = np.arange(robot.nu) < len(robot.base.actuators)  # wheels, virtual actuators
         self.tracked = (~base)[idx]
         """Per joint, whether it has a position error (False: wheels, a base's virtual

@@ -53,6 +53,7 @@ class RelativeFrameTask(PoseTask):
         ki: float | Sequence[float] = 0.0,
         integral_limit: float = 0.05,
         weight: float | Sequence[float] = 1.0,
+        lm_damping: float = 0.0,
     ) -> None:
         self.frame_a = robot.frame(frame_a)
         self.frame_b = robot.frame(frame_b)
@@ -65,6 +66,7 @@ class RelativeFrameTask(PoseTask):
             ki=ki,
             integral_limit=integral_limit,
             weight=weight,
+            lm_damping=lm_damping,
         )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -123,6 +125,7 @@ class RelativePositionTask(PoseTask):
         ki: float | Sequence[float] = 0.0,
         integral_limit: float = 0.05,
         weight: float | Sequence[float] = 1.0,
+        lm_damping: float = 0.0,
     ) -> None:
         self.frame_a = robot.frame(frame_a)
         self.frame_b = robot.frame(frame_b)
@@ -136,6 +139,7 @@ class RelativePositionTask(PoseTask):
             ki=ki,
             integral_limit=integral_limit,
             weight=weight,
+            lm_damping=lm_damping,
         )
 
     def _measured(self, state: RobotState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

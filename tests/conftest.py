@@ -38,6 +38,7 @@ def rng() -> np.random.Generator:
 # do. Started when the equivalence file is collected and slow tests are not deselected.
 EQUIVALENCE = [
     "test_step.py",
+    "test_torque_kernel.py",
     "test_dmp_kernels.py",
     "test_kernels.py",
     "test_daqp_kernel.py",

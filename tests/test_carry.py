@@ -111,13 +111,14 @@ def test_bad_carries_are_refused(talos):
 
 @pytest.mark.slow
 def test_the_coordinated_carry_holds_its_squeeze_under_torque_control():
-    """The issue's carry targets, on a carry 1.7 times as fast: the squeeze within 2 N
-    of 10 N while carrying, the hands within 5 mm of their references, no wrench outside
-    its pyramid."""
+    """The issue's carry targets on the scenario as it is: the squeeze within 2 N of 10 N
+    while carrying, the hands within 5 mm of their references, no wrench outside its
+    pyramid. (Faster, the peak is not robust: 1.6 to 2.4 N at 1.7 times the speed, with
+    the forward difference's step changed by 10 %, and 4.1 N at 1.25 times.)"""
     from wholebody.scenarios import load_scenario, run_scenario
 
     spec = load_scenario("tasks/coordinated_carry.toml")
-    run = run_scenario(spec, backend="dynamics", sim="mujoco", duration_scale=0.6)
+    run = run_scenario(spec, backend="dynamics", sim="mujoco")
     m = run.metrics
     assert not m["stopped"] and m["backend"] == "dynamics"
     assert m["squeeze_error_max_n"]["panel"] < 2.0

@@ -156,16 +156,14 @@ def test_task_accelerations_match_finite_differences_of_the_task_velocities(pand
 
 
 def test_the_rows_drift_is_pinocchios_frame_acceleration(panda):
-    """``Jdot u`` by central differences of the stack's rows equals Pinocchio's classical
+    """``Jdot u`` by forward differences of the stack's rows equals Pinocchio's classical
     acceleration of the frame at zero joint acceleration."""
     hand, stack = hand_stack(panda)
     solver = DynamicsSolver(panda)
     q = panda.home()
     hand.set_target(panda.frame_pose(q, "panda_hand_tcp"))
     u = np.random.default_rng(2).normal(scale=1.0, size=panda.nu)
-    ahead = solver._task_drifts(stack, q, u, DT)
-    problem = stack.evaluate(panda.update(q), DT)
-    (drift, _), _ = solver._drift_rows(problem, u, ahead)
+    drift = solver.drifts(stack, q, u, DT)
     model, data = panda.model, panda.model.createData()
     fid = model.getFrameId("panda_hand_tcp")
     pin.forwardKinematics(model, data, q, panda.actuation @ u, np.zeros(model.nv))
@@ -309,3 +307,22 @@ def test_a_force_task_sets_a_contacts_wrench_above_the_tasks(panda):
     run(panda, stack, solver, q, np.zeros(panda.nu), 50, pressing)
     with pytest.raises(ConfigError, match="wrench target"):
         hand.set_wrench_target([0.0, 20.0])
+
+
+def test_an_infeasible_weighted_step_falls_back_to_the_cascade(talos):
+    """Soles that take at most 100 N each cannot carry TALOS: the weighted QP has no
+    answer, the cascade solves the same levels instead (the contacts held as closely as the
+    bounds allow), and the step is INFEASIBLE with the excess named; with soles that can,
+    the QP answers."""
+    com, stack, solver, q = standing(talos, mode="weighted")
+    u = np.zeros(talos.nu)
+    assert solver.solve(stack, q, u, DT).status in (SolverStatus.OK, SolverStatus.BOUNDS_ACTIVE)
+    assert not solver.cascaded
+    for f in FEET:
+        solver.remove_contact(f)
+        solver.add_contact(PatchContact(f, mu=0.3, f_max=100.0, half_length=0.1, half_width=0.065))
+    solver.make_contacts(q)
+    res = solver.solve(stack, q, u, DT)
+    assert solver.cascaded and res.status == SolverStatus.INFEASIBLE
+    assert max(res.violations.values()) > 1.0  # N: a whole-body weight short
+    assert res.solution.task_residuals["contact left_sole_link"] >= 0.0  # (it reports)

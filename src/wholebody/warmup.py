@@ -5,12 +5,13 @@ The kernels (:mod:`wholebody.kernels`) compile on their first call and are cache
 the bundled humanoid, a stack that reaches every compiled entry (frame, relative and posture
 tasks, a half-space, collision avoidance, the arm energy with the shipped stiffness network,
 h1, manipulability, position, velocity and acceleration limits) through both backends'
-control steps, the evaluation, the stack's advance, the collision distances and the DMP
-kernels.
+control steps, the evaluation, the stack's advance, the collision distances, a torque-level
+step (:mod:`wholebody.kernels.torque`) and the DMP kernels.
 
 The work is split in two halves that compile in two processes at once (the machine's cores):
-the evaluation and the projection's step in one, the hierarchical QP's cascade, then its
-step (which finds the evaluation in the cache by then) and the DMP kernels in the other. The
+the evaluation, the projection's step and the torque level in one, the hierarchical QP's
+cascade, then its step (which finds the evaluation in the cache by then) and the DMP kernels
+in the other. The
 evaluation and the cascade are compiled as parts of the steps (:func:`wholebody.kernels.
 as_callees`), optimised once, in the steps. This process then loads everything from the
 cache.
@@ -103,11 +104,25 @@ def _half(name: str) -> None:
             stack.evaluate(robot.update(robot.home()), DT)
         _steps(robot, ProjectionSolver())
         stack.levels[0].entries[-1].model.distances(robot.update(robot.home()), 0.05)
+        _torque(robot)
     else:
         with as_callees():  # the cascade first, for the HQP's step
             _cascade()
         _steps(robot, HierarchicalQPSolver("daqp"))
         dmp.warmup()
+
+
+def _torque(robot: Robot) -> None:
+    """A weighted torque-level step (the torque level's kernels)."""
+    import numpy as np
+
+    from wholebody.dynamics import DynamicsSolver
+    from wholebody.solvers import Stack
+    from wholebody.tasks import PostureTask, VelocityLimits
+
+    stack = Stack(robot, [[PostureTask(robot)]], [VelocityLimits(robot)])
+    u = np.full(robot.nu, 0.1)
+    DynamicsSolver(robot, mode="weighted").solve(stack, robot.home(), u, 1e-3)
 
 
 def _cascade() -> None:

@@ -384,14 +384,22 @@ class Stack:
         """Rows of every level and the box at ``state`` for a step of ``dt`` s (scaled
         coordinates, see the module docstring), by the compiled plan. The arrays are views of
         the plan's arena that the next evaluation overwrites."""
+        plan = self.evaluated_plan(state, dt)
+        problem = plan.problem()
+        problem.objective_values = plan.objective_values()
+        return problem
+
+    def evaluated_plan(self, state: RobotState, dt: float) -> Plan:
+        """Evaluate every row and the box at ``state`` as :meth:`evaluate` does, and return
+        the plan whose arena holds them (its regions ``F_A``, ``F_B``, ``F_C``, ... of
+        :mod:`wholebody.kernels.layout`), without building the :class:`StackProblem`: what a
+        kernel that reads the rows takes (the torque level)."""
         plan = self.synced_plan(state, dt)
         first_call(
             "evaluate", "the control kernels", evaluate, *plan.kernel_args(state), NO_REFERENCES
         )
         plan.evaluated = state.stamp
-        problem = plan.problem()
-        problem.objective_values = plan.objective_values()
-        return problem
+        return plan
 
     def advance(
         self,

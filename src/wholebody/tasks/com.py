@@ -8,7 +8,8 @@ of the chosen axes are::
 
 A standing humanoid stays up under physics when its centre of mass stays over its support
 polygon (the soles): hold it in ``"xy"`` at the level below the soles' frame tasks. A Python
-task (no compiled kernel): the compiled stack writes its rows from Python each step.
+task (no compiled kernel): the compiled stack has it write its rows into the stack's arena
+each step (:meth:`ComTask.write_rows`, from Pinocchio's centre of mass and its Jacobian).
 """
 
 from __future__ import annotations
@@ -98,8 +99,17 @@ class ComTask(Task):
         return (self._target - state.com_position())[self.rows]
 
     def compute(self, state: RobotState) -> TaskRows:
-        J = state.com_jacobian()[self.rows]
-        return TaskRows(J, self._velocity[self.rows] + self.kp * self.error(state), self.weights)
+        J = np.empty((self.dim, state.robot.nu))
+        v = np.empty(self.dim)
+        ComTask.write_rows(self, state, J, v)
+        return TaskRows(J, v, self.weights)
+
+    def write_rows(self, state: RobotState, J: np.ndarray, v: np.ndarray) -> float | np.ndarray:
+        if type(self).compute is not ComTask.compute:  # (a subclass's own rows)
+            return super().write_rows(state, J, v)
+        np.take(state.com_jacobian(), self.rows, axis=0, out=J)
+        np.take(self._velocity + self.kp * (self._target - state.com_position()), self.rows, out=v)
+        return self.weight
 
     def __repr__(self) -> str:
         return f"ComTask({self.name!r}, rows={self.dim})"

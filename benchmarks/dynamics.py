@@ -18,10 +18,12 @@ force regularisation replaced by wholebody's (the contacts' internal wrenches, t
 tangential forces and torques, kept small).
 
 Measured per run: the step's wall time (wholebody: ``solver.solve``; TSID:
-``computeProblemData`` + ``solve``), median and p90 over the steps after the first 10 (us);
-the CoM's tracking error ``|com(q_k) - com_ref(t_k)|`` (rms and max over the run, and rms
-over its second half, mm); the soles' drift (mm). The cases are interleaved ``--repeat``
-times; the table gives the medians over the repeats.
+``computeProblemData`` + ``solve``), median and p90 over the steps after the first 10 (us),
+and the median of its QP alone (wholebody: ``result.qp_time``, the weighted QP's kernel or
+the cascade's; TSID: ``solver.solve``); the CoM's tracking error ``|com(q_k) -
+com_ref(t_k)|`` (rms and max over the run, and rms over its second half, mm); the soles'
+drift (mm). The cases are interleaved ``--repeat`` times; the table gives the medians over
+the repeats.
 
     bash benchmarks/peers/tsid/setup.sh      # once: TSID's own virtual environment
     python benchmarks/dynamics.py [--repeat 3] [--steps 2000] [--no-tsid]
@@ -85,7 +87,7 @@ def ours(mode: str, steps: int) -> dict:
     solver.make_contacts(q)
     com0, soles0 = robot.com_position(q), [robot.frame_pose(q, f)[:3, 3] for f in FEET]
     u = np.zeros(robot.nu)
-    times, errors = np.zeros(steps), np.zeros(steps)
+    times, errors, qp = np.zeros(steps), np.zeros(steps), np.zeros(steps)
     for k in range(steps):
         target, velocity = reference(com0, k * DT)
         errors[k] = np.linalg.norm(robot.com_position(q) - target)
@@ -93,19 +95,23 @@ def ours(mode: str, steps: int) -> dict:
         start = time.perf_counter()
         res = solver.solve(stack, q, u, DT)
         times[k] = time.perf_counter() - start
+        qp[k] = res.qp_time
         u = u + res.a * DT
         q = robot.integrate(q, u, DT)
         stack.advance(solver.state, DT)
     drift = max(
         np.linalg.norm(robot.frame_pose(q, f)[:3, 3] - p) for f, p in zip(FEET, soles0, strict=True)
     )
-    return _figures(times[WARMUP:] * 1e6, errors, drift, 36 + 12)
+    return _figures(times[WARMUP:] * 1e6, errors, drift, 36 + 12, qp[WARMUP:] * 1e6)
 
 
-def _figures(step_us: np.ndarray, errors: np.ndarray, drift: float, n_var: int) -> dict:
+def _figures(
+    step_us: np.ndarray, errors: np.ndarray, drift: float, n_var: int, qp_us: np.ndarray
+) -> dict:
     half = errors[errors.size // 2 :]
     return {
         "step_us": float(np.median(step_us)),
+        "qp_us": float(np.median(qp_us)),
         "p90_us": float(np.percentile(step_us, 90)),
         "rms_mm": float(np.sqrt(np.mean(errors**2)) * 1e3),
         "max_mm": float(errors.max() * 1e3),
@@ -122,6 +128,7 @@ def tsid(steps: int) -> dict:
     err = out["com_error_m"]
     return {
         "step_us": solve["median"],
+        "qp_us": out["qp_us"]["median"],
         "p90_us": solve["p90"],
         "rms_mm": err["rms"] * 1e3,
         "max_mm": err["max"] * 1e3,
@@ -149,11 +156,11 @@ def main() -> None:
                     runs[name].append(case())
                 except TsidPeerError as exc:
                     sys.exit(f"TSID: {exc}")
-    keys = ("step_us", "p90_us", "rms_mm", "max_mm", "rms2_mm", "drift_mm", "n_var")
-    head = "| case | step median (us) | step p90 (us) | CoM rms (mm) | CoM max (mm) |"
-    head += " CoM rms, 2nd half (mm) | soles' drift (mm) | QP variables |"
+    keys = ("step_us", "p90_us", "qp_us", "rms_mm", "max_mm", "rms2_mm", "drift_mm", "n_var")
+    head = "| case | step median (us) | step p90 (us) | of which the QP (us) | CoM rms (mm) |"
+    head += " CoM max (mm) | CoM rms, 2nd half (mm) | soles' drift (mm) | QP variables |"
     print(head)
-    print("|---" * 8 + "|")
+    print("|---" * 9 + "|")
     for name, rs in runs.items():
         med = [float(np.median([r[k] for r in rs])) for k in keys]
         print(f"| {name} | " + " | ".join(_cell(v) for v in med) + " |")

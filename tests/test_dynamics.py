@@ -314,7 +314,7 @@ def test_an_infeasible_weighted_step_falls_back_to_the_cascade(talos):
     answer, the cascade solves the same levels instead (the contacts held as closely as the
     bounds allow), and the step is INFEASIBLE with the excess named; with soles that can,
     the QP answers."""
-    com, stack, solver, q = standing(talos, mode="weighted")
+    _, stack, solver, q = standing(talos, mode="weighted")
     u = np.zeros(talos.nu)
     assert solver.solve(stack, q, u, DT).status in (SolverStatus.OK, SolverStatus.BOUNDS_ACTIVE)
     assert not solver.cascaded

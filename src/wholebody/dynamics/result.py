@@ -56,6 +56,9 @@ class DynamicsResult:
     squeeze: dict[str, float] = field(default_factory=dict)
     """Carried object -> the squeeze between its two hands (N, :mod:`~wholebody.dynamics.carry`)."""
     solve_time: float = 0.0
+    """The whole step (s)."""
+    qp_time: float = 0.0
+    """Of :attr:`solve_time`, the QP's solve (s): the weighted QP's kernel or the cascade's."""
 
     @property
     def solution(self) -> SolverResult:

@@ -325,9 +325,11 @@ class DynamicsSolver:
             layout = self._layout = Layout(self, plan, contacts, grasps)
         layout.fill(self, contacts, grasps)
         self._assemble(layout, plan, q, u, ahead, dt, M, h)
+        t1 = time.perf_counter()
         x, status = self._run(layout)
+        t2 = time.perf_counter()
         result = self._outcome(layout, x, status, M, h, grasps)
-        result.solve_time = time.perf_counter() - t0
+        result.solve_time, result.qp_time = time.perf_counter() - t0, t2 - t1
         return result
 
     def _checked(

@@ -113,8 +113,7 @@ def test_bad_carries_are_refused(talos):
 def test_the_coordinated_carry_holds_its_squeeze_under_torque_control():
     """The issue's carry targets on the scenario as it is: the squeeze within 2 N of 10 N
     while carrying, the hands within 5 mm of their references, no wrench outside its
-    pyramid. (Faster, the peak is not robust: 1.6 to 2.4 N at 1.7 times the speed, with
-    the forward difference's step changed by 10 %, and 4.1 N at 1.25 times.)"""
+    pyramid. (Faster, the peak is not robust: benchmarks/README.md, "The torque level".)"""
     from wholebody.scenarios import load_scenario, run_scenario
 
     spec = load_scenario("tasks/coordinated_carry.toml")

@@ -376,8 +376,11 @@ class DynamicsSolver:
             self.state = self.robot.update(q)
             plan = stack.evaluated_plan(self.state, dt)
             if eps == 0.0 or plan is ahead_plan:
-                break
-        return plan, ahead
+                return plan, ahead
+        raise SolverError(
+            "DynamicsSolver: the stack was laid out anew between its two evaluations, twice "
+            "(an entry whose rows change shape with the configuration?)"
+        )
 
     def drifts(self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """``Jdot u`` (K + P) of the stack's equality rows and inequality rows at ``(q, u)``,
@@ -386,7 +389,8 @@ class DynamicsSolver:
         q, u = self._checked(stack, q, u, dt)
         plan, ahead = self._rows(stack, q, u, dt)
         eps = self._par[torque.P_EPS]
-        return (ahead - _rows_times(plan, u)) / eps if eps > 0.0 else np.zeros(ahead.size)
+        now = _rows_times(plan, u)
+        return (ahead - now) / eps if eps > 0.0 else np.zeros(now.size)
 
     def _physics(
         self, q: np.ndarray, v: np.ndarray

@@ -254,16 +254,15 @@ def _stack_level(
     lv: int,
     plan: tuple,
     k: int,
-    weights: np.ndarray,
-    u: np.ndarray,
-    ahead: np.ndarray,
-    last_b: np.ndarray,
+    state: tuple,
     par: np.ndarray,
     internal: np.ndarray,
-    with_internal: bool,
+    with_internal: int,
 ) -> None:
     """Arena level ``lv``: plan level ``k`` (or every level, each times its weight, where
-    ``k < 0``), padded, then the internal-wrench rows where ``with_internal``."""
+    ``k < 0``), padded, then the internal-wrench rows where ``with_internal``; ``state``:
+    ``(u, ahead, last_b, weights)`` as :func:`assemble` takes them."""
+    u, ahead, last_b, weights = state
     f, i, h = arena
     pf, pi, ph = plan
     A, b, C = lay.fmat(f, h, lay.F_A), lay.fvec(f, h, lay.F_B), lay.fmat(f, h, lay.F_C)
@@ -429,10 +428,8 @@ def assemble(
                 A[r + t, nu:] = targets[t]
                 b[r + t] = target_b[t]
         elif kind == LEVEL_STACK:
-            _stack_level(
-                arena, lv, plan, spec[lv, 1], weights, u, ahead, last_b, par, internal,
-                spec[lv, 2] != 0,
-            )  # fmt: skip
+            stack_state = (u, ahead, last_b, weights)
+            _stack_level(arena, lv, plan, spec[lv, 1], stack_state, par, internal, spec[lv, 2])
         else:
             for t in range(quiet.shape[0]):
                 A[r + t, nu:] = quiet[t]

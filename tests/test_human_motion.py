@@ -113,6 +113,11 @@ def test_the_command_writes_the_table_and_the_plot(tmp_path, capsys):
         assert c["alpha_rms_deg_by_participant"]["ADL010"] == pytest.approx(c["alpha_rms_deg"])
         assert c["alpha_rms_deg_interval"] == pytest.approx([c["alpha_rms_deg"]] * 2)
         assert c["frames"] > 200 and c["waist_travel_rad"] >= 0.0
+        person = c["participants"]["ADL010"]
+        assert person["trials"] == 2
+        assert person["waist_travel_rad"] == pytest.approx(c["waist_travel_rad"])
+        low, high = person["waist_travel_rad_per_trial_interval"]
+        assert low <= person["waist_travel_rad_per_trial"] <= high
     assert (tmp_path / "humanlike.png").stat().st_size > 10_000
     assert "ADL010" in capsys.readouterr().out
 
@@ -160,3 +165,27 @@ def test_a_one_armed_robot_is_refused_by_name(trials):
         expected = "has one arm" if rec.side == "R" else "no left arm"
         with pytest.raises(DataError, match=expected):
             run_trial(panda, rec, None)
+
+
+def test_waist_travel_and_arm_angle_come_with_intervals_per_controller_and_participant():
+    """P1's two trials travel 1 and 3 rad, P2's one trial 5 rad: 3 rad per trial over
+    everyone, its interval from all-P1 (2 rad) to all-P2 (5 rad) resamples of the people;
+    P1's own from all-first (1 rad) to all-second (3 rad) resamples of P1's trials."""
+    zero = np.zeros(1)
+    trials = [
+        TrialResult("P1", "a", zero, np.array([0.1]), 1.0, 0.0),
+        TrialResult("P1", "b", zero, np.array([0.3]), 3.0, 0.0),
+        TrialResult("P2", "c", zero, np.array([0.2]), 5.0, 0.0),
+    ]
+    sc = compare_arm_angles(trials)
+    assert sc.waist_travel_rad == 9.0 and sc.waist_travel_rad_per_trial == 3.0
+    assert sc.waist_travel_rad_per_trial_interval == pytest.approx((2.0, 5.0))
+    p1, p2 = sc.participants["P1"], sc.participants["P2"]
+    assert (p1.waist_travel_rad, p1.trials, p2.trials) == (4.0, 2, 1)
+    assert p1.waist_travel_rad_per_trial_interval == pytest.approx((1.0, 3.0))
+    assert p2.waist_travel_rad_per_trial_interval == pytest.approx((5.0, 5.0))
+    assert p1.alpha_rms_deg == pytest.approx(np.degrees(np.sqrt((0.01 + 0.09) / 2)))
+    assert p1.alpha_rms_deg_interval == pytest.approx(np.degrees([0.1, 0.3]))
+    row = json.loads(json.dumps(sc.as_dict()))  # what humanlike.json holds
+    assert row["participants"]["P1"]["waist_travel_rad_per_trial_interval"] == [1.0, 3.0]
+    assert row["waist_travel_rad_per_trial"] == 3.0

@@ -848,10 +848,22 @@ def _humanlike_evaluate(args: argparse.Namespace) -> int:
             f"  {name:<19}{sc.alpha_rms_deg:6.1f}{f'[{lo:.1f}, {hi:.1f}]':>15}"
             + "".join(f"{by[p]:8.1f}" for p in people)
         )
+    print(
+        f"  {'waist travel (rad)':<19}{'/ trial':>6}{'95 % (people)':>15}"
+        + "".join(f"{p:>8}" for p in people)
+        + f"{'total':>9}"
+    )
+    for name, sc in scores.items():
+        lo, hi = sc.waist_travel_rad_per_trial_interval
+        print(
+            f"  {name:<19}{sc.waist_travel_rad_per_trial:6.2f}{f'[{lo:.2f}, {hi:.2f}]':>15}"
+            + "".join(f"{sc.participants[p].waist_travel_rad_per_trial:8.2f}" for p in people)
+            + f"{sc.waist_travel_rad:9.1f}"
+        )
     for name, sc in scores.items():
         print(
-            f"  {name:<19}waist travel {sc.waist_travel_rad:.2f} rad, wrist error median "
-            f"{sc.wrist_error_median_mm:.2f} mm, max {sc.wrist_error_mm:.1f} mm"
+            f"  {name:<19}wrist error median {sc.wrist_error_median_mm:.2f} mm, "
+            f"max {sc.wrist_error_mm:.1f} mm"
         )
     for what, path in written.items():
         print(f"  {what:<5} {path}")

@@ -44,6 +44,7 @@ from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativePositionTask
 __all__ = [
     "CONTROLLERS",
     "MotionScores",
+    "ParticipantScores",
     "PathTrajectory",
     "TrialResult",
     "compare_arm_angles",
@@ -105,8 +106,34 @@ class TrialResult:
 
 
 @dataclass
+class ParticipantScores:
+    """One participant's scores under one controller, each with its 95 % interval over
+    resamples of the participant's trials (:func:`compare_arm_angles`)."""
+
+    alpha_rms_deg: float
+    alpha_rms_deg_interval: tuple[float, float]
+    waist_travel_rad: float
+    """Summed over the participant's trials (rad)."""
+    waist_travel_rad_per_trial: float
+    waist_travel_rad_per_trial_interval: tuple[float, float]
+    trials: int
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "alpha_rms_deg": self.alpha_rms_deg,
+            "alpha_rms_deg_interval": list(self.alpha_rms_deg_interval),
+            "waist_travel_rad": self.waist_travel_rad,
+            "waist_travel_rad_per_trial": self.waist_travel_rad_per_trial,
+            "waist_travel_rad_per_trial_interval": list(self.waist_travel_rad_per_trial_interval),
+            "trials": self.trials,
+        }
+
+
+@dataclass
 class MotionScores:
-    """A controller's scores over trials (see :func:`compare_arm_angles`)."""
+    """A controller's scores over trials (see :func:`compare_arm_angles`): the arm angle's
+    rms and the waist's travel together, over everyone (intervals: participants resampled)
+    and per participant (intervals: their trials resampled)."""
 
     alpha_rms_deg: float
     alpha_rms_deg_by_participant: dict[str, float]
@@ -115,6 +142,9 @@ class MotionScores:
     wrist_error_mm: float
     wrist_error_median_mm: float = 0.0
     alpha_rms_deg_interval: tuple[float, float] = (math.nan, math.nan)
+    waist_travel_rad_per_trial: float = math.nan
+    waist_travel_rad_per_trial_interval: tuple[float, float] = (math.nan, math.nan)
+    participants: dict[str, ParticipantScores] = field(default_factory=dict)
     trials: list[TrialResult] = field(default_factory=list, repr=False)
 
     def as_dict(self) -> dict[str, object]:
@@ -123,6 +153,9 @@ class MotionScores:
             "alpha_rms_deg_interval": list(self.alpha_rms_deg_interval),
             "alpha_rms_deg_by_participant": self.alpha_rms_deg_by_participant,
             "waist_travel_rad": self.waist_travel_rad,
+            "waist_travel_rad_per_trial": self.waist_travel_rad_per_trial,
+            "waist_travel_rad_per_trial_interval": list(self.waist_travel_rad_per_trial_interval),
+            "participants": {p: sc.as_dict() for p, sc in self.participants.items()},
             "frames": self.frames,
             "wrist_error_mm_max": self.wrist_error_mm,
             "wrist_error_mm_median": self.wrist_error_median_mm,
@@ -237,23 +270,36 @@ def run_trial(
 
 def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
     """rms of the robot's arm angle against the person's (deg; differences wrapped into
-    (-180, 180]) over all scored frames, with its 95 % interval (participants resampled), and
-    per participant; waist travel summed (rad)."""
+    (-180, 180]) over all scored frames, and the waist's travel (rad: summed, and per trial),
+    with their 95 % intervals (participants resampled), and the same per participant (their
+    trials resampled)."""
     if not trials:
         raise DataError("compare_arm_angles: no trials")
     diffs = [
         np.degrees(np.remainder(t.robot - t.human + math.pi, 2 * math.pi) - math.pi) for t in trials
     ]
     every = np.concatenate(diffs)
-    by: dict[str, list[np.ndarray]] = {}
-    for t, d in zip(trials, diffs, strict=True):
-        by.setdefault(t.participant, []).append(d)
-    per = {p: float(np.sqrt(np.mean(np.concatenate(d) ** 2))) for p, d in sorted(by.items())}
+    by: dict[str, list[int]] = {}
+    for k, t in enumerate(trials):
+        by.setdefault(t.participant, []).append(k)
+    square = np.array([float(np.sum(d * d)) for d in diffs])
+    count = np.array([d.size for d in diffs], dtype=float)
+    travel = np.array([t.waist_travel for t in trials])
+    people = {p: np.array(ks) for p, ks in sorted(by.items())}
+    per = {p: _participant(square[ks], count[ks], travel[ks]) for p, ks in people.items()}
+    clusters = list(people.values())  # (the participants: resampled whole)
     return MotionScores(
-        alpha_rms_deg_interval=_participant_interval([np.concatenate(d) for d in by.values()]),
+        alpha_rms_deg_interval=_ratio_interval(
+            [square[ks].sum() for ks in clusters], [count[ks].sum() for ks in clusters], True
+        ),
         alpha_rms_deg=float(np.sqrt(np.mean(every**2))) if every.size else math.nan,
-        alpha_rms_deg_by_participant=per,
-        waist_travel_rad=float(sum(t.waist_travel for t in trials)),
+        alpha_rms_deg_by_participant={p: sc.alpha_rms_deg for p, sc in per.items()},
+        waist_travel_rad=float(travel.sum()),
+        waist_travel_rad_per_trial=float(travel.mean()),
+        waist_travel_rad_per_trial_interval=_ratio_interval(
+            [travel[ks].sum() for ks in clusters], [float(ks.size) for ks in clusters]
+        ),
+        participants=per,
         frames=int(every.size),
         wrist_error_mm=float(max(t.wrist_error_m for t in trials) * 1e3),
         wrist_error_median_mm=float(np.median([t.wrist_error_median_m for t in trials]) * 1e3),
@@ -261,18 +307,40 @@ def compare_arm_angles(trials: Sequence[TrialResult]) -> MotionScores:
     )
 
 
-def _participant_interval(
-    diffs: Sequence[np.ndarray], n_boot: int = 2000, seed: int = 0
+def _participant(square: np.ndarray, count: np.ndarray, travel: np.ndarray) -> ParticipantScores:
+    """One participant's scores from their trials' summed squared differences (deg^2),
+    frame counts and waist travels (rad); intervals over resamples of the trials."""
+    total = float(count.sum())
+    return ParticipantScores(
+        alpha_rms_deg=math.sqrt(float(square.sum()) / total) if total else math.nan,
+        alpha_rms_deg_interval=_ratio_interval(square, count, True),
+        waist_travel_rad=float(travel.sum()),
+        waist_travel_rad_per_trial=float(travel.mean()),
+        waist_travel_rad_per_trial_interval=_ratio_interval(travel, np.ones(travel.size)),
+        trials=int(travel.size),
+    )
+
+
+def _ratio_interval(
+    num: Sequence[float] | np.ndarray,
+    den: Sequence[float] | np.ndarray,
+    root: bool = False,
+    n_boot: int = 2000,
+    seed: int = 0,
 ) -> tuple[float, float]:
-    """95 % bootstrap interval of the rms over all frames (deg), the participants resampled
-    with replacement (``diffs``: one array of differences per participant). Why participants:
-    frames of one person are not independent, people are."""
-    sums = np.array([float(np.sum(d * d)) for d in diffs])
-    counts = np.array([d.size for d in diffs], dtype=float)
-    pick = np.random.default_rng(seed).integers(0, len(diffs), size=(n_boot, len(diffs)))
+    """95 % bootstrap interval of ``sum(num) / sum(den)`` (its square root where ``root``)
+    over resamples, with replacement, of the clusters ``(num_i, den_i)``: participants (an rms
+    over all frames is ``sqrt(sum d^2 / sum n)``; a mean travel per trial is ``sum travel /
+    trials``), or one participant's trials. Why whole clusters: frames of one trial, or trials
+    of one person, are not independent of each other."""
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    pick = np.random.default_rng(seed).integers(0, num.size, size=(n_boot, num.size))
     with np.errstate(invalid="ignore", divide="ignore"):
-        rms = np.sqrt(sums[pick].sum(axis=1) / counts[pick].sum(axis=1))
-    low, high = np.nanpercentile(rms, [2.5, 97.5]) if np.isfinite(rms).any() else (np.nan,) * 2
+        ratio = num[pick].sum(axis=1) / den[pick].sum(axis=1)
+    stat = np.sqrt(ratio) if root else ratio
+    if not np.isfinite(stat).any():
+        return math.nan, math.nan
+    low, high = np.nanpercentile(stat, [2.5, 97.5])
     return float(low), float(high)
 
 

@@ -1,9 +1,10 @@
 """The human arm angle: the elbow held where people hold theirs for the same wrist.
 
 The same 25 cm reach with the paper's stack twice: with its arm-energy spring (the default),
-and with a human-arm-angle task level below the hands (`PaperWeights(spring="none",
-human_arm_angle_kp=10)`), which drives the arm angle to `alpha_h(wrist)`, a model learned
-from people's reaching. At the end the task's arm angle is the closer to people's.
+and with the human-like preset (`wholebody.presets.HUMAN_LIKE`: a human-arm-angle task level
+below the hands, which drives the arm angle to `alpha_h(wrist)`, a model learned from
+people's reaching, and the waist dear in the velocity metric). At the end the preset's arm
+angle is the closer to people's.
 
     python examples/human_arm_angle.py [--viz]
 """
@@ -14,6 +15,7 @@ import numpy as np
 
 import wholebody as wb
 from wholebody.arm import default_arm_angle_model
+from wholebody.presets import HUMAN_LIKE
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--viz", action="store_true", help="replay the human-like run in MeshCat")
@@ -28,7 +30,7 @@ people = wb.HumanArmAngleTask(robot, "right", default_arm_angle_model())  # a ya
 gaps = {}
 for name, weights in [
     ("spring", wb.PaperWeights()),
-    ("human arm angle", wb.PaperWeights(spring="none", human_arm_angle_kp=10.0)),
+    ("human arm angle", HUMAN_LIKE),
 ]:
     hand = wb.FrameTask(robot, "right_tool", kp=20.0, ki=5.0)
     stack = wb.paper_stack(robot, [hand], weights=weights)  # hands, (arm angles,) H, limits

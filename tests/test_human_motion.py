@@ -189,3 +189,25 @@ def test_waist_travel_and_arm_angle_come_with_intervals_per_controller_and_parti
     row = json.loads(json.dumps(sc.as_dict()))  # what humanlike.json holds
     assert row["participants"]["P1"]["waist_travel_rad_per_trial_interval"] == [1.0, 3.0]
     assert row["waist_travel_rad_per_trial"] == 3.0
+
+
+def test_the_human_like_preset_moves_the_arms_more_and_the_waist_less(humanoid, trials):
+    """The waist dear in the velocity metric (``HUMAN_LIKE``): on the same trials its waist
+    travels less than with the metric's default, the elbow still pulled to the arm angle and
+    the wrist still tracked."""
+    import dataclasses
+
+    from wholebody.presets import HUMAN_LIKE, paper_metric
+
+    metric = paper_metric(humanoid, HUMAN_LIKE)
+    waist = humanoid.groups["waist"].indices
+    assert np.all(metric[waist] == 100.0) and np.sum(metric == 100.0) == waist.size
+    with pytest.raises(Exception, match="waist_metric must be a finite weight > 0"):
+        paper_metric(humanoid, PaperWeights(waist_metric=0.0))
+    cheap = dataclasses.replace(HUMAN_LIKE, waist_metric=1.0)
+    for rec in trials:
+        dear = run_trial(humanoid, rec, HUMAN_LIKE, arm_angle_model=Constant(0.4))
+        plain = run_trial(humanoid, rec, cheap, arm_angle_model=Constant(0.4))
+        assert dear.waist_travel < 0.8 * plain.waist_travel
+        assert dear.wrist_error_median_m < 1e-3
+        assert abs(np.median(dear.robot) - 0.4) < 0.05

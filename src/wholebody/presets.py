@@ -53,7 +53,14 @@ from wholebody.tasks import (
 )
 from wholebody.tasks.arm_angle import ArmAngleModel
 
-__all__ = ["SPRINGS", "PaperWeights", "paper_metric", "paper_objectives", "paper_stack"]
+__all__ = [
+    "HUMAN_LIKE",
+    "SPRINGS",
+    "PaperWeights",
+    "paper_metric",
+    "paper_objectives",
+    "paper_stack",
+]
 
 
 SPRINGS = ("paper", "signed", "none")
@@ -65,9 +72,10 @@ SPRINGS = ("paper", "signed", "none")
 class PaperWeights:
     """Weights of ``H`` and the descent gain (see the module docstring); beyond the paper,
     the spring's form (:data:`SPRINGS`), the weight of the pull towards the human arm angle
-    in ``H`` (:class:`~wholebody.tasks.HumanArmAngle`, 0: off) and the rate (1/s) of the arm
+    in ``H`` (:class:`~wholebody.tasks.HumanArmAngle`, 0: off), the rate (1/s) of the arm
     angle as a task level between the tasks and ``H``
-    (:class:`~wholebody.tasks.HumanArmAngleTask`, 0: no such level)."""
+    (:class:`~wholebody.tasks.HumanArmAngleTask`, 0: no such level), and the velocity
+    metric's weight on the waist's joints (:func:`paper_metric`)."""
 
     energy: float = 0.5
     limits_arms: float = 0.05
@@ -78,6 +86,16 @@ class PaperWeights:
     spring: str = "paper"
     human_arm_angle: float = 0.0
     human_arm_angle_kp: float = 0.0
+    waist_metric: float = 1.0
+
+
+HUMAN_LIKE = PaperWeights(spring="none", human_arm_angle_kp=10.0, waist_metric=100.0)
+"""The human-like preset: the paper's stack with its spring replaced by the human arm angle
+as a task level (rate 10 1/s), and the waist a hundred times dearer than an arm joint in the
+velocity metric. Why the metric: the arm-angle level moves the elbow in the null space of the
+hands, which without it the waist pays for (twice the paper's waist travel on people's
+trials); with it the arms do, "more arm, less waist", at a cost of a fraction of a degree of
+arm angle (benchmarks/README.md, "Human motion")."""
 
 
 def default_stiffness(robot: Robot) -> StiffnessModel:
@@ -90,9 +108,17 @@ def default_stiffness(robot: Robot) -> StiffnessModel:
 
 
 def paper_metric(robot: Robot, weights: PaperWeights = PaperWeights()) -> np.ndarray:
-    """Velocity metric: ``weights.wheel_metric`` on the base actuators, 1 elsewhere."""
+    """Velocity metric ``W`` (:class:`~wholebody.solvers.Stack`'s: every minimum-norm choice
+    in ``||u||_W``): ``weights.wheel_metric`` on the base actuators, ``weights.waist_metric``
+    on the joints of the robot's ``waist`` group (if it has one), 1 elsewhere."""
+    for name in ("wheel_metric", "waist_metric"):
+        value = getattr(weights, name)
+        if not (math.isfinite(value) and value > 0):
+            raise DimensionError(f"PaperWeights.{name} must be a finite weight > 0, got {value}")
     metric = np.ones(robot.nu)
     metric[: len(robot.base.actuators)] = weights.wheel_metric
+    if "waist" in robot.groups:
+        metric[robot.groups["waist"].indices] = weights.waist_metric
     return metric
 
 

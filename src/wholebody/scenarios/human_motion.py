@@ -36,7 +36,7 @@ from wholebody.planning.trajectory import (
     Trajectory,
     TrajectoryArrays,
 )
-from wholebody.presets import PaperWeights, paper_stack
+from wholebody.presets import HUMAN_LIKE, PaperWeights, paper_stack
 from wholebody.robot import ArmChain, Robot
 from wholebody.solvers import ProjectionSolver
 from wholebody.tasks import ArmPotentialEnergy, FrameTask, RelativePositionTask
@@ -412,11 +412,12 @@ def held_out_arm_angle_models(
 CONTROLLERS: dict[str, PaperWeights | None] = {
     "pseudo_inverse": None,
     "paper": PaperWeights(),
-    "human_arm_angle": PaperWeights(spring="none", human_arm_angle_kp=10.0),
+    "human_arm_angle": HUMAN_LIKE,
 }
 """The controllers the test compares: the plain pseudo-inverse, the paper's stack (its spring
-and learned stiffness), and the paper's stack with the spring replaced by a level of
-:class:`~wholebody.tasks.HumanArmAngleTask` below the wrist (rate 10 1/s; the pull as an
+and learned stiffness), and the human-like preset (:data:`~wholebody.presets.HUMAN_LIKE`: the
+paper's stack with the spring replaced by a level of :class:`~wholebody.tasks.HumanArmAngleTask`
+below the wrist, rate 10 1/s, and the waist dear in the velocity metric; the pull as an
 objective of ``H`` instead, ``human_arm_angle = w``, stays further from people at every
 weight measured: benchmarks/README.md, "Human motion")."""
 

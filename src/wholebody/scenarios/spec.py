@@ -28,6 +28,7 @@ with one planner per hand. Layout (every key is checked; unknown keys are errors
     manipulability = 0.0               # w3
     gain = 1.0                         # k
     wheel_metric = 0.01                # velocity metric of the wheels
+    waist_metric = 1.0                 # velocity metric of the waist's joints (100: dear)
     stiffness = "learned"              # "learned" (the robot's model) or a number (N m/rad)
     acceleration = true                # the robot's acceleration limits as a hard box
     spring = "paper"                   # the arm energy's spring: "paper" (1/2 k (pi - |alpha|)^2),
@@ -399,6 +400,7 @@ def _stack(r: TomlReader, st: dict) -> StackSpec:
             for k in ("energy", "limits_arms", "limits_waist", "manipulability", "gain")
         },
         wheel_metric=r.number(st, "wheel_metric", "stack", default=0.01, positive=True),
+        waist_metric=r.number(st, "waist_metric", "stack", default=1.0, positive=True),
         stiffness=stiffness,
         acceleration=r.boolean(st, "acceleration", "stack", default=True),
         spring=r.string(st, "spring", "stack", default="paper", choices=SPRINGS),

@@ -309,6 +309,7 @@ def test_a_force_task_sets_a_contacts_wrench_above_the_tasks(panda):
         hand.set_wrench_target([0.0, 20.0])
 
 
+@pytest.mark.slow
 def test_an_infeasible_weighted_step_falls_back_to_the_cascade(talos):
     """Soles that take at most 100 N each cannot carry TALOS: the weighted QP has no
     answer, the cascade solves the same levels instead (the contacts held as closely as the

@@ -191,6 +191,7 @@ def test_waist_travel_and_arm_angle_come_with_intervals_per_controller_and_parti
     assert row["waist_travel_rad_per_trial"] == 3.0
 
 
+@pytest.mark.slow
 def test_the_human_like_preset_moves_the_arms_more_and_the_waist_less(humanoid, trials):
     """The waist dear in the velocity metric (``HUMAN_LIKE``): on the same trials its waist
     travels less than with the metric's default, the elbow still pulled to the arm angle and

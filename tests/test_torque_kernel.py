@@ -94,7 +94,9 @@ def qp_oracle(arena, spec: np.ndarray, hard: int, quiet_weight: float) -> np.nda
     return out.x
 
 
-@pytest.mark.parametrize("case", ["standing", "torque-bound arm"])
+@pytest.mark.parametrize(
+    "case", [pytest.param("standing", marks=pytest.mark.slow), "torque-bound arm"]
+)
 def test_the_weighted_qp_is_scipys_answer(case):
     """One weighted step's QP (TALOS standing on both soles; the Panda reaching with its
     torque limits cut to a third, so that some are active and the deferred rows come back)

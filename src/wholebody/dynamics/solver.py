@@ -213,8 +213,8 @@ class DynamicsSolver:
         model = robot.model
         self._data = model.createData()
         self._A = A = np.asarray(robot.actuation)
-        self._act = np.array(np.nonzero(A), dtype=np.int64)  # (model velocity, entry of u)
-        self._act_a = A[self._act[0], self._act[1]].astype(float)
+        kin = robot.kinematics
+        self._act = (kin.act_k, kin.act_j, kin.act_a)  # A's non-zero entries
         root = A[:6] if robot.base.floating else A[:0]
         self.unactuated = np.flatnonzero(np.abs(root).sum(axis=0) > 0)
         """The entries of ``u`` that move a floating base (no motor: their rows of the
@@ -434,7 +434,7 @@ class DynamicsSolver:
             (plan.f, plan.i, plan.h),
             par,
             (u, self.robot.joint_positions(q), ahead, self._last_b, layout.level_weights),
-            (self._act, self._act_a, self.driven, self.effort, self.unactuated, self._limits),
+            (self._act, self.driven, self.effort, self.unactuated, self._limits),
             (M, h, layout.Jw, self.rotor_inertia, self.friction),
             (layout.eq_dv, layout.eq_f, layout.eq_b, layout.cf, layout.cf_lo, layout.cf_hi),
             (
@@ -502,7 +502,7 @@ class DynamicsSolver:
         excess = np.empty(len(self.contacts) + len(self.objects) + 2)
         torque.outcome(
             x,
-            (self._act, self._act_a, self.driven, self.effort, self._eom_rows, self.force_scale),
+            (self._act, self.driven, self.effort, self._eom_rows, self.force_scale),
             (M, h, layout.Jw),
             layout.cf,
             layout.cf_lo,

@@ -38,10 +38,10 @@ Joint position limits bound the acceleration with braking (:func:`braking`): for
 a dt`` keeps ``u'^2 <= 2 b d``: the joint can still stop before its limit decelerating at
 ``b`` (``braking``, rad/s^2 or m/s^2).
 
-The actuation ``A`` (nv x nu) is taken by its non-zero entries ``act`` (rows: model
-velocity, actuated entry; values ``act_a``): a floating base's or a wheeled base's ``A`` is
-nearly an identity, and ``M A`` or ``A^T M A`` as dense products would cost more than the
-rest of the step.
+The actuation ``A`` (nv x nu) is taken by its non-zero entries ``A[act_j[e], act_k[e]] =
+act_a[e]`` (:class:`wholebody.robot.compiled.RobotKinematics`): a floating base's or a
+wheeled base's ``A`` is nearly an identity, and ``M A`` or ``A^T M A`` as dense products
+would cost more than the rest of the step.
 """
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ import numpy as np
 
 from wholebody.kernels import daqp, kernel
 from wholebody.kernels import layout as lay
+from wholebody.kernels.forward import model_velocity
 from wholebody.kernels.lapack import syevd
 from wholebody.kernels.linalg import fortran, mm, mmt
 
@@ -112,8 +113,7 @@ def _drives(
     rotor: np.ndarray,
     friction: np.ndarray,
     u: np.ndarray,
-    act: np.ndarray,
-    act_a: np.ndarray,
+    act: tuple,
 ) -> None:
     """``M`` symmetric from its upper triangle with the drives' rotor inertia on its
     diagonal, and ``h += d v`` (``v = A u``), in place."""
@@ -121,49 +121,44 @@ def _drives(
         for c in range(r):
             M[r, c] = M[c, r]
         M[r, r] += rotor[r]
-    for e in range(act_a.shape[0]):
-        nle[act[0, e]] += friction[act[0, e]] * act_a[e] * u[act[1, e]]
+    v = np.empty(M.shape[0])
+    model_velocity(act[0], act[1], act[2], u, v)
+    for r in range(v.shape[0]):
+        nle[r] += friction[r] * v[r]
 
 
 @kernel
-def _act_right(X: np.ndarray, act: np.ndarray, act_a: np.ndarray, nu: int) -> np.ndarray:
+def _act_right(X: np.ndarray, act: tuple, nu: int) -> np.ndarray:
     """``X A`` (rows of X over the model's velocities -> over ``u``)."""
+    act_k, act_j, act_a = act
     out = np.zeros((X.shape[0], nu))
     for e in range(act_a.shape[0]):
-        j, k, a = act[0, e], act[1, e], act_a[e]
+        j, k, a = act_j[e], act_k[e], act_a[e]
         for r in range(X.shape[0]):
             out[r, k] += X[r, j] * a
     return out
 
 
 @kernel
-def _act_left(v: np.ndarray, act: np.ndarray, act_a: np.ndarray, nu: int) -> np.ndarray:
+def _act_left(v: np.ndarray, act: tuple, nu: int) -> np.ndarray:
     """``A^T v``."""
+    act_k, act_j, act_a = act
     out = np.zeros(nu)
     for e in range(act_a.shape[0]):
-        out[act[1, e]] += act_a[e] * v[act[0, e]]
+        out[act_k[e]] += act_a[e] * v[act_j[e]]
     return out
 
 
 @kernel
 def _generalised_rows(
-    out: np.ndarray,
-    entries: np.ndarray,
-    MA: np.ndarray,
-    JA: np.ndarray,
-    act: np.ndarray,
-    act_a: np.ndarray,
-    fs: float,
+    out: np.ndarray, entries: np.ndarray, AMA: np.ndarray, JA: np.ndarray, fs: float
 ) -> None:
     """Row ``t`` of ``out`` (over ``x~``): the entry ``entries[t]`` of ``A^T (M A a - J_w^T
     f)``, i.e. ``[(A^T M A)_j, -(J_w A)_j^T s_f]``."""
-    nu = MA.shape[1]
+    nu = AMA.shape[1]
     for t in range(entries.shape[0]):
         j = entries[t]
-        out[t] = 0.0
-        for e in range(act_a.shape[0]):
-            if act[1, e] == j:
-                out[t, :nu] += act_a[e] * MA[act[0, e]]
+        out[t, :nu] = AMA[j]
         for w in range(JA.shape[0]):
             out[t, nu + w] = -JA[w, j] * fs
 
@@ -332,7 +327,7 @@ def _box(
 def _contact_level(
     arena: tuple,
     lv: int,
-    MA: np.ndarray,
+    AMA: np.ndarray,
     JA: np.ndarray,
     hA: np.ndarray,
     model: tuple,
@@ -342,13 +337,13 @@ def _contact_level(
     """Arena level ``lv``: the contact-level equalities, the wrench rows and the torque
     limits (module docstring)."""
     f, i, h = arena
-    act, act_a, driven, effort = model
+    act, driven, effort = model
     eq_dv, eq_f, eq_b, cf, cf_lo, cf_hi = contact
     A, b, C = lay.fmat(f, h, lay.F_A), lay.fvec(f, h, lay.F_B), lay.fmat(f, h, lay.F_C)
     CB, levels = lay.fmat(f, h, lay.F_CB), lay.imat(i, h, lay.I_LEVEL)
-    nu = MA.shape[1]
+    nu = AMA.shape[1]
     r, p0, p1 = levels[lv, 0], levels[lv, 3], levels[lv, 4]
-    EA = _act_right(eq_dv, act, act_a, nu)
+    EA = _act_right(eq_dv, act, nu)
     for t in range(eq_b.shape[0]):
         A[r + t, :nu] = EA[t]
         A[r + t, nu:] = eq_f[t]
@@ -357,7 +352,7 @@ def _contact_level(
     for t in range(m):
         C[p0 + t, nu:] = cf[t]
         CB[0, p0 + t], CB[1, p0 + t] = cf_lo[t], cf_hi[t]
-    _generalised_rows(C[p0 + m : p1], driven, MA, JA, act, act_a, fs)
+    _generalised_rows(C[p0 + m : p1], driven, AMA, JA, fs)
     for t in range(driven.shape[0]):
         j = driven[t]
         CB[0, p0 + m + t] = -effort[j] - hA[j]
@@ -384,7 +379,7 @@ def assemble(
     ``state``: ``u`` (nu), the joint positions ``qj`` (nu), ``ahead`` (K + P: the plan's
     ``A u~`` and ``C u~`` at ``q (+) eps u``; unread at rest, ``eps = 0``), ``last_b`` (K:
     the last step's ``b``), the stack's level weights. ``model``: the actuation's non-zero
-    entries ``act`` (2 x E: model velocity, entry of ``u``) and ``act_a``, the driven
+    entries ``act = (act_k, act_j, act_a)`` (module docstring), the driven
     entries, the torque limits (nu), the unactuated entries, ``limits`` (3 x nu: position
     limits, acceleration limits). ``dynamics``: Pinocchio's ``M`` (nv x nv, its upper
     triangle read) and ``h`` (nv), the wrenches' Jacobians ``J_w`` (nw x nv), the drives'
@@ -397,9 +392,9 @@ def assemble(
     for the contacts ``G``, ``W^-1`` and ``L^T``."""
     f, i, h = arena
     u, qj, ahead, last_b, weights = state
-    act, act_a, driven, effort, unactuated, limits = model
+    act, driven, effort, unactuated, limits = model
     M, nle, Jw, rotor, friction = dynamics
-    _drives(M, nle, rotor, friction, u, act, act_a)
+    _drives(M, nle, rotor, friction, u, act)
     targets, target_b, internal, quiet, G, W_inv, L_t = extra
     nc = G.shape[1]
     if nc:
@@ -412,17 +407,17 @@ def assemble(
     lay.fmat(f, h, lay.F_ROW)[1] = 1.0
     lf[:, lay.LEVEL_IDENTITY] = 0.0
     lf[:, lay.LEVEL_REFERENCE] = 1.0
-    MA, JA = _act_right(M, act, act_a, nu), _act_right(Jw, act, act_a, nu)
-    hA = _act_left(nle, act, act_a, nu)
+    MA, JA = _act_right(M, act, nu), _act_right(Jw, act, nu)
+    AMA, hA = _act_right(MA.T.copy(), act, nu), _act_left(nle, act, nu)  # (M symmetric)
     for lv in range(spec.shape[0]):
         kind, r = spec[lv, 0], levels[lv, 0]
         if kind == LEVEL_EOM:
-            _generalised_rows(A[r : r + unactuated.shape[0]], unactuated, MA, JA, act, act_a, fs)
+            _generalised_rows(A[r : r + unactuated.shape[0]], unactuated, AMA, JA, fs)
             for t in range(unactuated.shape[0]):
                 A[r + t] /= fs
                 b[r + t] = -hA[unactuated[t]] / fs
         elif kind == LEVEL_CONTACTS:
-            _contact_level(arena, lv, MA, JA, hA, (act, act_a, driven, effort), contact, fs)
+            _contact_level(arena, lv, AMA, JA, hA, (act, driven, effort), contact, fs)
         elif kind == LEVEL_TARGETS:
             for t in range(target_b.shape[0]):
                 A[r + t, nu:] = targets[t]
@@ -555,18 +550,16 @@ def outcome(
     ``tau = A^T Q``; ``excess`` per owner of the wrench rows ``cf`` (over ``f / s_f``; row
     ``t`` belongs to ``owner[t]``), then the torque limits, then the equations of motion
     (``|Q|`` on the velocities a floating base's entries move: ``eom`` rows)."""
-    act, act_a, driven, effort, eom, fs = model
+    act, driven, effort, eom, fs = model
     M, nle, Jw = dynamics
     dv, Q, tau, excess = out
     nu, nw = tau.shape[0], Jw.shape[0]
-    dv[:] = 0.0
-    for e in range(act_a.shape[0]):
-        dv[act[0, e]] += act_a[e] * x[act[1, e]]
+    model_velocity(act[0], act[1], act[2], x[:nu], dv)
     for r in range(Q.shape[0]):
         Q[r] = M[r] @ dv + nle[r]
         for w in range(nw):
             Q[r] -= Jw[w, r] * x[nu + w]
-    tau[:] = _act_left(Q, act, act_a, nu)
+    tau[:] = _act_left(Q, act, nu)
     excess[:] = 0.0
     for t in range(cf.shape[0]):
         s = 0.0

@@ -29,6 +29,7 @@ import numpy as np
 from wholebody.arm.angle import DOWN, arm_angle
 from wholebody.control import Controller
 from wholebody.errors import DataError
+from wholebody.humanlike.evaluation import cluster_bootstrap
 from wholebody.humanlike.mapping import lab_to_canonical, map_to_robot
 from wholebody.humanlike.recordings import Recording
 from wholebody.planning.trajectory import (
@@ -322,26 +323,26 @@ def _participant(square: np.ndarray, count: np.ndarray, travel: np.ndarray) -> P
 
 
 def _ratio_interval(
-    num: Sequence[float] | np.ndarray,
-    den: Sequence[float] | np.ndarray,
-    root: bool = False,
-    n_boot: int = 2000,
-    seed: int = 0,
+    num: Sequence[float] | np.ndarray, den: Sequence[float] | np.ndarray, root: bool = False
 ) -> tuple[float, float]:
     """95 % bootstrap interval of ``sum(num) / sum(den)`` (its square root where ``root``)
-    over resamples, with replacement, of the clusters ``(num_i, den_i)``: participants (an rms
-    over all frames is ``sqrt(sum d^2 / sum n)``; a mean travel per trial is ``sum travel /
-    trials``), or one participant's trials. Why whole clusters: frames of one trial, or trials
-    of one person, are not independent of each other."""
+    over resamples, with replacement, of the clusters ``(num_i, den_i)``
+    (:func:`~wholebody.humanlike.evaluation.cluster_bootstrap`): participants (an rms over all
+    frames is ``sqrt(sum d^2 / sum n)``; a mean travel per trial is ``sum travel / trials``),
+    or one participant's trials. Why whole clusters: frames of one trial, or trials of one
+    person, are not independent of each other. One cluster: its own value, twice."""
     num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
-    pick = np.random.default_rng(seed).integers(0, num.size, size=(n_boot, num.size))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = num[pick].sum(axis=1) / den[pick].sum(axis=1)
-    stat = np.sqrt(ratio) if root else ratio
-    if not np.isfinite(stat).any():
-        return math.nan, math.nan
-    low, high = np.nanpercentile(stat, [2.5, 97.5])
-    return float(low), float(high)
+
+    def ratio(idx: np.ndarray) -> float:
+        total = float(den[idx].sum())
+        r = float(num[idx].sum()) / total if total else math.nan
+        return math.sqrt(r) if root else r
+
+    if num.size < 2:
+        value = ratio(np.arange(num.size))
+        return value, value
+    _, low, high = cluster_bootstrap(ratio, np.arange(num.size))
+    return low, high
 
 
 def evaluate(

@@ -119,6 +119,9 @@ class Layout:
             levels.append(_level("wrench targets", self.target_b.size, 0, n, self.target_names, {}))
             spec.append((torque.LEVEL_TARGETS, 0, 0))
         self.hard = len(levels)
+        self.active = np.zeros(n + m_i, dtype=np.int64)
+        """The weighted QP's working set, carried from step to step
+        (:func:`~wholebody.kernels.torque.weighted_qp`)."""
         for level, row in self._stack_levels(solver, plan.problem(), n):
             levels.append(level)
             spec.append(row)

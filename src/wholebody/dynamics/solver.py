@@ -91,8 +91,8 @@ from wholebody.dynamics.carry import CarriedObject, GraspRows
 from wholebody.dynamics.contacts import Contact, ContactRows
 from wholebody.dynamics.layout import Layout
 from wholebody.dynamics.result import DynamicsResult
-from wholebody.errors import ConfigError, DimensionError, SolverError
-from wholebody.kernels import daqp, torque
+from wholebody.errors import ConfigError, DimensionError, ModelError, SolverError
+from wholebody.kernels import control, daqp, torque
 from wholebody.kernels import layout as lay
 from wholebody.robot import Robot, RobotState
 from wholebody.robot.sim import effort_limits
@@ -238,6 +238,19 @@ class DynamicsSolver:
         """Per model velocity, the drive's viscous friction added to ``h`` (N m s/rad, N s/m:
         ``[sim] damping``)."""
         self._par = np.zeros(torque.P_WIDTH)
+        self._zero_v = np.zeros(model.nv)
+        try:  # the kernels' own kinematics (torque.ahead), where they can move the robot
+            model_i, model_f = robot.kinematics.model_tables()
+            self._kin: control.Kinematics | None = control.Kinematics(
+                model_i,
+                model_f,
+                np.zeros((model.nv, 6)).T,
+                np.zeros((model.nframes, 12)),
+                np.zeros((model.njoints, 12)),
+                np.zeros(model.nv),
+            )
+        except ModelError:
+            self._kin = None
 
     def add_contact(self, contact: Contact) -> None:
         """Make ``contact`` active (its frame checked against the robot)."""
@@ -322,6 +335,7 @@ class DynamicsSolver:
         contacts, grasps, M, h = self._physics(q, self._A @ u)
         layout = self._layout
         if layout is None or layout.key != self.layout_key(plan):
+            _no_acceleration_limits(stack)
             layout = self._layout = Layout(self, plan, contacts, grasps)
         layout.fill(self, contacts, grasps)
         self._assemble(layout, plan, q, u, ahead, dt, M, h)
@@ -337,19 +351,14 @@ class DynamicsSolver:
     ) -> tuple[np.ndarray, np.ndarray]:
         if stack.robot is not self.robot:
             raise ConfigError("DynamicsSolver: the stack is over another robot")
-        if any(isinstance(c, AccelerationLimits) for c in stack.constraints):
-            raise ConfigError(
-                "DynamicsSolver: the stack has AccelerationLimits; the torque level bounds "
-                "the accelerations itself (DynamicsSolver(acceleration_limits=True)): leave "
-                "them out of the stack"
-            )
         q, u = np.asarray(q, dtype=float), np.asarray(u, dtype=float)
         if q.shape != (self.robot.nq,) or u.shape != (self.robot.nu,):
             raise DimensionError(
                 f"DynamicsSolver: q must be ({self.robot.nq},) and u ({self.robot.nu},), got "
                 f"{q.shape} and {u.shape}"
             )
-        if not (np.isfinite(q).all() and np.isfinite(u).all()):
+        finite = math.isfinite(q @ q + u @ u)  # (an overflow: the full check decides)
+        if not (finite or (np.isfinite(q).all() and np.isfinite(u).all())):
             raise DimensionError("DynamicsSolver: q and u must be finite")
         if not (math.isfinite(dt) and dt > 0.0):
             raise DimensionError(f"DynamicsSolver: dt must be positive, got {dt}")
@@ -370,9 +379,7 @@ class DynamicsSolver:
         ahead, ahead_plan = np.zeros(0), None
         for _ in range(2):  # (again where the plan was laid out anew between the two)
             if eps > 0.0:
-                state = self.robot.update(self.robot.integrate(q, u, eps))
-                ahead_plan = stack.evaluated_plan(state, dt)
-                ahead = _rows_times(ahead_plan, u)
+                ahead_plan, ahead = self._ahead(stack, q, u, dt, eps)
             self.state = self.robot.update(q)
             plan = stack.evaluated_plan(self.state, dt)
             if eps == 0.0 or plan is ahead_plan:
@@ -381,6 +388,22 @@ class DynamicsSolver:
             "DynamicsSolver: the stack was laid out anew between its two evaluations, twice "
             "(an entry whose rows change shape with the configuration?)"
         )
+
+    def _ahead(
+        self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float, eps: float
+    ) -> tuple[Plan, np.ndarray]:
+        """The plan and its rows times ``u~`` at ``q (+) eps u``: by one kernel on the
+        kernels' own kinematics (:func:`~wholebody.kernels.torque.ahead`) where every entry
+        is compiled, else by Pinocchio's and the stack's Python entries."""
+        plan = stack.plan()
+        if self._kin is not None and not plan.python:
+            plan.sync(None, dt)
+            if not plan.stale:
+                out = np.empty(plan.view(lay.F_A).shape[0] + plan.view(lay.F_C).shape[0])
+                torque.ahead((plan.f, plan.i, plan.h), self._kin, q, u, eps, out)
+                return plan, out
+        plan = stack.evaluated_plan(self.robot.update(self.robot.integrate(q, u, eps)), dt)
+        return plan, _rows_times(plan, u)
 
     def drifts(self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
         """``Jdot u`` (K + P) of the stack's equality rows and inequality rows at ``(q, u)``,
@@ -399,9 +422,9 @@ class DynamicsSolver:
         triangle) and ``h`` at ``(q, v)``: :func:`~wholebody.kernels.torque.assemble` makes
         ``M`` symmetric and adds the drives' rotor inertia and friction, in place."""
         model, data = self.robot.model, self._data
-        pin.forwardKinematics(model, data, q, v, np.zeros(model.nv))
+        pin.forwardKinematics(model, data, q, v, self._zero_v)
         pin.updateFramePlacements(model, data)
-        pin.computeJointJacobians(model, data, q)
+        pin.computeJointJacobians(model, data)  # (on forwardKinematics' placements)
         contacts = [c.rows(model, data) for c in self.contacts]
         grasps = [o.rows(model, data) for o in self.objects]
         M = pin.crba(model, data, q)  # (upper triangle; the kernel adds the drives)
@@ -463,6 +486,7 @@ class DynamicsSolver:
                 self.wrench_regularization,
                 layout.deferred,
                 self._daqp,
+                layout.active,
                 x,
             )
             if flag > 0:
@@ -528,6 +552,17 @@ class DynamicsSolver:
         status = _status(status, max(violations.values()) > self.tolerance)
         return DynamicsResult(
             a, dv, Q, tau, wrenches, violations, status, self, self._solves, squeeze
+        )
+
+
+def _no_acceleration_limits(stack: Stack) -> None:
+    """ConfigError where ``stack`` has :class:`~wholebody.tasks.AccelerationLimits` (checked
+    whenever the problem is laid out: a stack's constraints are fixed with its plan)."""
+    if any(isinstance(c, AccelerationLimits) for c in stack.constraints):
+        raise ConfigError(
+            "DynamicsSolver: the stack has AccelerationLimits; the torque level bounds "
+            "the accelerations itself (DynamicsSolver(acceleration_limits=True)): leave "
+            "them out of the stack"
         )
 
 

@@ -37,6 +37,7 @@ from wholebody.kernels.rows import (
     POSE_STAMP,
     POSE_TARGET,
     TARGET_SET,
+    com_rows,
     half_space_row,
     pose_rows,
     posture_rows,
@@ -84,7 +85,7 @@ def evaluate(
         if entries[e, lay.E_KIND] == lay.KIND_PYTHON:
             continue
         if cat == lay.CAT_TASK:
-            _task(f, i, h, entries[e], refs)
+            _task(f, i, h, entries[e], refs, J, oMf)
         elif cat == lay.CAT_INEQUALITY:
             _inequality(f, i, h, entries[e], dt, J, oMf)
         elif cat == lay.CAT_OBJECTIVE:
@@ -97,15 +98,28 @@ def evaluate(
 
 
 @kernel
-def _task(f: np.ndarray, i: np.ndarray, h: np.ndarray, entry: np.ndarray, refs: np.ndarray) -> None:
+def _task(
+    f: np.ndarray,
+    i: np.ndarray,
+    h: np.ndarray,
+    entry: np.ndarray,
+    refs: np.ndarray,
+    J: np.ndarray,
+    oMf: np.ndarray,
+) -> None:
     """A compiled task's rows: a pose task (a frame, or a frame relative to another; its
-    target and twist from its reference if it follows one) or a posture task."""
+    target and twist from its reference if it follows one), a posture task or a
+    centre-of-mass task."""
     par = fvec(f, h, lay.F_PAR)[entry[lay.E_F0] : entry[lay.E_F0] + entry[lay.E_FN]]
     ints = ivec(i, h, lay.I_PAR)[entry[lay.E_I0] : entry[lay.E_I0] + entry[lay.E_IN]]
     r0, n = entry[lay.E_ROW], entry[lay.E_ROWS]
     A, b = fmat(f, h, lay.F_A)[r0 : r0 + n], fvec(f, h, lay.F_B)[r0 : r0 + n]
     if entry[lay.E_KIND] == lay.KIND_POSTURE:
         posture_rows(fvec(f, h, lay.F_JP), par, ints, A, b)
+        return
+    if entry[lay.E_KIND] == lay.KIND_COM:
+        act = imat(i, h, lay.I_ACT)
+        com_rows(J, oMf, act[0], act[1], fvec(f, h, lay.F_ACT_A), par, ints, A, b)
         return
     ref = entry[lay.E_REF]
     if ref >= 0:

@@ -78,10 +78,11 @@ CAT_TASK, CAT_INEQUALITY, CAT_OBJECTIVE, CAT_LIMIT = 0, 1, 2, 3
 # kinds: which kernel computes it; KIND_PYTHON entries are written by Python before the
 # kernel runs
 KIND_PYTHON = 0
-KIND_POSE, KIND_POSTURE = 1, 2  # tasks
+KIND_POSE, KIND_POSTURE = 1, 2  # tasks (and KIND_COM below)
 KIND_HALF_SPACE, KIND_COLLISION = 3, 4  # inequality tasks
 KIND_ARM, KIND_H1, KIND_H2 = 5, 6, 7  # objectives
 KIND_POSITION, KIND_VELOCITY, KIND_ACCELERATION = 8, 9, 10  # limits
+KIND_COM = 11  # a task: the whole-body centre of mass
 
 # levels: I_LEVEL columns
 LEVEL_ROW0, LEVEL_TASKS_END, LEVEL_ROW_END, LEVEL_INEQ0, LEVEL_INEQ_END = 0, 1, 2, 3, 4

@@ -1,11 +1,12 @@
 """Task rows in kernels: pose tracking (a frame, or one frame relative to another) with its
-PI integral, posture, half-spaces.
+PI integral, posture, the whole-body centre of mass, half-spaces.
 
 The maths is documented where the tasks are (:mod:`wholebody.tasks.frame`,
 :mod:`wholebody.tasks.relative`, :mod:`wholebody.tasks.posture`,
-:mod:`wholebody.tasks.inequality`). Each task keeps its numbers in a parameter block laid out
-here (``POSE_*``); the task classes call these kernels on it for their own rows, and the
-compiled stack calls them on the same block, adopted into its arena, for every task at once.
+:mod:`wholebody.tasks.com`, :mod:`wholebody.tasks.inequality`). Each task keeps its numbers
+in a parameter block laid out here (``POSE_*``, ``COM_*``); the task classes call these
+kernels on it for their own rows, and the compiled stack calls them on the same block,
+adopted into its arena, for every task at once.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ __all__ = [
     "POSE_NOT_ROTATION",
     "POSE_WIDTH",
     "advance_integral",
+    "com_rows",
     "half_space_row",
     "pose_defect",
     "pose_rows",
@@ -227,6 +229,74 @@ def posture_rows(
             err = 0.0
         par[2 * n + r] = err
         v[r] = par[n + r] * err
+
+
+# a centre-of-mass task's block: target (m), its velocity (m/s), gain (1/s), total mass (kg),
+# the centre of mass (m, out), the welded mass's moment (kg m, world), then per moving body its
+# mass (kg) and centre of mass in its frame (m); ints: the row count, the rows (3 slots), the
+# body and joint counts, then per body its frame and joint, then per joint (Pinocchio's order,
+# the universe first) its parent, first velocity and velocity count
+COM_TARGET, COM_VELOCITY, COM_KP, COM_MASS, COM_C, COM_FIXED, COM_BODIES = 0, 3, 6, 7, 8, 11, 14
+COM_BODY = 4
+COM_NROWS, COM_SEL, COM_NB, COM_NJ, COM_TABLE = 0, 1, 4, 5, 6
+
+
+@kernel
+def com_rows(
+    J: np.ndarray,
+    oMf: np.ndarray,
+    act_k: np.ndarray,
+    act_j: np.ndarray,
+    act_a: np.ndarray,
+    par: np.ndarray,
+    ints: np.ndarray,
+    A: np.ndarray,
+    v: np.ndarray,
+) -> None:
+    """Centre-of-mass rows ``A = J_c[rows]``, ``v = (v_ref + kp (c_ref - c))[rows]``, the
+    blocks laid out by ``COM_*``, from the joint Jacobians ``J`` (6 x nv, Pinocchio's
+    ``data.J``: column ``j`` the spatial velocity at the world origin, linear rows first) and
+    the frame placements ``oMf`` (nframes, 12: rotation column-major, then translation):
+
+        c = (m_0 c_0 + sum_k m_k c_k) / M,     c_k = p_k + R_k l_k
+        J_c[:, j] = (m_j v_j + w_j x s_j) / M,  then times A (columns over u)
+
+    over the bodies ``k`` (mass ``m_k``, centre of mass ``l_k`` in its frame), ``m_0 c_0``
+    the mass welded to the world, ``M`` the total; ``m_j`` and ``s_j`` the mass and moment
+    ``sum m_k c_k`` of the bodies that column ``j`` moves (its joint's subtree, summed from
+    the leaves up), ``v_j`` and ``w_j`` its linear and angular rows (the velocity of a point
+    ``c`` is ``v + w x c``). ``act_k, act_j, act_a``: the non-zero entries of ``A``. ``c``
+    is written to the block."""
+    nb, nj = ints[COM_NB], ints[COM_NJ]
+    bodies, joints = ints[COM_TABLE : COM_TABLE + 2 * nb], ints[COM_TABLE + 2 * nb :]
+    mass, moment = np.zeros(nj), np.zeros((nj, 3))
+    for k in range(nb):
+        m, j, o = oMf[bodies[2 * k]], bodies[2 * k + 1], COM_BODIES + COM_BODY * k
+        mass[j] += par[o]
+        for i in range(3):
+            ci = m[9 + i] + m[i] * par[o + 1] + m[3 + i] * par[o + 2] + m[6 + i] * par[o + 3]
+            moment[j, i] += par[o] * ci
+    scale = 1.0 / par[COM_MASS]
+    for i in range(3):
+        par[COM_C + i] = (moment[1:, i].sum() + par[COM_FIXED + i]) * scale
+    Jm = np.zeros((3, J.shape[1]))
+    for j in range(nj - 1, 0, -1):  # the subtrees' sums, leaves first
+        mj, sx, sy, sz = mass[j], moment[j, 0], moment[j, 1], moment[j, 2]
+        for col in range(joints[3 * j + 1], joints[3 * j + 1] + joints[3 * j + 2]):
+            wx, wy, wz = J[3, col], J[4, col], J[5, col]
+            Jm[0, col] = mj * J[0, col] + (wy * sz - wz * sy)
+            Jm[1, col] = mj * J[1, col] + (wz * sx - wx * sz)
+            Jm[2, col] = mj * J[2, col] + (wx * sy - wy * sx)
+        parent = joints[3 * j]
+        mass[parent] += mj
+        for i in range(3):
+            moment[parent, i] += moment[j, i]
+    for n in range(ints[COM_NROWS]):
+        i = ints[COM_SEL + n]
+        A[n, :] = 0.0
+        for e in range(act_k.shape[0]):
+            A[n, act_k[e]] += act_a[e] * Jm[i, act_j[e]] * scale
+        v[n] = par[COM_VELOCITY + i] + par[COM_KP] * (par[COM_TARGET + i] - par[COM_C + i])
 
 
 @kernel

@@ -1,7 +1,8 @@
-r"""The torque level's step in kernels: its problem written into a cascade's arena
-(:func:`assemble`), the weighted mode's single QP (:func:`weighted_qp`), and the torques and
-excesses of an answer (:func:`outcome`). :mod:`wholebody.dynamics.solver` states the problem
-and lays the arena out; this module computes it.
+r"""The torque level's step in kernels: the stack's rows a moment ahead (:func:`ahead`), its
+problem written into a cascade's arena (:func:`assemble`), the weighted mode's single QP
+(:func:`weighted_qp`), and the torques and excesses of an answer (:func:`outcome`).
+:mod:`wholebody.dynamics.solver` states the problem and lays the arena out; this module
+computes it.
 
 The unknowns are ``x~ = [a, f / s_f]`` (``nu + nw``; ``s_f`` the robot's weight, N). The
 arena's levels, each of a kind (``spec``, made with the layout):
@@ -52,11 +53,21 @@ import numpy as np
 
 from wholebody.kernels import daqp, kernel
 from wholebody.kernels import layout as lay
-from wholebody.kernels.forward import model_velocity
-from wholebody.kernels.lapack import syevd
-from wholebody.kernels.linalg import fortran, mm, mmt
+from wholebody.kernels.evaluate import REF_WIDTH, evaluate
+from wholebody.kernels.forward import forward_kinematics, integrate, model_velocity
+from wholebody.kernels.lapack import potrf, syevd, trtrs, trtrs_rows
+from wholebody.kernels.linalg import (
+    cholesky_inverse,
+    fortran,
+    frobenius2,
+    gram_solve,
+    mm,
+    mmt,
+    mtm,
+    trace,
+)
 
-__all__ = ["assemble", "braking", "internal_rows", "outcome", "weighted_qp"]
+__all__ = ["ahead", "assemble", "braking", "internal_rows", "outcome", "weighted_qp"]
 
 # par: the step's numbers (float64)
 P_DT, P_EPS, P_KD, P_FS, P_BRAKING, P_REGULARIZATION = 0, 1, 2, 3, 4, 5
@@ -85,13 +96,9 @@ def braking(
 
 
 @kernel
-def internal_rows(G: np.ndarray, W_inv: np.ndarray, L_t: np.ndarray) -> np.ndarray:
-    """``L^T P`` with ``P = I - W^-1 G^T (G W^-1 G^T)^+ G`` (nc x nc): the contacts' wrenches
-    ``f`` less the quietest ones (in the metric ``W = L L^T``) with the same sum ``G f`` about
-    the world's origin. The pseudo-inverse by eigenvalues, those at or below ``1e-12`` of the
-    largest dropped (``G`` may lack rank: a single point contact)."""
-    WG = mmt(W_inv, G)  # (nc, 6)
-    S = fortran(mm(G, WG))
+def _eigen_pinv(S: np.ndarray) -> np.ndarray:
+    """The pseudo-inverse of the symmetric ``S`` (Fortran; overwritten) by its eigenvalues,
+    those at or below ``1e-12`` of the largest dropped."""
     info, w = syevd(S)  # (S now holds the eigenvectors)
     m = w.shape[0]
     pinv = np.zeros((m, m))
@@ -100,6 +107,20 @@ def internal_rows(G: np.ndarray, W_inv: np.ndarray, L_t: np.ndarray) -> np.ndarr
             for r in range(m):
                 for c in range(m):
                     pinv[r, c] += S[r, e] * S[c, e] / w[e]
+    return pinv
+
+
+@kernel
+def internal_rows(G: np.ndarray, W_inv: np.ndarray, L_t: np.ndarray) -> np.ndarray:
+    """``L^T P`` with ``P = I - W^-1 G^T (G W^-1 G^T)^+ G`` (nc x nc): the contacts' wrenches
+    ``f`` less the quietest ones (in the metric ``W = L L^T``) with the same sum ``G f`` about
+    the world's origin. The inverse by Cholesky where ``G W^-1 G^T`` is well conditioned, else
+    its pseudo-inverse by eigenvalues (``G`` may lack rank: a single point contact)."""
+    WG = mmt(W_inv, G)  # (nc, 6)
+    S = mm(G, WG)
+    ok, X = cholesky_inverse(S)
+    conditioned = ok and frobenius2(X) * trace(S) < 1e8  # then S^-1 = X^T X
+    pinv = mtm(X, X) if conditioned else _eigen_pinv(fortran(S))
     P = -mm(WG, mm(pinv, G))
     for r in range(P.shape[0]):
         P[r, r] += 1.0
@@ -361,6 +382,33 @@ def _contact_level(
 
 
 @kernel
+def ahead(
+    plan: tuple, kin: tuple, q: np.ndarray, u: np.ndarray, eps: float, out: np.ndarray
+) -> None:
+    """The first half of the forward difference that gives ``Jdot u``: the stack's rows
+    evaluated at ``q (+) eps A u`` on the kernels' own kinematics (:mod:`.forward`), and
+    their products ``[A u~, C u~]`` (K + P, ``u~ = u / D``) into ``out``. ``plan`` ``(f, i,
+    h)``: a stack's arena whose entries are all compiled, synced for the step (its rows are
+    overwritten: evaluate it at ``q`` next); ``kin`` ``(model_i, model_f, J, oMf, oMi, v)``:
+    :class:`wholebody.kernels.control.Kinematics`."""
+    f, i, h = plan
+    model_i, model_f, J, oMf, oMi, v = kin
+    act = lay.imat(i, h, lay.I_ACT)
+    model_velocity(act[0], act[1], lay.fvec(f, h, lay.F_ACT_A), u, v)
+    q_ahead = np.empty(q.shape[0])
+    integrate(model_i, q, v, eps, q_ahead)
+    forward_kinematics(model_i, model_f, q_ahead, oMi, oMf, J)
+    evaluate(f, i, h, J, oMf, q_ahead, np.zeros((0, REF_WIDTH)))
+    A, C = lay.fmat(f, h, lay.F_A), lay.fmat(f, h, lay.F_C)
+    u_s = u / lay.fmat(f, h, lay.F_METRIC)[0]
+    K = A.shape[0]
+    for r in range(K):
+        out[r] = A[r] @ u_s
+    for r in range(C.shape[0]):
+        out[K + r] = C[r] @ u_s
+
+
+@kernel
 def assemble(
     arena: tuple,
     spec: np.ndarray,
@@ -489,6 +537,111 @@ def _held(C: np.ndarray, CB: np.ndarray, x: np.ndarray, first: int, last: int) -
 
 
 @kernel
+def _equality_optimum(
+    H: np.ndarray, g: np.ndarray, E: np.ndarray, e: np.ndarray, x: np.ndarray, mu: np.ndarray
+) -> bool:
+    """``x = argmin 1/2 x'H x + g'x`` subject to ``E x = e`` alone, into ``x``, and its
+    multipliers ``mu`` (``H x + g + E^T mu = 0``, daqp's sign), by the Schur complement: with
+    ``H = L L^T``, ``Y = L^-1 E^T`` and ``z = L^-1 g``, ``(Y^T Y) mu = -(e + Y^T z)`` and
+    ``x = -L^-T (z + Y mu)``, refined once on the residual ``e - E x``. False where ``H`` or
+    ``Y^T Y`` has no Cholesky factor, or ``E x = e`` is not met to 1e-12 relative (dependent
+    rows)."""
+    n, m = H.shape[0], E.shape[0]
+    L = fortran(H)
+    if potrf(L, True) != 0:
+        return False
+    Y = E.copy()  # row k: L^-1 E[k]
+    trtrs_rows(L, Y, True, False)
+    z = g.copy()
+    trtrs(L, z, True, False)
+    S, r = np.zeros((m, m)), np.empty(m)
+    for i in range(m):
+        for j in range(i + 1):
+            S[i, j] = Y[i] @ Y[j]
+        r[i] = -(e[i] + Y[i] @ z)
+    ok, X = cholesky_inverse(S)
+    if not ok:
+        return False
+    w = z
+    mu[:] = 0.0
+    for k in range(2):  # the solve, then one refinement on the residual
+        step = gram_solve(X, r)
+        mu += step
+        if k:
+            w[:] = 0.0
+        for i in range(m):
+            w += step[i] * Y[i]
+        trtrs(L, w, True, True)
+        for c in range(n):
+            x[c] = x[c] + w[c] if k else -w[c]
+        for i in range(m):
+            r[i] = e[i] - E[i] @ x
+    for i in range(m):
+        if abs(r[i]) > 1e-12 * (1.0 + abs(e[i])):
+            return False
+    return True
+
+
+@kernel
+def _working_set(
+    arena: tuple, n_eq: int, active: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The equality rows of the working set ``active`` (per bound, the box's ``n`` then the
+    inequality rows: 1 at its upper side, -1 at its lower, 0 free): the arena's first
+    ``n_eq`` equality rows, then each active bound held at its side; ``(E, e, which)``,
+    ``which`` the bounds' indices."""
+    f, _, h = arena
+    A, b, C = lay.fmat(f, h, lay.F_A), lay.fvec(f, h, lay.F_B), lay.fmat(f, h, lay.F_C)
+    CB, box = lay.fmat(f, h, lay.F_CB), lay.fmat(f, h, lay.F_BOX)
+    n = A.shape[1]
+    which = np.flatnonzero(active)
+    E, e = np.zeros((n_eq + which.shape[0], n)), np.empty(n_eq + which.shape[0])
+    E[:n_eq], e[:n_eq] = A[:n_eq], b[:n_eq]
+    for k in range(which.shape[0]):
+        t, side = which[k], 1 if active[which[k]] > 0 else 0
+        if t < n:
+            E[n_eq + k, t], e[n_eq + k] = 1.0, box[side, t]
+        else:
+            E[n_eq + k], e[n_eq + k] = C[t - n], CB[side, t - n]
+    return E, e, which
+
+
+@kernel
+def _feasible(arena: tuple, x: np.ndarray) -> bool:
+    """Whether ``x`` keeps the arena's box and every inequality row (to 1e-12 relative)."""
+    f, _, h = arena
+    box = lay.fmat(f, h, lay.F_BOX)
+    for c in range(x.shape[0]):
+        if x[c] < box[0, c] - 1e-12 * (1.0 + abs(box[0, c])):
+            return False
+        if x[c] > box[1, c] + 1e-12 * (1.0 + abs(box[1, c])):
+            return False
+    C = lay.fmat(f, h, lay.F_C)
+    return _held(C, lay.fmat(f, h, lay.F_CB), x, 0, C.shape[0])
+
+
+@kernel
+def _warm(
+    arena: tuple, H: np.ndarray, g: np.ndarray, n_eq: int, active: np.ndarray, x: np.ndarray
+) -> tuple[bool, bool]:
+    """The QP solved on the last step's working set ``active``: ``(solved, bounded)``.
+    Solved where the working set's equality optimum (:func:`_equality_optimum`) keeps every
+    other bound and each active bound's multiplier has its side's sign (the KKT conditions:
+    then it is the QP's optimum); bounded where an active bound has a multiplier."""
+    E, e, which = _working_set(arena, n_eq, active)
+    mu = np.empty(e.shape[0])
+    if not (_equality_optimum(H, g, E, e, x, mu) and _feasible(arena, x)):
+        return False, False
+    bounded = False
+    for k in range(which.shape[0]):
+        m = mu[n_eq + k] * active[which[k]]
+        if m < -1e-12:
+            return False, False
+        bounded = bounded or m > 0.0
+    return True, bounded
+
+
+@kernel
 def weighted_qp(
     arena: tuple,
     spec: np.ndarray,
@@ -496,12 +649,16 @@ def weighted_qp(
     quiet_weight: float,
     deferred: np.ndarray,
     settings: np.ndarray,
+    active: np.ndarray,
     x: np.ndarray,
 ) -> tuple[int, bool]:
     """The weighted mode's problem as one QP solved by daqp: the arena's first ``hard``
     levels' equality rows held exactly, every level's inequality rows and the box as bounds,
     and the least squares of the other levels' rows (the quiet level's times
-    ``quiet_weight``) plus ``1e-9 ||x~||^2`` (strictly convex). The inequality rows
+    ``quiet_weight``) plus ``1e-9 ||x~||^2`` (strictly convex). The last step's working set
+    ``active`` (n + the inequality rows: 1 at the upper side, -1 at the lower, 0 free; kept
+    up to date here) is tried first (:func:`_warm`): where it satisfies the KKT conditions it
+    gives the optimum without daqp (a standing robot's usual step). The inequality rows
     ``deferred[0]:deferred[1]`` (the torque limits, seldom active) are left out of a first
     solve and added for a second only where its answer breaks one: the same answer, a
     smaller QP. ``(exitflag, bounded)``: daqp's exit flag, and whether a bound is active
@@ -518,6 +675,9 @@ def weighted_qp(
     for c in range(n):
         H[c, c] += 1e-9
     n_eq = levels[hard - 1, 2] if hard > 0 else 0
+    solved, bounded = _warm(arena, H, g, n_eq, active, x)
+    if solved:
+        return daqp.OPTIMAL, bounded
     keep = np.ones(C.shape[0], np.bool_)
     keep[deferred[0] : deferred[1]] = False
     for _ in range(2):
@@ -527,10 +687,14 @@ def weighted_qp(
         if flag <= 0 or keep.all() or _held(C, CB, x, deferred[0], deferred[1]):
             break
         keep[:] = True
-    bounded = False
+    active[:] = 0
     if flag > 0:
+        kept = np.flatnonzero(keep)
         for t in range(sense.shape[0]):
-            bounded = bounded or (sense[t] == 0 and lam[t] != 0.0)
+            if sense[t] == 0 and lam[t] != 0.0:
+                side = 1 if lam[t] > 0.0 else -1
+                active[t if t < n else n + kept[t - n - n_eq]] = side
+                bounded = True
     return flag, bounded
 
 

@@ -17,21 +17,83 @@ leader). Two kinds of mass are welded rather than jointed, and both count:
   which Pinocchio leaves out. It does not move: it shifts ``c`` and scales ``J_c`` by
   ``M_moving / M``, and is added here, so that ``c`` is the mass-weighted mean of every
   link of the URDF.
+
+:func:`mass_table` gives the same sums per body for the kernels (each joint's inertia on one
+of its frames, :func:`wholebody.kernels.rows.com_rows`), which compute ``c`` and ``J_c`` from
+the frames' kinematics.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from wholebody.errors import ModelError
+from wholebody.robot.parts import Frame
 
-__all__ = ["center_of_mass", "total_mass"]
+__all__ = ["MassTable", "center_of_mass", "mass_table", "total_mass"]
 
 
 def total_mass(model: pin.Model) -> float:
     """``M`` (kg): every inertia of the model, the universe's (a fixed base's) included."""
     return float(sum(inertia.mass for inertia in model.inertias))
+
+
+@dataclass(frozen=True)
+class MassTable:
+    """The model's masses as :func:`~wholebody.kernels.rows.com_rows` sums them: per moving
+    body (a joint's inertia, locked links merged in), a frame it moves with, its mass (kg)
+    and its centre of mass in that frame (m); the mass welded to the world and its centre
+    (kg, m world); the total (kg)."""
+
+    frames: tuple[Frame, ...]
+    masses: np.ndarray
+    centres: np.ndarray
+    fixed_mass: float
+    fixed_centre: np.ndarray
+    total: float
+
+
+def mass_table(model: pin.Model) -> MassTable:
+    """The :class:`MassTable` of ``model``: each joint with mass is carried by the first of
+    its frames whose placement is the identity (its JOINT frame), else by its first frame;
+    :class:`ModelError` for a massless model or a massive joint without a frame."""
+    total = total_mass(model)
+    if not total > 0.0:
+        raise ModelError(
+            "the robot has no mass: its URDF has no <inertial> with a mass > 0, "
+            "so it has no centre of mass"
+        )
+    carriers: dict[int, int] = {}
+    for fid, frame in enumerate(model.frames):
+        j, best = int(frame.parentJoint), carriers.get(int(frame.parentJoint))
+        if best is None or (
+            frame.placement.isIdentity() and not model.frames[best].placement.isIdentity()
+        ):
+            carriers[j] = fid
+    frames, masses, centres = [], [], []
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        if inertia.mass <= 0.0:
+            continue
+        if j not in carriers:
+            raise ModelError(f"joint {model.names[j]!r} has mass but no frame to carry it")
+        fid = carriers[j]
+        frame = model.frames[fid]
+        frames.append(Frame(frame.name, fid, j))
+        masses.append(inertia.mass)
+        centres.append(frame.placement.actInv(inertia.lever))
+    fixed = model.inertias[0]
+    return MassTable(
+        tuple(frames),
+        np.array(masses),
+        np.array(centres).reshape(-1, 3),
+        float(fixed.mass),
+        np.array(fixed.lever),
+        total,
+    )
 
 
 def center_of_mass(

@@ -39,6 +39,7 @@ def rng() -> np.random.Generator:
 EQUIVALENCE = [
     "test_step.py",
     "test_torque_kernel.py",
+    "test_contact_kernels.py",
     "test_dmp_kernels.py",
     "test_kernels.py",
     "test_daqp_kernel.py",

@@ -68,15 +68,8 @@ def qp_oracle(arena, spec: np.ndarray, hard: int, quiet_weight: float) -> np.nda
     (``trust-constr``)."""
     A, b = arena.view(lay.F_A), arena.view(lay.F_B)
     C, CB, box = arena.view(lay.F_C), arena.view(lay.F_CB), arena.view(lay.F_BOX)
-    levels = arena.view(lay.I_LEVEL)
     n = A.shape[1]
-    H, g = 1e-9 * np.eye(n), np.zeros(n)
-    for lv in range(hard, levels.shape[0]):
-        w2 = (quiet_weight if spec[lv, 0] == torque.LEVEL_QUIET else 1.0) ** 2
-        rows = slice(levels[lv, 0], levels[lv, 2])
-        H += w2 * A[rows].T @ A[rows]
-        g -= w2 * A[rows].T @ b[rows]
-    n_eq = levels[hard - 1, 2]
+    H, g, n_eq = _objective(arena, spec, hard, quiet_weight)
     constraints = [
         LinearConstraint(np.vstack([C, np.eye(n)]), np.r_[CB[0], box[0]], np.r_[CB[1], box[1]])
     ]
@@ -94,6 +87,23 @@ def qp_oracle(arena, spec: np.ndarray, hard: int, quiet_weight: float) -> np.nda
     return out.x
 
 
+def standing(sideways: float):
+    """TALOS standing on both soles in the weighted mode, its CoM asked ``sideways`` (m) to
+    its left: ``(robot, stack, solver, q)``."""
+    robot = wb.load_robot("talos_full")
+    com = wb.ComTask(robot, "xyz", kp=5.0)
+    stack = wb.Stack(robot, [[com], [wb.PostureTask(robot, kp=0.5)]], [])
+    feet = [
+        PatchContact(f, mu=0.3, f_min=5.0, half_length=0.1, half_width=0.065)
+        for f in ("left_sole_link", "right_sole_link")
+    ]
+    solver = DynamicsSolver(robot, feet, mode="weighted", level_weights=[1.0, 0.03])
+    q = robot.home()
+    solver.make_contacts(q)
+    com.set_target(robot.com_position(q) + np.array([0.0, sideways, 0.0]))
+    return robot, stack, solver, q
+
+
 @pytest.mark.parametrize(
     "case", [pytest.param("standing", marks=pytest.mark.slow), "torque-bound arm"]
 )
@@ -102,17 +112,7 @@ def test_the_weighted_qp_is_scipys_answer(case):
     torque limits cut to a third, so that some are active and the deferred rows come back)
     solved by the kernel and by scipy: the same answer."""
     if case == "standing":
-        robot = wb.load_robot("talos_full")
-        com = wb.ComTask(robot, "xyz", kp=5.0)
-        stack = wb.Stack(robot, [[com], [wb.PostureTask(robot, kp=0.5)]], [])
-        feet = [
-            PatchContact(f, mu=0.3, f_min=5.0, half_length=0.1, half_width=0.065)
-            for f in ("left_sole_link", "right_sole_link")
-        ]
-        solver = DynamicsSolver(robot, feet, mode="weighted", level_weights=[1.0, 0.03])
-        q = robot.home()
-        solver.make_contacts(q)
-        com.set_target(robot.com_position(q) + np.array([0.0, 0.03, 0.0]))
+        robot, stack, solver, q = standing(0.03)
     else:
         robot = wb.load_robot("panda")
         hand = wb.FrameTask(robot, "panda_hand_tcp", kp=10.0)
@@ -136,3 +136,88 @@ def test_the_weighted_qp_is_scipys_answer(case):
         d = solver.driven
         assert np.any(np.abs(res.tau[d]) > solver.effort[d] - 1e-6)  # a torque limit holds it
         assert res.violations["torque limits"] < 1e-6
+
+
+def test_the_equality_optimum_is_the_kkt_solution(rng):
+    """``_equality_optimum`` against the KKT system ``[H E^T; E 0] [x; mu] = [-g; e]`` solved
+    by numpy, H ill-conditioned as the step's is (1e-9 on a floating base's directions);
+    dependent rows refused."""
+    n, m = 30, 9
+    X, Y = rng.standard_normal((20, n)), rng.standard_normal((3, n))
+    X[:, :6] = 0.0  # (the posture-like rows leave the base; three CoM-like rows do not)
+    H = X.T @ X + Y.T @ Y + 1e-9 * np.eye(n)
+    E, e, g = rng.standard_normal((m, n)), rng.standard_normal(m), rng.standard_normal(n)
+    x, mu = np.empty(n), np.empty(m)
+    assert torque._equality_optimum(H, g, E, e, x, mu)
+    kkt = np.block([[H, E.T], [E, np.zeros((m, m))]])
+    oracle = np.linalg.solve(kkt, np.r_[-g, e])
+    np.testing.assert_allclose(E @ x, e, atol=1e-12 * (1 + np.abs(e).max()))
+    np.testing.assert_allclose(x, oracle[:n], atol=1e-7 * (1 + np.abs(oracle[:n]).max()))
+    np.testing.assert_allclose(H @ x + g + E.T @ mu, 0.0, atol=1e-7 * (1 + np.abs(g).max()))
+    E[-1] = E[0] + E[1]
+    assert not torque._equality_optimum(H, g, E, e, x, mu)  # (rows dependent)
+
+
+def test_trtrs_rows_solves_every_row(rng):
+    """One LAPACK call for many right-hand sides against scipy's triangular solve, both
+    ``op``."""
+    from wholebody.kernels.lapack import trtrs_rows
+
+    L = np.tril(rng.standard_normal((7, 7))) + 5.0 * np.eye(7)
+    B = rng.standard_normal((4, 7))
+    for transpose in (False, True):
+        Y = B.copy()
+        assert trtrs_rows(np.asfortranarray(L), Y, True, transpose) == 0
+        expected = scipy.linalg.solve_triangular(L, B.T, lower=True, trans=int(transpose)).T
+        np.testing.assert_allclose(Y, expected, atol=1e-12)
+
+
+def test_the_last_working_set_gives_daqps_answer_or_is_refused():
+    """The weighted QP's warm start (:func:`~wholebody.kernels.torque._warm`): on the
+    working set daqp's answer left (TALOS standing, its CoM pushed aside so that the soles'
+    cones bind), the equality optimum is daqp's answer; a working set with a bound that is
+    not active (a wrong side, a free row held) is refused."""
+    robot, stack, solver, q = standing(0.08)
+    u = np.random.default_rng(7).normal(scale=0.2, size=robot.nu)
+    solver.solve(stack, q, u, DT)
+    layout = solver.layout
+    active = layout.active.copy()
+    assert active.any()  # (bounds bind: daqp found them)
+    arena = (layout.arena.f, layout.arena.i, layout.arena.h)
+    first = np.empty(layout.n)
+    flag, _ = torque.weighted_qp(
+        arena,
+        layout.spec,
+        layout.hard,
+        solver.wrench_regularization,
+        layout.deferred,
+        solver._daqp,
+        np.zeros_like(active),
+        first,
+    )  # (from an empty working set: daqp)
+    H, g, n_eq = _objective(layout.arena, layout.spec, layout.hard, solver.wrench_regularization)
+    x = np.empty(layout.n)
+    solved, bounded = torque._warm(arena, H, g, n_eq, active, x)
+    assert flag > 0 and solved and bounded
+    np.testing.assert_allclose(x, first, atol=1e-9 * (1 + np.abs(first).max()))
+    for k in np.flatnonzero(active):
+        wrong = active.copy()
+        wrong[k] = -wrong[k]  # the other side of the same bound
+        assert not torque._warm(arena, H, g, n_eq, wrong, x)[0]
+    free = np.flatnonzero(active == 0)[-1]
+    held = active.copy()
+    held[free] = 1
+    assert not torque._warm(arena, H, g, n_eq, held, x)[0]
+
+
+def _objective(arena, spec, hard, quiet_weight):
+    """The weighted QP's ``H``, ``g`` and equality count, written out from the arena."""
+    A, b, levels = arena.view(lay.F_A), arena.view(lay.F_B), arena.view(lay.I_LEVEL)
+    n = A.shape[1]
+    H, g = 1e-9 * np.eye(n), np.zeros(n)
+    for lv in range(hard, levels.shape[0]):
+        w2 = (quiet_weight if spec[lv, 0] == torque.LEVEL_QUIET else 1.0) ** 2
+        rows = slice(levels[lv, 0], levels[lv, 2])
+        H += w2 * A[rows].T @ A[rows]
+        g -= w2 * A[rows].T @ b[rows]
+    return H, g, int(levels[hard - 1, 2])

@@ -26,7 +26,10 @@ the robot. Its force ``f = (f_x, f_y, f_z)`` (N) is in the world's axes at the f
 Both hold their frame with the acceleration ``J_c dv + Jdot_c v = -kp e - kd V`` (``e``, the
 drift from the pose or point the contact was made at, ``V`` the frame's velocity; ``kp``
 1/s^2, ``kd`` 1/s): with ``kp = kd = 0`` the frame's acceleration is zero, and the gains only
-pull back a drift that integration or a simulator's compliance let in.
+pull back a drift that integration or a simulator's compliance let in. The kernels of
+:mod:`wholebody.kernels.contacts` compute these rows (``Jdot_c v`` by the same forward
+difference as the stack's rows, :mod:`wholebody.dynamics.solver`); a contact gives them its
+kind, frame, gains and reference (:meth:`Contact.pack`).
 """
 
 from __future__ import annotations
@@ -38,30 +41,9 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody.errors import ConfigError
+from wholebody.kernels.contacts import CP_KD, CP_KP, CP_REF
 
-__all__ = ["Contact", "ContactRows", "PatchContact", "PointContact"]
-
-LOCAL = pin.ReferenceFrame.LOCAL
-LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-
-
-@dataclass
-class ContactRows:
-    """One contact's rows at one state, for the model's velocities (``nv``).
-
-    ``jacobian`` (k x nv) and ``drift`` (``Jdot v``, k) give the frame's acceleration
-    ``jacobian dv + drift``; ``desired`` (k) is the acceleration the contact asks for
-    (``-kp e - kd V``); ``C lower <= C f <= C upper`` bounds its wrench ``f`` (k);
-    ``to_world`` (6 x k) maps ``f`` to the wrench it exerts about the world's origin (world
-    axes, force then torque)."""
-
-    jacobian: np.ndarray
-    drift: np.ndarray
-    desired: np.ndarray
-    C: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    to_world: np.ndarray
+__all__ = ["Contact", "PatchContact", "PointContact"]
 
 
 def _frozen(arrays: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
@@ -146,10 +128,25 @@ class Contact:
         """Hold the frame where it is now (``data`` after forward kinematics)."""
         raise NotImplementedError
 
-    def rows(self, model: pin.Model, data: pin.Data) -> ContactRows:
-        """The contact's rows; ``data`` holds the kinematics at ``(q, v)`` with zero
-        acceleration (``forwardKinematics(q, v, 0)``) and the joint Jacobians at ``q``."""
-        raise NotImplementedError
+    @property
+    def frame_id(self) -> int:
+        """The frame's index in the model it was bound to (-1 before :meth:`bind`)."""
+        return self._id
+
+    @property
+    def wrench_bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(C, lower, upper)``: the wrench's rows ``lower <= C f <= upper`` (N, N m;
+        read-only)."""
+        return self._wrench
+
+    def pack(self, out: np.ndarray) -> None:
+        """The gains and the reference into ``out``, a row of the kernels' ``par``
+        (:mod:`wholebody.kernels.contacts`); a ConfigError if the contact was never made."""
+        if self.reference is None:
+            raise ConfigError(f"contact {self.frame!r} was never made (call make())")
+        out[CP_KP], out[CP_KD] = self.kp, self.kd
+        ref = self.reference.ravel()
+        out[CP_REF : CP_REF + ref.size] = ref
 
     def quiet(self) -> np.ndarray:
         """The rows ``R`` (r x size) of the wrench that the last level keeps small when
@@ -200,17 +197,6 @@ class PatchContact(Contact):
 
     def make(self, model: pin.Model, data: pin.Data) -> None:
         self.reference = data.oMf[self._id].homogeneous.copy()
-
-    def rows(self, model: pin.Model, data: pin.Data) -> ContactRows:
-        J = pin.getFrameJacobian(model, data, self._id, LOCAL)
-        drift = pin.getFrameAcceleration(model, data, self._id, LOCAL).vector
-        velocity = pin.getFrameVelocity(model, data, self._id, LOCAL).vector
-        if self.reference is None:
-            raise ConfigError(f"contact {self.frame!r} was never made (call make())")
-        here = data.oMf[self._id]
-        error = pin.log6(pin.SE3(self.reference).actInv(here)).vector
-        desired = -self.kp * error - self.kd * velocity
-        return ContactRows(J, drift, desired, *self._wrench, here.toDualActionMatrix())
 
     def wrench_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``C``, ``lower``, ``upper`` of the module docstring's rows on the wrench (made
@@ -271,16 +257,6 @@ class PointContact(Contact):
 
     def make(self, model: pin.Model, data: pin.Data) -> None:
         self.reference = data.oMf[self._id].translation.copy()
-
-    def rows(self, model: pin.Model, data: pin.Data) -> ContactRows:
-        J = pin.getFrameJacobian(model, data, self._id, LWA)[:3]
-        drift = pin.getFrameClassicalAcceleration(model, data, self._id, LWA).linear
-        velocity = pin.getFrameVelocity(model, data, self._id, LWA).linear
-        if self.reference is None:
-            raise ConfigError(f"contact {self.frame!r} was never made (call make())")
-        p = data.oMf[self._id].translation
-        desired = -self.kp * (p - self.reference) - self.kd * velocity
-        return ContactRows(J, drift, desired, *self._wrench, np.vstack([np.eye(3), pin.skew(p)]))
 
     def quiet(self) -> np.ndarray:
         return self._basis[:2].copy()

@@ -11,7 +11,6 @@ import numpy as np
 import scipy.linalg
 
 from wholebody.dynamics.carry import GraspRows
-from wholebody.dynamics.contacts import ContactRows
 from wholebody.errors import ConfigError
 from wholebody.kernels import torque
 from wholebody.solvers.plan import Plan, ProblemArena
@@ -49,7 +48,7 @@ class Layout:
     """The levels, the arena and the step's buffers of one problem shape (module docstring).
 
     Built from the solver's contacts and carried objects, the stack's ``plan`` (evaluated)
-    and the first step's ``contacts`` and ``grasps`` rows (their counts)."""
+    and the first step's ``grasps`` rows (their counts)."""
 
     level_weights = np.ones(0)
     """The stack's levels' weights (weighted mode)."""
@@ -58,7 +57,6 @@ class Layout:
         self,
         solver: DynamicsSolver,
         plan: Plan,
-        contacts: list[ContactRows],
         grasps: list[GraspRows],
     ) -> None:
         self.nu = nu = solver.robot.nu
@@ -71,11 +69,12 @@ class Layout:
         fs = solver.force_scale
         # the contact level: equality rows, wrench rows (contacts' constant), torque limits
         eq = [(f"contact {c.frame}", c.size) for c in solver.contacts]
+        bounds = [c.wrench_bounds for c in solver.contacts]
         ineq = [
-            (f"wrench {c.frame}", r.C.shape[0])
-            for c, r in zip(solver.contacts, contacts, strict=True)
+            (f"wrench {c.frame}", b[0].shape[0])
+            for c, b in zip(solver.contacts, bounds, strict=True)
         ]
-        self.owner = [k for k, r in enumerate(contacts) for _ in range(r.C.shape[0])]
+        self.owner = [k for k, (C, _, _) in enumerate(bounds) for _ in range(C.shape[0])]
         for k, (o, g) in enumerate(zip(solver.objects, grasps, strict=True)):
             eq.append((f"carry {o.name}", 6))
             if g.K.shape[0]:
@@ -84,7 +83,7 @@ class Layout:
                 eq.append((f"squeeze {o.name}", 1))
             if g.C.shape[0]:
                 ineq.append((f"grasp {o.name}", g.C.shape[0]))
-                self.owner += [len(contacts) + k] * g.C.shape[0]
+                self.owner += [len(bounds) + k] * g.C.shape[0]
         eq_rows, m_e = _named(eq)
         m_c = sum(m for _, m in ineq)
         ineq.append(("torque limits", solver.driven.size))
@@ -99,11 +98,10 @@ class Layout:
         self.G = np.zeros((6, nc))
         self.internal = np.zeros((nw, nw))
         p = col = 0
-        for c, r in zip(solver.contacts, contacts, strict=True):  # constant rows
-            self.cf[p : p + r.C.shape[0], col : col + c.size] = r.C * fs
-            self.cf_lo[p : p + r.C.shape[0]] = r.lower
-            self.cf_hi[p : p + r.C.shape[0]] = r.upper
-            p, col = p + r.C.shape[0], col + c.size
+        for c, (C, lower, upper) in zip(solver.contacts, bounds, strict=True):  # constant
+            self.cf[p : p + C.shape[0], col : col + c.size] = C * fs
+            self.cf_lo[p : p + C.shape[0]], self.cf_hi[p : p + C.shape[0]] = lower, upper
+            p, col = p + C.shape[0], col + c.size
         self.cf_lo[p:], self.cf_hi[p:] = -np.inf, 0.0  # a grasp's friction rows: C f <= 0
         self._quiet_rows(solver)
         self._targets(solver)
@@ -197,20 +195,11 @@ class Layout:
         level = _level("tasks", k + self.nw * internal, c, n, rows, irows)
         return [(level, (torque.LEVEL_STACK, -1, int(internal)))]
 
-    def fill(
-        self, solver: DynamicsSolver, contacts: list[ContactRows], grasps: list[GraspRows]
-    ) -> None:
-        """The step's rows into the buffers: the wrenches' Jacobians, the contact-level
-        equality rows, the contacts' map to the world ``G`` (the kernel makes their
-        internal-wrench rows), the grasps' rows and the targets."""
-        fs, r, col = solver.force_scale, 0, 0
-        for c, rows in zip(solver.contacts, contacts, strict=True):
-            k = c.size
-            self.Jw[col : col + k] = rows.jacobian
-            self.eq_dv[r : r + k] = rows.jacobian
-            self.eq_b[r : r + k] = rows.desired - rows.drift
-            self.G[:, col : col + k] = rows.to_world
-            r, col = r + k, col + k
+    def fill(self, solver: DynamicsSolver, grasps: list[GraspRows]) -> None:
+        """The step's rows into the buffers that the contacts' kernel does not write
+        (:func:`wholebody.kernels.contacts.contact_rows`): the grasps' rows and the wrench
+        targets."""
+        fs, r, col = solver.force_scale, self.nc, self.nc
         p = self.cf.shape[0] - sum(g.C.shape[0] for g in grasps)
         for o, g in zip(solver.objects, grasps, strict=True):
             r, p = self._grasp(o.size, o.squeeze, g, r, p, col, fs)

@@ -36,14 +36,14 @@ last step over ``dt``; ``feedforward``): ``J u`` then follows ``b`` with the tim
 ``1 / K_d`` and no lag, and a task ``e' = v_ref - k e`` keeps its velocity-level behaviour
 (without ``b'`` it is the PD law ``e'' + K_d e' + K_d k e = 0``). ``Jdot u`` is the
 derivative of the rows along the motion, by a forward difference of the stack's own rows at
-``q`` and ``q (+) eps u`` for every task, built-in or a user's (``eps`` such that no
-coordinate moves more than :data:`DRIFT_STEP`; its error is about 1e-8 relative, checked
-against Pinocchio's frame accelerations in the tests). An inequality row ``l <= C u' <= h``
-on the next velocity ``u' = u + a dt`` becomes ``(l - C u)/dt <= C a <= (h - C u)/dt``; so
-does the stack's box (velocity limits, position limits for one step), intersected with the
-braking bounds of the joint position limits (:func:`wholebody.kernels.torque.braking`) and the
-robot's acceleration limits; a floating base's six are left free (the contacts and the
-joints move them).
+``q`` and ``q (+) eps u`` for every task, built-in or a user's, and so is each contact's
+``Jdot_c v`` (``eps`` such that no coordinate moves more than :data:`DRIFT_STEP`; its error
+is about 1e-8 relative, checked against Pinocchio's frame accelerations in the tests). An
+inequality row ``l <= C u' <= h`` on the next velocity ``u' = u + a dt`` becomes ``(l - C
+u)/dt <= C a <= (h - C u)/dt``; so does the stack's box (velocity limits, position limits
+for one step), intersected with the braking bounds of the joint position limits
+(:func:`wholebody.kernels.torque.braking`) and the robot's acceleration limits; a floating
+base's six are left free (the contacts and the joints move them).
 
 Priorities
 ----------
@@ -67,10 +67,14 @@ tight on the contact and torque rows every level inherits: they hold to about 1e
 robot's weight. Wrenches are scaled by the robot's weight ``m g`` inside the QP, so the final
 minimum-norm choice weighs ``||a||^2`` against ``||f / (m g)||^2``.
 
-The step (:meth:`DynamicsSolver.solve`): the stack's rows evaluated by its kernels at ``q (+)
-eps u`` and at ``q``, Pinocchio's dynamics and each contact's rows, then the kernels of
-:mod:`wholebody.kernels.torque` write the problem into the cascade's arena and solve it (the
-weighted QP, or the cascade's kernel) and compute the torques and the bounds' excesses.
+The step (:meth:`DynamicsSolver.solve`): the stack's rows and the contacts' velocities at
+``q (+) eps u`` (one kernel on the kernels' own kinematics, :func:`wholebody.kernels.torque.
+ahead`, where every entry of the stack is compiled) and the stack's rows at ``q``;
+Pinocchio's ``M`` and ``h`` (and a carried object's rows); the contacts' rows
+(:mod:`wholebody.kernels.contacts`); then the kernels of :mod:`wholebody.kernels.torque`
+write the problem into the cascade's arena and solve it (the weighted QP, first on the last
+step's working set, or the cascade's kernel) and compute the torques and the bounds'
+excesses.
 
 Nothing saturates silently: after each solve :attr:`DynamicsResult.violations` holds, per
 kind of bound, how far the answer exceeds it (torques in N m or N, wrench rows in N or N m,
@@ -88,17 +92,18 @@ import numpy as np
 import pinocchio as pin
 
 from wholebody.dynamics.carry import CarriedObject, GraspRows
-from wholebody.dynamics.contacts import Contact, ContactRows
+from wholebody.dynamics.contacts import Contact
 from wholebody.dynamics.layout import Layout
 from wholebody.dynamics.result import DynamicsResult
-from wholebody.errors import ConfigError, DimensionError, ModelError, SolverError
-from wholebody.kernels import control, daqp, torque
+from wholebody.errors import ConfigError, DimensionError, SolverError
+from wholebody.kernels import contacts as contact_kernels
+from wholebody.kernels import daqp, torque
 from wholebody.kernels import layout as lay
-from wholebody.robot import Robot, RobotState
+from wholebody.robot import Frame, Robot, RobotState
 from wholebody.robot.sim import effort_limits
 from wholebody.solvers import compiled_hqp
 from wholebody.solvers.hqp import HierarchicalQPSolver
-from wholebody.solvers.plan import Plan
+from wholebody.solvers.plan import Plan, kinematics_buffers
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.solvers.stack import Stack
 from wholebody.tasks.limits import AccelerationLimits
@@ -203,6 +208,7 @@ class DynamicsSolver:
         """The kinematics at the last solve's ``q`` (valid until the robot's next update):
         what the stack's :meth:`~wholebody.solvers.Stack.advance` takes after the step."""
         self.contacts: list[Contact] = []
+        self._pack_contacts()
         self.objects: list[CarriedObject] = []
         """The carried objects (:meth:`carry`, :mod:`wholebody.dynamics.carry`)."""
         for contact in contacts:
@@ -239,32 +245,44 @@ class DynamicsSolver:
         ``[sim] damping``)."""
         self._par = np.zeros(torque.P_WIDTH)
         self._zero_v = np.zeros(model.nv)
-        try:  # the kernels' own kinematics (torque.ahead), where they can move the robot
-            model_i, model_f = robot.kinematics.model_tables()
-            self._kin: control.Kinematics | None = control.Kinematics(
-                model_i,
-                model_f,
-                np.zeros((model.nv, 6)).T,
-                np.zeros((model.nframes, 12)),
-                np.zeros((model.njoints, 12)),
-                np.zeros(model.nv),
-            )
-        except ModelError:
-            self._kin = None
+        kin, movable = kinematics_buffers(robot)
+        self._kin = kin if movable else None  # (torque.ahead's, where they move the robot)
 
     def add_contact(self, contact: Contact) -> None:
         """Make ``contact`` active (its frame checked against the robot)."""
         if any(c.frame == contact.frame for c in self.contacts):
             raise ConfigError(f"DynamicsSolver: a contact on {contact.frame!r} is already active")
+        if contact.size not in (contact_kernels.PATCH, contact_kernels.POINT):
+            raise ConfigError(
+                f"DynamicsSolver: a contact is a PatchContact or a PointContact, got "
+                f"{type(contact).__name__}"
+            )
         contact.bind(self.robot.model)
         self.contacts.append(contact)
+        self._pack_contacts()
 
     def remove_contact(self, frame: str) -> Contact:
         """Break the contact on ``frame``; returns it."""
         for i, c in enumerate(self.contacts):
             if c.frame == frame:
-                return self.contacts.pop(i)
+                self.contacts.pop(i)
+                self._pack_contacts()
+                return c
         raise ConfigError(f"DynamicsSolver: no active contact on {frame!r}")
+
+    def _pack_contacts(self) -> None:
+        """The active contacts as the kernels of :mod:`wholebody.kernels.contacts` take
+        them: their kinds and frames, the velocities that move them, their gains and
+        references (written each step) and their velocities a moment ahead."""
+        model, n = self.robot.model, len(self.contacts)
+        table = [(c.size, c.frame_id) for c in self.contacts]
+        self._contact_table = np.array(table, dtype=np.int64).reshape(n, contact_kernels.CT_WIDTH)
+        frames = [
+            Frame(c.frame, c.frame_id, model.frames[c.frame_id].parentJoint) for c in self.contacts
+        ]
+        self._support = self.robot.kinematics.support(frames)
+        self._contact_par = np.zeros((n, contact_kernels.CP_WIDTH))
+        self._twists = np.zeros((n, 6))
 
     def carry(self, obj: CarriedObject, q: np.ndarray, pose: np.ndarray) -> None:
         """Hold ``obj`` at ``pose`` (4x4, world, at its centre of mass) with its hands where
@@ -331,13 +349,15 @@ class DynamicsSolver:
         the configuration ``q`` and actuated velocity ``u`` (rad/s, m/s)."""
         t0 = time.perf_counter()
         q, u = self._checked(stack, q, u, dt)
+        v = self._A @ u
         plan, ahead = self._rows(stack, q, u, dt)
-        contacts, grasps, M, h = self._physics(q, self._A @ u)
+        grasps, M, h = self._physics(q, v)
         layout = self._layout
         if layout is None or layout.key != self.layout_key(plan):
             _no_acceleration_limits(stack)
-            layout = self._layout = Layout(self, plan, contacts, grasps)
-        layout.fill(self, contacts, grasps)
+            layout = self._layout = Layout(self, plan, grasps)
+        self._contact_rows(layout, v)
+        layout.fill(self, grasps)
         self._assemble(layout, plan, q, u, ahead, dt, M, h)
         t1 = time.perf_counter()
         x, status = self._run(layout)
@@ -392,17 +412,21 @@ class DynamicsSolver:
     def _ahead(
         self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float, eps: float
     ) -> tuple[Plan, np.ndarray]:
-        """The plan and its rows times ``u~`` at ``q (+) eps u``: by one kernel on the
-        kernels' own kinematics (:func:`~wholebody.kernels.torque.ahead`) where every entry
-        is compiled, else by Pinocchio's and the stack's Python entries."""
+        """The plan and its rows times ``u~`` at ``q (+) eps u``, and the contacts' velocities
+        there (:attr:`_twists`): by one kernel on the kernels' own kinematics
+        (:func:`~wholebody.kernels.torque.ahead`) where every entry is compiled, else by
+        Pinocchio's and the stack's Python entries."""
         plan = stack.plan()
+        contacts = (self._contact_table, self._support, self._twists)
         if self._kin is not None and not plan.python:
             plan.sync(None, dt)
             if not plan.stale:
                 out = np.empty(plan.view(lay.F_A).shape[0] + plan.view(lay.F_C).shape[0])
-                torque.ahead((plan.f, plan.i, plan.h), self._kin, q, u, eps, out)
+                torque.ahead((plan.f, plan.i, plan.h), self._kin, contacts, q, u, eps, out)
                 return plan, out
         plan = stack.evaluated_plan(self.robot.update(self.robot.integrate(q, u, eps)), dt)
+        J, oMf = self.robot.kinematics.views()
+        contact_kernels.twists(J, oMf, *contacts[:2], self._A @ u, self._twists)
         return plan, _rows_times(plan, u)
 
     def drifts(self, stack: Stack, q: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
@@ -417,18 +441,37 @@ class DynamicsSolver:
 
     def _physics(
         self, q: np.ndarray, v: np.ndarray
-    ) -> tuple[list[ContactRows], list[GraspRows], np.ndarray, np.ndarray]:
-        """Each contact's and carried object's rows, and Pinocchio's ``M`` (its upper
-        triangle) and ``h`` at ``(q, v)``: :func:`~wholebody.kernels.torque.assemble` makes
-        ``M`` symmetric and adds the drives' rotor inertia and friction, in place."""
+    ) -> tuple[list[GraspRows], np.ndarray, np.ndarray]:
+        """Each carried object's rows, and Pinocchio's ``M`` (its upper triangle) and ``h``
+        at ``(q, v)``: :func:`~wholebody.kernels.torque.assemble` makes ``M`` symmetric and
+        adds the drives' rotor inertia and friction, in place."""
         model, data = self.robot.model, self._data
-        pin.forwardKinematics(model, data, q, v, self._zero_v)
-        pin.updateFramePlacements(model, data)
-        pin.computeJointJacobians(model, data)  # (on forwardKinematics' placements)
-        contacts = [c.rows(model, data) for c in self.contacts]
-        grasps = [o.rows(model, data) for o in self.objects]
+        grasps = []
+        if self.objects:
+            pin.forwardKinematics(model, data, q, v, self._zero_v)
+            pin.updateFramePlacements(model, data)
+            pin.computeJointJacobians(model, data)  # (on forwardKinematics' placements)
+            grasps = [o.rows(model, data) for o in self.objects]
         M = pin.crba(model, data, q)  # (upper triangle; the kernel adds the drives)
-        return contacts, grasps, M, pin.nonLinearEffects(model, data, q, v)
+        return grasps, M, pin.nonLinearEffects(model, data, q, v)
+
+    def _contact_rows(self, layout: Layout, v: np.ndarray) -> None:
+        """The contacts' rows at the state of the robot's kinematics (the step's ``q``) into
+        the layout's buffers (:func:`wholebody.kernels.contacts.contact_rows`)."""
+        for k, c in enumerate(self.contacts):
+            c.pack(self._contact_par[k])
+        J, oMf = self.robot.kinematics.views()
+        contact_kernels.contact_rows(
+            J,
+            oMf,
+            self._contact_table,
+            self._support,
+            self._contact_par,
+            v,
+            self._twists,
+            self._par[torque.P_EPS],
+            (layout.Jw, layout.eq_dv, layout.eq_b, layout.G),
+        )
 
     def _assemble(
         self,

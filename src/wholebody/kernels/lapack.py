@@ -129,14 +129,28 @@ def trtrs(a: np.ndarray, b: np.ndarray, lower: bool, transpose: bool) -> int:
     """Solve ``op(a) x = b`` for the triangular ``a`` (n x n: a Fortran array or a block of
     one, column stride ``lda``), ``op`` the transpose if ``transpose``; ``b`` (n,) is
     overwritten with ``x``."""
-    n = b.shape[0]
+    return _trtrs(a, b, b.shape[0], 1, lower, transpose)
+
+
+@kernel
+def trtrs_rows(a: np.ndarray, B: np.ndarray, lower: bool, transpose: bool) -> int:
+    """Solve ``op(a) x = b`` for every row ``b`` of the C-ordered ``B`` (m, n) at once (one
+    LAPACK call with ``m`` right-hand sides: ``B``'s memory is the Fortran n x m ``B^T``),
+    each row overwritten with its ``x``; ``a`` as in :func:`trtrs`."""
+    return _trtrs(a, B, B.shape[1], B.shape[0], lower, transpose)
+
+
+@kernel
+def _trtrs(a: np.ndarray, b: np.ndarray, n: int, nrhs: int, lower: bool, transpose: bool) -> int:
+    """``dtrtrs`` on ``a`` for the ``nrhs`` right-hand sides of ``n`` entries stored one
+    after the other from ``b``'s first entry."""
     ch = np.empty(3, np.uint8)
     ch[0] = _L if lower else _U
     ch[1] = _T if transpose else _N
     ch[2] = _N
     iv = np.empty(5, np.int32)
     iv[0] = n
-    iv[1] = 1
+    iv[1] = nrhs
     iv[2] = max(a.strides[1] // 8, 1)
     iv[3] = max(n, 1)
     iv[4] = 0
@@ -149,36 +163,6 @@ def trtrs(a: np.ndarray, b: np.ndarray, lower: bool, transpose: bool) -> int:
         a.ctypes.data,
         iv[2:].ctypes.data,
         b.ctypes.data,
-        iv[3:].ctypes.data,
-        iv[4:].ctypes.data,
-    )
-    return int(iv[4])
-
-
-@kernel
-def trtrs_rows(a: np.ndarray, B: np.ndarray, lower: bool, transpose: bool) -> int:
-    """Solve ``op(a) x = b`` for every row ``b`` of the C-ordered ``B`` (m, n) at once (one
-    LAPACK call with ``m`` right-hand sides: ``B``'s memory is the Fortran n x m ``B^T``),
-    each row overwritten with its ``x``; ``a`` as in :func:`trtrs`."""
-    ch = np.empty(3, np.uint8)
-    ch[0] = _L if lower else _U
-    ch[1] = _T if transpose else _N
-    ch[2] = _N
-    iv = np.empty(5, np.int32)
-    iv[0] = B.shape[1]
-    iv[1] = B.shape[0]
-    iv[2] = max(a.strides[1] // 8, 1)
-    iv[3] = max(B.shape[1], 1)
-    iv[4] = 0
-    _dtrtrs(
-        ch[0:].ctypes.data,
-        ch[1:].ctypes.data,
-        ch[2:].ctypes.data,
-        iv[0:].ctypes.data,
-        iv[1:].ctypes.data,
-        a.ctypes.data,
-        iv[2:].ctypes.data,
-        B.ctypes.data,
         iv[3:].ctypes.data,
         iv[4:].ctypes.data,
     )

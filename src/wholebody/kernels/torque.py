@@ -53,6 +53,7 @@ import numpy as np
 
 from wholebody.kernels import daqp, kernel
 from wholebody.kernels import layout as lay
+from wholebody.kernels.contacts import twists
 from wholebody.kernels.evaluate import REF_WIDTH, evaluate
 from wholebody.kernels.forward import forward_kinematics, integrate, model_velocity
 from wholebody.kernels.lapack import potrf, syevd, trtrs, trtrs_rows
@@ -77,6 +78,10 @@ P_WIDTH = 8
 # whether the internal-wrench rows close it
 LEVEL_EOM, LEVEL_CONTACTS, LEVEL_TARGETS, LEVEL_STACK, LEVEL_QUIET = 0, 1, 2, 3, 4
 INF = 1e30  # daqp's "no bound"
+SCHUR_KAPPA2 = 1e16
+"""The largest squared Frobenius condition of the Schur complement ``E H^-1 E^T`` that the
+weighted QP's warm start solves with (a standing TALOS's is about 1e11: the floating base's
+directions cost nothing but the ``1e-9`` regularisation); beyond it, daqp."""
 
 
 @kernel
@@ -383,14 +388,22 @@ def _contact_level(
 
 @kernel
 def ahead(
-    plan: tuple, kin: tuple, q: np.ndarray, u: np.ndarray, eps: float, out: np.ndarray
+    plan: tuple,
+    kin: tuple,
+    contacts: tuple,
+    q: np.ndarray,
+    u: np.ndarray,
+    eps: float,
+    out: np.ndarray,
 ) -> None:
     """The first half of the forward difference that gives ``Jdot u``: the stack's rows
     evaluated at ``q (+) eps A u`` on the kernels' own kinematics (:mod:`.forward`), and
-    their products ``[A u~, C u~]`` (K + P, ``u~ = u / D``) into ``out``. ``plan`` ``(f, i,
-    h)``: a stack's arena whose entries are all compiled, synced for the step (its rows are
-    overwritten: evaluate it at ``q`` next); ``kin`` ``(model_i, model_f, J, oMf, oMi, v)``:
-    :class:`wholebody.kernels.control.Kinematics`."""
+    their products ``[A u~, C u~]`` (K + P, ``u~ = u / D``) into ``out``; and the contacts'
+    velocities there. ``plan`` ``(f, i, h)``: a stack's arena whose entries are all compiled,
+    synced for the step (its rows are overwritten: evaluate it at ``q`` next); ``kin``
+    ``(model_i, model_f, J, oMf, oMi, v)``: :class:`wholebody.kernels.control.Kinematics`;
+    ``contacts`` ``(table, support, twists)``: the contacts and their velocities' buffer
+    (:func:`wholebody.kernels.contacts.twists`)."""
     f, i, h = plan
     model_i, model_f, J, oMf, oMi, v = kin
     act = lay.imat(i, h, lay.I_ACT)
@@ -399,6 +412,8 @@ def ahead(
     integrate(model_i, q, v, eps, q_ahead)
     forward_kinematics(model_i, model_f, q_ahead, oMi, oMf, J)
     evaluate(f, i, h, J, oMf, q_ahead, np.zeros((0, REF_WIDTH)))
+    table, support, twist = contacts
+    twists(J, oMf, table, support, v, twist)
     A, C = lay.fmat(f, h, lay.F_A), lay.fmat(f, h, lay.F_C)
     u_s = u / lay.fmat(f, h, lay.F_METRIC)[0]
     K = A.shape[0]
@@ -543,43 +558,34 @@ def _equality_optimum(
     """``x = argmin 1/2 x'H x + g'x`` subject to ``E x = e`` alone, into ``x``, and its
     multipliers ``mu`` (``H x + g + E^T mu = 0``, daqp's sign), by the Schur complement: with
     ``H = L L^T``, ``Y = L^-1 E^T`` and ``z = L^-1 g``, ``(Y^T Y) mu = -(e + Y^T z)`` and
-    ``x = -L^-T (z + Y mu)``, refined once on the residual ``e - E x``. False where ``H`` or
-    ``Y^T Y`` has no Cholesky factor, or ``E x = e`` is not met to 1e-12 relative (dependent
-    rows)."""
-    n, m = H.shape[0], E.shape[0]
-    L = fortran(H)
+    ``x = -L^-T (z + Y mu)``, refined twice on the residual ``e - E x``. False where ``H`` or
+    ``Y^T Y`` has no Cholesky factor, the latter's squared Frobenius condition exceeds
+    :data:`SCHUR_KAPPA2`, or ``E x = e`` is not met to 1e-12 relative (dependent rows)."""
+    L = H.copy().T  # (H is symmetric: its copy, read column-major, is H)
     if potrf(L, True) != 0:
         return False
-    Y = E.copy()  # row k: L^-1 E[k]
+    Y, z = E.copy(), g.copy()  # row k of Y: L^-1 E[k]; z = L^-1 g
     trtrs_rows(L, Y, True, False)
-    z = g.copy()
     trtrs(L, z, True, False)
-    S, r = np.zeros((m, m)), np.empty(m)
-    for i in range(m):
-        for j in range(i + 1):
-            S[i, j] = Y[i] @ Y[j]
-        r[i] = -(e[i] + Y[i] @ z)
+    S = Y @ Y.T
     ok, X = cholesky_inverse(S)
-    if not ok:
+    if not (ok and frobenius2(X) * trace(S) <= SCHUR_KAPPA2):
         return False
-    w = z
-    mu[:] = 0.0
-    for k in range(2):  # the solve, then one refinement on the residual
+    r = -(e + Y @ z)
+    for k in range(3):  # the solve, then two refinements on the residual e - E x
         step = gram_solve(X, r)
-        mu += step
+        w = Y.T @ step
         if k:
-            w[:] = 0.0
-        for i in range(m):
-            w += step[i] * Y[i]
-        trtrs(L, w, True, True)
-        for c in range(n):
-            x[c] = x[c] + w[c] if k else -w[c]
-        for i in range(m):
-            r[i] = e[i] - E[i] @ x
-    for i in range(m):
-        if abs(r[i]) > 1e-12 * (1.0 + abs(e[i])):
-            return False
-    return True
+            trtrs(L, w, True, True)
+            x += w  # x + H^-1 E^T S^-1 r: the multipliers change by -S^-1 r
+            mu -= step
+        else:
+            w += z
+            trtrs(L, w, True, True)
+            x[:] = -w
+            mu[:] = step
+        r = e - E @ x
+    return bool(np.all(np.abs(r) <= 1e-12 * (1.0 + np.abs(e))))
 
 
 @kernel
@@ -630,6 +636,8 @@ def _warm(
     then it is the QP's optimum); bounded where an active bound has a multiplier."""
     E, e, which = _working_set(arena, n_eq, active)
     mu = np.empty(e.shape[0])
+    if not np.isfinite(e).all():  # (a side without a bound: not a working set)
+        return False, False
     if not (_equality_optimum(H, g, E, e, x, mu) and _feasible(arena, x)):
         return False, False
     bounded = False

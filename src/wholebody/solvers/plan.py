@@ -30,7 +30,7 @@ from wholebody.kernels import control
 from wholebody.kernels import layout as lay
 from wholebody.kernels.evaluate import REF_WIDTH, evaluate
 from wholebody.kernels.objectives import AE_WIDTH, ARM_PARTS
-from wholebody.robot import Frame, RobotState
+from wholebody.robot import Frame, Robot, RobotState
 from wholebody.solvers.result import SolverResult, SolverStatus
 from wholebody.tasks.arm_energy import ArmEnergyValue, ArmPotentialEnergy
 from wholebody.tasks.base import (
@@ -46,7 +46,15 @@ from wholebody.tasks.base import (
 if TYPE_CHECKING:
     from wholebody.solvers.stack import LevelProblem, Stack, StackProblem
 
-__all__ = ["Arena", "BoundCall", "Plan", "ProblemArena", "is_compiled", "sqrt_weights"]
+__all__ = [
+    "Arena",
+    "BoundCall",
+    "Plan",
+    "ProblemArena",
+    "is_compiled",
+    "kinematics_buffers",
+    "sqrt_weights",
+]
 
 Entry = Task | InequalityTask | Objective | Limit
 _WARM: dict[str, bool] = {}  # whether a kernel entry point ran in this process
@@ -731,6 +739,28 @@ class Plan(Arena):
         return None
 
 
+def kinematics_buffers(robot: Robot) -> tuple[control.Kinematics, bool]:
+    """The packed model and the buffers of the kernels' own kinematics
+    (:class:`~wholebody.kernels.control.Kinematics`), and whether the kernels can move the
+    robot (else its joints need Pinocchio's kinematics, and the tables are empty)."""
+    model = robot.model
+    try:
+        model_i, model_f = robot.kinematics.model_tables()
+        movable = True
+    except ModelError:
+        model_i, model_f = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 15))
+        movable = False
+    buffers = control.Kinematics(
+        model_i,
+        model_f,
+        np.zeros((model.nv, 6)).T,
+        np.zeros((model.nframes, 12)),
+        np.zeros((model.njoints, 12)),
+        np.zeros(model.nv),
+    )
+    return buffers, movable
+
+
 class StepBuffers:
     """What a compiled step reads and writes besides the arena (:mod:`wholebody.kernels.
     control`): the arena as a record, the kinematics' buffers (Pinocchio's views, or the
@@ -739,22 +769,8 @@ class StepBuffers:
 
     def __init__(self, plan: Plan, references: int) -> None:
         robot = self.robot = plan.robot
-        model = robot.model
         self.arena = control.Arena(plan.f, plan.i, plan.h)
-        try:
-            model_i, model_f = robot.kinematics.model_tables()
-            self.movable = True
-        except ModelError:  # joints the kernels do not move: Pinocchio's kinematics only
-            model_i, model_f = np.zeros((0, 4), dtype=np.int64), np.zeros((0, 15))
-            self.movable = False
-        self.own = control.Kinematics(
-            model_i,
-            model_f,
-            np.zeros((robot.nv, 6)).T,
-            np.zeros((model.nframes, 12)),
-            np.zeros((model.njoints, 12)),
-            np.zeros(robot.nv),
-        )
+        self.own, self.movable = kinematics_buffers(robot)
         self.references = references
         self.batch = control.Batch(
             np.zeros((1, robot.nq)),

@@ -31,7 +31,13 @@ from wholebody.humanlike.arm_angle_scores import (
     spread_of,
     wrap,
 )
-from wholebody.humanlike.evaluation import cluster_bootstrap, r2_with_intervals, regression_scores
+from wholebody.humanlike.evaluation import (
+    cluster_bootstrap,
+    paired_r2_difference,
+    r2_with_intervals,
+    regression_scores,
+)
+from wholebody.humanlike.linear import fit_linear
 from wholebody.humanlike.recordings import load_participants, load_recording, real_recordings_dir
 
 
@@ -255,6 +261,38 @@ def test_r2_per_group_is_each_groups_own_r2(rng):
         assert out["m"][g]["r2"] == pytest.approx(regression_scores(y[s], pred[s])["r2"])
         assert out["m"][g]["low"] <= out["m"][g]["r2"] <= out["m"][g]["high"]
     assert out["m"]["all"]["r2"] == pytest.approx(regression_scores(y, pred)["r2"])
+
+
+def test_the_paired_r2_difference_scores_both_models_on_the_same_resamples(rng):
+    """``R^2(a) - R^2(b)`` per group equals the difference of their R^2; a model that is the
+    other plus noise is worse with an interval below 0; a model against itself is 0 on every
+    resample (the resamples are shared: paired)."""
+    y = rng.normal(size=120)
+    a = y + rng.normal(scale=0.3, size=120)
+    b = a + rng.normal(scale=0.5, size=120)
+    groups = np.repeat(["P1", "P2"], 60)
+    clusters = np.repeat(np.arange(24), 5)
+    out = paired_r2_difference(y, a, b, groups, clusters, n_boot=200)
+    for g in ("P1", "P2"):
+        s = groups == g
+        r2 = [regression_scores(y[s], p[s])["r2"] for p in (a, b)]
+        assert out[g]["r2"] == pytest.approx(r2[0] - r2[1])
+    assert out["all"]["low"] > 0.0  # a is better, and the interval says so
+    same = paired_r2_difference(y, a, a, groups, clusters, n_boot=50)
+    assert all(v == {"r2": 0.0, "low": 0.0, "high": 0.0} for v in same.values())
+
+
+def test_the_linear_baseline_is_least_squares(rng):
+    """``fit_linear`` recovers a plane exactly, and is numpy's least squares otherwise."""
+    X = rng.normal(size=(50, 3))
+    model = fit_linear(X, 0.3 + X @ np.array([1.0, -2.0, 0.5]))
+    assert model.intercept == pytest.approx(0.3)
+    np.testing.assert_allclose(model.coef, [1.0, -2.0, 0.5], atol=1e-12)
+    y = rng.normal(size=50)
+    A = np.column_stack([np.ones(50), X])
+    np.testing.assert_allclose(
+        fit_linear(X, y).predict(X), A @ np.linalg.lstsq(A, y, rcond=None)[0]
+    )
 
 
 class _Linear:

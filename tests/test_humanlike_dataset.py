@@ -17,6 +17,7 @@ from wholebody.humanlike.dataset import (
     build_dataset,
     label_recording,
 )
+from wholebody.humanlike.linear import fit_linear
 from wholebody.humanlike.mapping import ArmParameters
 from wholebody.humanlike.pipeline import fit_and_evaluate, make_dataset
 from wholebody.humanlike.recordings import load_recording, real_recordings_dir
@@ -199,6 +200,17 @@ def test_reference_networks_are_scored_alike_and_must_not_have_seen_the_test_peo
     assert det["by_task"]["before"]["forward"]["r2"] == pytest.approx(
         regression_scores(test.k[s], ref.predict(test.wrist[s]))["r2"]
     )
+    train, _ = ds.split(["ADL003", "ADL008"])
+    linear = fit_linear(train.wrist, train.k)
+    paired = det["network_minus"]["linear"]
+    for person in ("ADL003", "ADL008", "all"):  # the paired difference, the same records
+        s = test.participant == person if person != "all" else np.ones(len(test), bool)
+        r2 = [
+            regression_scores(test.k[s], m.predict(test.wrist[s]))["r2"]
+            for m in (out.network, linear)
+        ]
+        assert paired[person]["r2"] == pytest.approx(r2[0] - r2[1])
+        assert paired[person]["low"] <= paired[person]["r2"] <= paired[person]["high"]
     assert out.network.meta["references"]["before"]["split"]["test_participants"] == held
     seen = sorted(set(ds.participant) - set(held))[0]
     with pytest.raises(DataError, match=f"trained on test participant.*{seen}"):

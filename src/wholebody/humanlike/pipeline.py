@@ -35,7 +35,12 @@ from wholebody.humanlike.dataset import (
     StiffnessDataset,
     build_dataset,
 )
-from wholebody.humanlike.evaluation import r2_with_intervals, regression_scores
+from wholebody.humanlike.evaluation import (
+    paired_r2_difference,
+    r2_with_intervals,
+    regression_scores,
+)
+from wholebody.humanlike.linear import fit_linear
 from wholebody.humanlike.mapping import ArmParameters
 from wholebody.humanlike.recordings import (
     Recording,
@@ -61,6 +66,8 @@ __all__ = [
     "select_model",
 ]
 
+BASELINES = ("linear", "svr")
+"""The models the network is compared with, paired, on the held-out participants."""
 PAPER_SCORES = {"network": {"r2": 0.9304, "mse": 0.1673}, "svr": {"r2": 0.9169, "mse": 0.2352}}
 
 
@@ -304,8 +311,10 @@ def held_out_details(
     :func:`~wholebody.humanlike.evaluation.r2_with_intervals` (R^2 with trial-bootstrap
     intervals, per model): ``per_participant`` (each about its own mean, and ``all``
     pooled), ``by_task`` (per task, from the trial ids, and ``all``) and ``by_task_group``
-    (the :data:`TASK_GROUPS` present). Empty without two real records. Why real only:
-    synthetic test participants measure the generator, not people."""
+    (the :data:`TASK_GROUPS` present), and ``network_minus``: per baseline (:data:`BASELINES`)
+    the network's R^2 less the baseline's, per participant and ``all``, with its interval over
+    the same resamples (paired). Empty without two real records. Why real only: synthetic
+    test participants measure the generator, not people."""
     real = test.source == "real"
     if real.sum() < 2:
         return {}
@@ -316,6 +325,14 @@ def held_out_details(
     for name, members in TASK_GROUPS.items():
         groups[np.isin(tasks, members)] = name
     out = {"bootstrap": {"resamples": n_boot, "seed": seed, "level": 0.95}}
+    if "network" in preds:
+        out["network_minus"] = {
+            name: paired_r2_difference(
+                sub.k, preds["network"], p, sub.participant, sub.trial, n_boot=n_boot, seed=seed
+            )
+            for name, p in preds.items()
+            if name in BASELINES
+        }
     for key, labels in (
         ("per_participant", sub.participant),
         ("by_task", tasks),
@@ -403,10 +420,15 @@ def fit_and_evaluate(
     result = train_network(train.wrist, train.k, config, progress=progress, meta=meta)  # type: ignore[arg-type]
     net = result.network
     net.meta["gradient_norm"] = gradient_norms(net)
-    predictions = {"network": net.predict(test.wrist), "mean": np.full(len(test), train.k.mean())}
+    predictions = {
+        "network": net.predict(test.wrist),
+        "mean": np.full(len(test), train.k.mean()),
+        "linear": fit_linear(train.wrist, train.k).predict(test.wrist),
+    }
     scores = {
         "network": regression_scores(test.k, predictions["network"]),
         "mean": regression_scores(test.k, predictions["mean"]),
+        "linear": regression_scores(test.k, predictions["linear"]),
         "network_train": regression_scores(train.k, net.predict(train.wrist)),
     }
     svr_params = None

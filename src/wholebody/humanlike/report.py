@@ -133,7 +133,7 @@ def _per_participant_lines(m: dict) -> list[str]:
         return []
     names = list(per)
     groups = list(next(iter(per.values())))
-    label = {"network": "network", "svr": "SVR", "mean": "training mean"}
+    label = {"network": "network", "svr": "SVR", "mean": "training mean", "linear": "linear"}
     boot = det.get("bootstrap", {})
     lines = [
         "",
@@ -179,6 +179,34 @@ def _transpose(table: dict) -> dict:
         for g, v in groups.items():
             out.setdefault(g, {})[model] = v
     return out
+
+
+def _baseline_lines(m: dict) -> list[str]:
+    """The network's R^2 less each baseline's on the same records, paired, and the verdict
+    the interval supports."""
+    diffs = (m.get("scores_real_held_out") or {}).get("network_minus") or {}
+    if not diffs:
+        return []
+    label = {"linear": "a linear model (least squares)", "svr": "the SVR"}
+    lines = [
+        "",
+        "The network against its baselines, paired (R^2 of the network less the baseline's, "
+        "the same records and resamples; an interval above 0: the network predicts better):",
+        "",
+        "| participant | " + " | ".join(f"network - {n}" for n in diffs) + " |",
+        "|---|" + "---|" * len(diffs),
+    ]
+    for g in next(iter(diffs.values())):
+        lines.append(f"| {g} | " + " | ".join(_interval(d[g]) for d in diffs.values()) + " |")
+    lines.append("")
+    for name, d in diffs.items():
+        low, high = d["all"]["low"], d["all"]["high"]
+        verdict = "better than" if low > 0 else "worse than" if high < 0 else "no better than"
+        lines.append(
+            f"- Over the held-out participants together the network predicts {verdict} "
+            f"{label.get(name, name)}: {_interval(d['all'])}."
+        )
+    return lines
 
 
 def _reference_lines(m: dict) -> list[str]:
@@ -261,6 +289,7 @@ def _scores_lines(net: NetworkStiffness, dataset: StiffnessDataset, paper_scores
         "|---|---|---|---|",
         _row("network", sc.get("network"), paper_scores.get("network")),
         _row("SVR (RBF)", sc.get("svr"), paper_scores.get("svr")),
+        _row("linear (least squares)", sc.get("linear")),
         _row("training mean", sc.get("mean")),
         *(_row(n, sc.get(n)) for n in refs),
         _row("network, training records", sc.get("network_train")),
@@ -269,6 +298,7 @@ def _scores_lines(net: NetworkStiffness, dataset: StiffnessDataset, paper_scores
         "N m/rad. SVR hyper-parameters (grouped 3-fold CV on the training participants): "
         f"{m.get('svr_params', '-')}.",
         *_per_participant_lines(m),
+        *_baseline_lines(m),
         *_reference_lines(m),
         *_selection_lines(m),
     ]

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from wholebody.kernels import kernel
+from wholebody.kernels.kinematics import frame_kinematics
 from wholebody.kernels.so3 import log3
 
 __all__ = ["CP_WIDTH", "CT_WIDTH", "PATCH", "POINT", "contact_rows", "log6", "twists"]
@@ -40,35 +41,29 @@ _PREC3 = 2.220446049250313e-16**0.25  # Pinocchio's TaylorSeriesExpansion precis
 
 
 @kernel
-def _point_velocity(J: np.ndarray, col: int, p: np.ndarray, out: np.ndarray) -> None:
-    """``out`` (6) = column ``col``'s velocity of the point ``p``, then its angular part."""
-    wx, wy, wz = J[3, col], J[4, col], J[5, col]
-    out[0] = J[0, col] + (wy * p[2] - wz * p[1])
-    out[1] = J[1, col] + (wz * p[0] - wx * p[2])
-    out[2] = J[2, col] + (wx * p[1] - wy * p[0])
-    out[3], out[4], out[5] = wx, wy, wz
-
-
-@kernel
 def _jacobian(
     J: np.ndarray, oMf: np.ndarray, kind: int, frame: int, support: np.ndarray, out: np.ndarray
 ) -> None:
-    """The contact's Jacobian (``kind`` rows x nv) into ``out`` (module docstring)."""
-    m = oMf[frame]
-    p = m[9:12]
-    col = np.empty(6)
-    out[:, :] = 0.0
-    for j in range(J.shape[1]):
-        if not support[j]:
-            continue
-        _point_velocity(J, j, p, col)
-        if kind == POINT:
-            for i in range(3):
-                out[i, j] = col[i]
-            continue
-        for i in range(3):  # R^T: row i of R^T is column i of R, m[3 i : 3 i + 3]
-            out[i, j] = m[3 * i] * col[0] + m[3 * i + 1] * col[1] + m[3 * i + 2] * col[2]
-            out[3 + i, j] = m[3 * i] * col[3] + m[3 * i + 1] * col[4] + m[3 * i + 2] * col[5]
+    """The contact's Jacobian (``kind`` rows x nv) into ``out`` (module docstring): the
+    frame's world-aligned Jacobian over the model's velocities
+    (:func:`~wholebody.kernels.kinematics.frame_kinematics` with the identity for ``A``;
+    ``support``: its row, 1 x nv), rotated into the frame for a patch."""
+    nv = J.shape[1]
+    columns = np.arange(nv)
+    Jf, p, R = np.empty((1, 6, nv)), np.empty((1, 3)), np.empty((1, 3, 3))
+    frames = np.full(1, frame)
+    frame_kinematics(J, oMf, frames, support, columns, columns, np.ones(nv), Jf, p, R)
+    if kind == POINT:
+        out[:, :] = Jf[0, :3]
+        return
+    for i in range(3):  # R^T: row i of R^T is column i of R
+        for j in range(nv):
+            out[i, j] = (
+                R[0, 0, i] * Jf[0, 0, j] + R[0, 1, i] * Jf[0, 1, j] + R[0, 2, i] * Jf[0, 2, j]
+            )
+            out[3 + i, j] = (
+                R[0, 0, i] * Jf[0, 3, j] + R[0, 1, i] * Jf[0, 4, j] + R[0, 2, i] * Jf[0, 5, j]
+            )
 
 
 @kernel
@@ -86,7 +81,7 @@ def twists(
     Jc = np.empty((6, J.shape[1]))
     for c in range(table.shape[0]):
         kind = table[c, CT_KIND]
-        _jacobian(J, oMf, kind, table[c, CT_FRAME], support[c], Jc[:kind])
+        _jacobian(J, oMf, kind, table[c, CT_FRAME], support[c : c + 1], Jc[:kind])
         for i in range(kind):
             out[c, i] = Jc[i] @ v
 
@@ -168,7 +163,7 @@ def contact_rows(
     for c in range(table.shape[0]):
         kind, m = table[c, CT_KIND], oMf[table[c, CT_FRAME]]
         Jc = Jw[r : r + kind]
-        _jacobian(J, oMf, kind, table[c, CT_FRAME], support[c], Jc)
+        _jacobian(J, oMf, kind, table[c, CT_FRAME], support[c : c + 1], Jc)
         eq_dv[r : r + kind] = Jc
         _error(kind, m, par[c, CP_REF:], e)
         for i in range(kind):

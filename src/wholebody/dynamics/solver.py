@@ -421,7 +421,7 @@ class DynamicsSolver:
         if self._kin is not None and not plan.python:
             plan.sync(None, dt)
             if not plan.stale:
-                out = np.empty(plan.view(lay.F_A).shape[0] + plan.view(lay.F_C).shape[0])
+                out = np.empty(_row_count(plan))
                 torque.ahead((plan.f, plan.i, plan.h), self._kin, contacts, q, u, eps, out)
                 return plan, out
         plan = stack.evaluated_plan(self.robot.update(self.robot.integrate(q, u, eps)), dt)
@@ -609,10 +609,17 @@ def _no_acceleration_limits(stack: Stack) -> None:
         )
 
 
+def _row_count(plan: Plan) -> int:
+    """K + P: the plan's equality and inequality rows."""
+    return plan.view(lay.F_A).shape[0] + plan.view(lay.F_C).shape[0]
+
+
 def _rows_times(plan: Plan, u: np.ndarray) -> np.ndarray:
-    """The plan's evaluated rows times ``u~ = u / D``: ``[A u~, C u~]`` (K + P)."""
-    u_s = u / plan.view(lay.F_METRIC)[0]
-    return np.concatenate([plan.view(lay.F_A) @ u_s, plan.view(lay.F_C) @ u_s])
+    """The plan's evaluated rows times ``u~ = u / D``: ``[A u~, C u~]`` (K + P;
+    :func:`~wholebody.kernels.torque.rows_times`)."""
+    out = np.empty(_row_count(plan))
+    torque.rows_times((plan.f, plan.i, plan.h), u, out)
+    return out
 
 
 def _status(solved: SolverStatus, exceeded: bool) -> SolverStatus:

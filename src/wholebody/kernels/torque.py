@@ -68,7 +68,15 @@ from wholebody.kernels.linalg import (
     trace,
 )
 
-__all__ = ["ahead", "assemble", "braking", "internal_rows", "outcome", "weighted_qp"]
+__all__ = [
+    "ahead",
+    "assemble",
+    "braking",
+    "internal_rows",
+    "outcome",
+    "rows_times",
+    "weighted_qp",
+]
 
 # par: the step's numbers (float64)
 P_DT, P_EPS, P_KD, P_FS, P_BRAKING, P_REGULARIZATION = 0, 1, 2, 3, 4, 5
@@ -414,6 +422,14 @@ def ahead(
     evaluate(f, i, h, J, oMf, q_ahead, np.zeros((0, REF_WIDTH)))
     table, support, twist = contacts
     twists(J, oMf, table, support, v, twist)
+    rows_times(plan, u, out)
+
+
+@kernel
+def rows_times(plan: tuple, u: np.ndarray, out: np.ndarray) -> None:
+    """A stack's evaluated rows times ``u~ = u / D``: ``[A u~, C u~]`` (K + P) into ``out``
+    (``plan``: its arena ``(f, i, h)``)."""
+    f, _, h = plan
     A, C = lay.fmat(f, h, lay.F_A), lay.fmat(f, h, lay.F_C)
     u_s = u / lay.fmat(f, h, lay.F_METRIC)[0]
     K = A.shape[0]
@@ -540,13 +556,16 @@ def _qp_constraints(arena: tuple, n_eq: int, keep: np.ndarray) -> tuple:
 
 
 @kernel
+def _within(s: float, low: float, high: float) -> bool:
+    """Whether ``low <= s <= high`` to 1e-12 relative (a bound's tolerance)."""
+    return low - 1e-12 * (1.0 + abs(low)) <= s <= high + 1e-12 * (1.0 + abs(high))
+
+
+@kernel
 def _held(C: np.ndarray, CB: np.ndarray, x: np.ndarray, first: int, last: int) -> bool:
-    """Whether ``x`` keeps the inequality rows ``first:last`` (unit rows; to 1e-12)."""
+    """Whether ``x`` keeps the inequality rows ``first:last`` (unit rows; :func:`_within`)."""
     for t in range(first, last):
-        s = C[t] @ x
-        if s < CB[0, t] - 1e-12 * (1.0 + abs(CB[0, t])):
-            return False
-        if s > CB[1, t] + 1e-12 * (1.0 + abs(CB[1, t])):
+        if not _within(C[t] @ x, CB[0, t], CB[1, t]):
             return False
     return True
 
@@ -614,13 +633,11 @@ def _working_set(
 
 @kernel
 def _feasible(arena: tuple, x: np.ndarray) -> bool:
-    """Whether ``x`` keeps the arena's box and every inequality row (to 1e-12 relative)."""
+    """Whether ``x`` keeps the arena's box and every inequality row (:func:`_within`)."""
     f, _, h = arena
     box = lay.fmat(f, h, lay.F_BOX)
     for c in range(x.shape[0]):
-        if x[c] < box[0, c] - 1e-12 * (1.0 + abs(box[0, c])):
-            return False
-        if x[c] > box[1, c] + 1e-12 * (1.0 + abs(box[1, c])):
+        if not _within(x[c], box[0, c], box[1, c]):
             return False
     C = lay.fmat(f, h, lay.F_C)
     return _held(C, lay.fmat(f, h, lay.F_CB), x, 0, C.shape[0])

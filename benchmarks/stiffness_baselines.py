@@ -24,18 +24,13 @@ import numpy as np
 
 from wholebody.files import write_json
 from wholebody.humanlike.dataset import StiffnessDataset
-from wholebody.humanlike.evaluation import cluster_bootstrap
+from wholebody.humanlike.evaluation import cluster_bootstrap, regression_scores
 from wholebody.humanlike.linear import fit_linear
 from wholebody.humanlike.svr import fit_svr
 from wholebody.humanlike.training import TrainingConfig, train_network
 
 DATASET = Path(__file__).resolve().parents[1] / "data" / "stiffness" / "mobile_humanoid.npz"
 SVR = {"C": 1.0, "gamma": 0.3, "epsilon": 0.1}  # (robots/mobile_humanoid/stiffness_card.md)
-
-
-def r2(y: np.ndarray, p: np.ndarray) -> float:
-    """R^2 of ``p`` about ``y``'s own mean."""
-    return 1.0 - float(np.sum((y - p) ** 2)) / float(np.sum((y - y.mean()) ** 2))
 
 
 def held_out(ds: StiffnessDataset, person: str, config: TrainingConfig) -> dict[str, float]:
@@ -47,7 +42,7 @@ def held_out(ds: StiffnessDataset, person: str, config: TrainingConfig) -> dict[
         "linear": fit_linear(train.wrist, train.k).predict(test.wrist),
         "SVR": fit_svr(train.wrist, train.k, **SVR).predict(test.wrist),
     }
-    return {name: r2(test.k, p) for name, p in models.items()}
+    return {name: regression_scores(test.k, p)["r2"] for name, p in models.items()}
 
 
 def summary(scores: dict[str, dict[str, float]]) -> dict[str, list[float]]:

@@ -35,7 +35,9 @@ def rng() -> np.random.Generator:
 # kernels as plain Python: the code numba compiles is the code tested) and with
 # NUMBA_BOUNDSCHECK=1 (an index out of bounds raises instead of corrupting memory; its own
 # cache flavour, so it compiles everything once more: ~5 minutes). The session fails if they
-# do. Started when the equivalence file is collected and slow tests are not deselected.
+# do. Started when the equivalence file is collected and slow tests are not deselected, and
+# not under pytest-xdist (`-n`, for the fast subset: its workers take both cores), which says
+# so at the end.
 EQUIVALENCE = [
     "test_step.py",
     "test_torque_kernel.py",
@@ -53,7 +55,12 @@ _background: dict[str, object] = {}
 
 def pytest_collection_finish(session: pytest.Session) -> None:
     config = session.config
-    if os.environ.get(_MODE) or config.option.collectonly or "not slow" in config.option.markexpr:
+    if (
+        os.environ.get(_MODE)
+        or os.environ.get("PYTEST_XDIST_WORKER")
+        or config.option.collectonly
+        or "not slow" in config.option.markexpr
+    ):
         return
     if not any(item.path.name == "test_step.py" for item in session.items):
         return
@@ -75,6 +82,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     proc = _background.pop("proc", None)
     if proc is None:
+        _say_if_skipped_under_xdist(session.config)
         return
     out = _background.pop("out")
     rc = proc.wait()
@@ -90,3 +98,14 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             reporter.write_line(line)
     if rc and session.exitstatus == 0:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def _say_if_skipped_under_xdist(config: pytest.Config) -> None:
+    """Under ``-n`` the controller runs no test: say that the equivalence runs did not run."""
+    if getattr(config.option, "numprocesses", None) and "not slow" not in config.option.markexpr:
+        reporter = config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is not None:
+            reporter.write("\n")
+            reporter.write_sep(
+                "=", "kernel equivalence: not run under -n (python -m pytest without -n runs it)"
+            )

@@ -193,7 +193,9 @@ def _baseline_lines(m: dict) -> list[str]:
         "The network against its baselines, paired (R^2 of the network less the baseline's, "
         "the same records and resamples; an interval above 0: the network predicts better):",
         "",
-        "| participant | " + " | ".join(f"network - {n}" for n in diffs) + " |",
+        "| participant | "
+        + " | ".join(f"network - {n.replace('svr', 'SVR')}" for n in diffs)
+        + " |",
         "|---|" + "---|" * len(diffs),
     ]
     for g in next(iter(diffs.values())):

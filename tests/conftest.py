@@ -35,9 +35,9 @@ def rng() -> np.random.Generator:
 # kernels as plain Python: the code numba compiles is the code tested) and with
 # NUMBA_BOUNDSCHECK=1 (an index out of bounds raises instead of corrupting memory; its own
 # cache flavour, so it compiles everything once more: ~5 minutes). The session fails if they
-# do. Started when the equivalence file is collected and slow tests are not deselected, and
-# not under pytest-xdist (`-n`, for the fast subset: its workers take both cores), which says
-# so at the end.
+# do. Started when the equivalence file is collected and slow tests are not deselected (after
+# the warm-up below), and not under pytest-xdist (`-n`, for the fast subset: its workers
+# take both cores), which says so at the end.
 EQUIVALENCE = [
     "test_step.py",
     "test_torque_kernel.py",
@@ -64,6 +64,11 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         return
     if not any(item.path.name == "test_step.py" for item in session.items):
         return
+    # The kernels compiled first, on both cores (`wholebody warmup`), instead of one by one
+    # in the tests that first call them: a new environment's run is shorter by about a minute.
+    from wholebody.warmup import warmup
+
+    _background["warmup"] = warmup().seconds
     here = Path(__file__).parent
     files = " ".join(shlex.quote(str(here / f)) for f in EQUIVALENCE)
     pytest_cmd = f"{shlex.quote(sys.executable)} -m pytest -q -p no:cacheprovider {files}"
@@ -93,6 +98,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     verdict = "passed" if rc == 0 else f"FAILED (exit {rc})"
     if reporter is not None:
         modes = "NUMBA_DISABLE_JIT=1 and NUMBA_BOUNDSCHECK=1"
+        reporter.write_sep("=", f"kernels warmed up in {_background.pop('warmup'):.0f} s")
         reporter.write_sep("=", f"kernel equivalence with {modes}: {verdict}")
         for line in lines if rc else [s for s in lines if " passed" in s or " failed" in s]:
             reporter.write_line(line)
